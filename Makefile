@@ -1,0 +1,36 @@
+# Set-up and entry points. `make demo` and `make test` work on a fresh machine:
+# they create or refresh .venv (Python 3.12, everything from PyPI) first.
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: venv demo test lint bench clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg
+	@py="$${PYTHON:-$$(tools/find_python312.sh)}" || exit 1; \
+	if [ ! -x $(PY) ] || ! $(PY) -c 'import sys; assert sys.version_info[:2] == (3, 12)' 2>/dev/null; then \
+		rm -rf $(VENV); echo "creating $(VENV) with $$py"; "$$py" -m venv $(VENV) || exit 1; \
+	fi
+	$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
+	$(PY) -m pip install -q --disable-pip-version-check -r requirements-dev.txt
+	$(PY) -m pip install -q --disable-pip-version-check --no-deps -e .
+	@touch $(STAMP)
+
+demo: venv
+	$(PY) -m imu_allan demo
+
+test: venv
+	$(PY) -m pytest -q test
+
+lint: venv
+	$(PY) -m pytest -q test/test_flake8.py test/test_pep257.py
+
+bench: venv
+	$(PY) bench/bench_batch.py
+	$(PY) bench/bench_accumulator.py
+
+clean:
+	rm -rf $(VENV) build install log .pytest_cache
