@@ -1,0 +1,626 @@
+"""
+Streaming overlapping Allan variance for many axes, in bounded memory.
+
+:class:`AllanAccumulator` takes blocks of rate samples of any size (one row from a
+ROS callback, a million rows from a bag reader) and keeps, per cluster size m, the
+pooled sum of squared second differences of the running sum X of the samples
+(NIST SP 1065 eq. 14)::
+
+    AVAR(m tau0) = sum_i (X[i+2m] - 2 X[i+m] + X[i])^2 / (2 m^2 n_terms)
+
+The result does not depend on how the record is cut into blocks: samples are
+buffered and processed in chunks of a fixed length counted from the start of each
+contiguous segment, so one block, random-sized blocks, and a save/load in between
+give bit-identical sums.
+
+Estimator
+---------
+* Exact part (level 0), m <= ``exact_max_m``: every term i of the batch overlapping
+  estimator is summed; the curve equals :func:`imu_allan.allan.overlapping_avar` on
+  the same samples to rounding (about 1e-12 relative).  Memory: the last
+  ``2 * exact_max_m`` samples, since a term needs X up to 2m samples back.
+* Decimated part (levels L = 1, 2, ...), m > ``exact_max_m``: level L keeps cluster
+  sums of D_L = exact_max_m * 2^(L-1) / 64 samples, i.e. X only at indices that are
+  multiples of D_L, and serves m = m' D_L with 64 < m' <= 128 (the dense grid rounded
+  to a multiple of D_L, so tau_s is exact for the value reported).  The sum over
+  i = 0, D_L, 2 D_L, ... of (X[i+2m] - 2 X[i+m] + X[i])^2 is the batch overlapping
+  sum subsampled at stride D_L <= m / 64: each term has the same expectation, so the
+  estimator is unbiased, and it is exactly the overlapping estimator of the
+  D_L-decimated series (cluster sums) at cluster size m'.  Its EDF is therefore the
+  overlapping EDF for (m', N / D_L) (Greenhall's algorithm, as for the batch curve).
+  For white, flicker and random-walk FM noise (alpha = 0, -1, -2: the noises that
+  rule beyond a few seconds in an IMU) that equals the full-overlap EDF at (m, N) to
+  1e-4 once m' > 64 (it gives 3 % less at m' = 33, hence the range); white and
+  flicker PM (alpha = 2, 1) lose most of their EDF to the decimation, but they fall
+  as tau^-2 and do not matter at such taus.  The estimate differs from the batch
+  value by a small fraction of its own confidence interval (checked in
+  test/test_accumulator.py).  Memory: 256 cluster sums per level.
+
+Pooling over segments: :meth:`AllanAccumulator.break_segment` ends a contiguous
+segment; no term spans the gap, and sums and term counts are pooled, so the AVAR is
+the total sum over 2 m^2 times the total number of terms (the batch estimator
+applied to each segment and pooled).  The EDF of a pooled estimate is approximated by
+that of one segment with the same number of terms (N_eff = n_terms + 2 m' - 1).
+
+Precision: the running sum is rebuilt for every chunk from zero, after subtracting a
+per-axis reference (the mean of the first chunk) and then the chunk window's own
+mean.  A constant subtracted from all samples of a window cancels exactly in every
+second difference, so |X| is bounded by the window length times the *local*
+variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
+"""
+
+import json
+import os
+from pathlib import Path
+import tempfile
+
+import numpy as np
+
+from imu_allan.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
+from imu_allan.errors import InputError
+
+#: Format tag and version written into every state file.
+STATE_FORMAT = 'imu_allan.accumulator'
+STATE_VERSION = 1
+
+#: Decimated levels serve m = m' D_L with _M_LO < m' <= 2 * _M_LO.
+_M_LO = 64
+#: Levels are pre-allocated up to this cluster size [samples] (35 years at 1 kHz), so
+#: the state never grows while data flow.
+_MAX_M = 2 ** 40
+#: Largest exact_max_m: keeps the state under 1 MB per axis (0.58 MB at this value).
+_MAX_EXACT_M = 2 ** 14
+
+
+def dense_m_grid(max_m: int, per_decade: int) -> np.ndarray:
+    """
+    Log-spaced cluster sizes, ``per_decade`` per decade, rounded and deduplicated.
+
+    Parameters
+    ----------
+    max_m : int
+        Largest cluster size [samples].
+    per_decade : int
+        Grid points per decade of tau.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (k,), int64 cluster sizes 1 .. max_m [samples], ascending.
+
+    """
+    n = int(np.floor(per_decade * np.log10(max_m) + 1e-9)) + 1
+    m = np.round(10.0 ** (np.arange(n) / per_decade)).astype(np.int64)
+    return np.unique(m[m <= max_m])
+
+
+class _Level:
+    """Decimated level: cluster sums of ``stride`` samples and their short history."""
+
+    def __init__(self, stride: int, m_prime: np.ndarray, index: np.ndarray, n_axes: int):
+        self.stride = stride
+        self.m_prime = m_prime          # (k_L,) cluster sizes in level samples
+        self.index = index              # (k_L,) rows of the accumulator's sums
+        self.capacity = 4 * _M_LO       # 2 * max m'
+        self.hist = np.zeros((n_axes, self.capacity))
+        self.h = 0                      # valid history values (the last ones)
+        self.n = 0                      # level samples in the current segment
+
+
+class AllanAccumulator:
+    """
+    Streaming overlapping Allan variance of ``n_axes`` axes in bounded memory.
+
+    Parameters
+    ----------
+    n_axes : int
+        Number of axes (columns of every block), 6 for an IMU.
+    rate_hz : float
+        Sample rate [Hz]; tau_s = m / rate_hz.
+    exact_max_m : int
+        Largest cluster size computed exactly [samples]; a multiple of 64 up to
+        16384.  Taus with m <= exact_max_m equal the batch overlapping AVAR; longer
+        taus use the decimated estimator described in the module docstring.
+    per_decade : int
+        Taus per decade of the log grid.
+
+    Notes
+    -----
+    Trade-off of ``exact_max_m`` (default 8192, i.e. 8.2 s at 1 kHz): every exact tau
+    costs about three in-cache passes over the data, a decimated one almost nothing,
+    and the exact taus need 2 * exact_max_m samples of history.  Measured with
+    bench/bench_accumulator.py --sweep (6 axes, 10 taus per decade, CPU time of one
+    core, busy machine; exact_max_m: exact taus, M rows/s, MB of state per axis):
+    1024: 28, 2.5, 0.34; 4096: 34, 2.3, 0.39; 8192: 37, 2.0, 0.45; 16384: 40, 2.0,
+    0.58.  The default keeps twice the 1 M rows/s target on a shared machine.
+    Decimated taus keep the full EDF of the FM noises, so a larger exact_max_m buys
+    agreement with the batch curve to rounding, not precision; it is capped at 16384
+    so that the state stays under 1 MB per axis.
+
+    Which taus are exact: ``m <= exact_max_m`` (see :meth:`exact_mask`), i.e.
+    ``tau_s <= exact_max_m / rate_hz``.
+
+    Memory: :meth:`state_nbytes` is the persistent state (what :meth:`save` writes):
+    a buffer of 2 * exact_max_m history samples plus one chunk of pending samples per
+    axis, 256 values per decimated level, and the pooled sums.  While a chunk is
+    processed, work arrays of about twice that size exist in addition.
+
+    """
+
+    def __init__(self, n_axes: int, rate_hz: float, exact_max_m: int = 8192,
+                 per_decade: int = 10):
+        n_axes, exact_max_m, per_decade = int(n_axes), int(exact_max_m), int(per_decade)
+        rate_hz = float(rate_hz)
+        if n_axes < 1:
+            raise InputError(f'n_axes must be at least 1, not {n_axes}')
+        if not np.isfinite(rate_hz) or rate_hz <= 0:
+            raise InputError(f'rate_hz must be a positive number, not {rate_hz}')
+        if not _M_LO <= exact_max_m <= _MAX_EXACT_M or exact_max_m % _M_LO:
+            raise InputError(f'exact_max_m must be a multiple of {_M_LO} in '
+                             f'{_M_LO}..{_MAX_EXACT_M}, not {exact_max_m}')
+        if not 1 <= per_decade <= 100:
+            raise InputError(f'per_decade must lie in 1..100, not {per_decade}')
+        self.n_axes = n_axes
+        self.rate_hz = rate_hz
+        self.exact_max_m = exact_max_m
+        self.per_decade = per_decade
+        # Level 0: history of 2 * exact_max_m samples, then one chunk of pending ones.
+        self._hist_cap = 2 * exact_max_m
+        self._chunk = max(32768, 2 * exact_max_m)
+        self._buf = np.zeros((n_axes, self._hist_cap + self._chunk))
+        self._h0 = 0                    # history samples at the front of _buf
+        self._pending = 0               # raw samples after the history
+        self._seg_n = 0                 # processed samples in the current segment
+        self._ref = np.zeros(n_axes)
+        self._ref_set = False
+        self._n_samples = 0
+        self._n_segments = 0
+        self._build_grid()
+        self._sums = np.zeros((self._m.size, n_axes))
+        self._counts = np.zeros(self._m.size, dtype=np.int64)
+        self._work = None
+
+    # ------------------------------------------------------------------ grid
+    def _build_grid(self) -> None:
+        grid = dense_m_grid(_MAX_M, self.per_decade)
+        m0 = grid[grid <= self.exact_max_m]
+        all_m = [m0]
+        strides = [np.ones(m0.size, dtype=np.int64)]
+        self._m0 = m0
+        self._levels = []
+        stride = self.exact_max_m // _M_LO
+        lo = self.exact_max_m
+        k = m0.size
+        while lo < _MAX_M:
+            sel = grid[(grid > lo) & (grid <= 2 * lo)]
+            m_prime = np.unique(np.clip(np.round(sel / stride).astype(np.int64),
+                                        _M_LO + 1, 2 * _M_LO))
+            index = np.arange(k, k + m_prime.size)
+            self._levels.append(_Level(stride, m_prime, index, self.n_axes))
+            all_m.append(m_prime * stride)
+            strides.append(np.full(m_prime.size, stride, dtype=np.int64))
+            k += m_prime.size
+            stride *= 2
+            lo *= 2
+        self._m = np.concatenate(all_m)
+        self._stride = np.concatenate(strides)
+
+    # ------------------------------------------------------------ properties
+    @property
+    def n_samples(self) -> int:
+        """Return the number of samples added so far (all segments, buffered ones too)."""
+        return self._n_samples
+
+    @property
+    def n_segments(self) -> int:
+        """Return the number of contiguous segments that received at least one sample."""
+        return self._n_segments
+
+    @property
+    def m(self) -> np.ndarray:
+        """Return every cluster size the accumulator can serve, shape (k,) [samples]."""
+        return self._m.copy()
+
+    def exact_mask(self, m: np.ndarray) -> np.ndarray:
+        """
+        Tell which cluster sizes are computed exactly (equal to the batch estimator).
+
+        Parameters
+        ----------
+        m : np.ndarray
+            Shape (k,), cluster sizes [samples], e.g. ``curve.m``.
+
+        Returns
+        -------
+        np.ndarray
+            Shape (k,), bool: True where m <= exact_max_m.
+
+        """
+        return np.asarray(m) <= self.exact_max_m
+
+    def state_nbytes(self) -> int:
+        """Return the bytes of persistent state (independent of the record length)."""
+        return int(self._buf.nbytes + self._ref.nbytes + self._sums.nbytes
+                   + self._counts.nbytes + sum(lv.hist.nbytes for lv in self._levels))
+
+    # ------------------------------------------------------------- streaming
+    def add(self, samples: np.ndarray) -> None:
+        """
+        Add a block of consecutive samples to the current segment.
+
+        Parameters
+        ----------
+        samples : np.ndarray
+            Shape (n, n_axes), rate samples [unit], any n >= 0.
+
+        """
+        block = np.asarray(samples)
+        if block.ndim != 2 or block.shape[1] != self.n_axes:
+            raise InputError(f'expected a block of shape (n, {self.n_axes}), '
+                             f'got {block.shape}')
+        n = block.shape[0]
+        if n == 0:
+            return
+        if not np.issubdtype(block.dtype, np.number) or np.iscomplexobj(block):
+            raise InputError(f'samples must be real numbers, not {block.dtype}')
+        for s in range(0, n, self._chunk):   # checked by chunks: bounded temporaries
+            if not np.isfinite(block[s:s + self._chunk]).all():
+                raise InputError('samples contain NaN or infinite values')
+        if self._seg_n + self._pending == 0:
+            self._n_segments += 1
+        start = 0
+        while start < n:
+            take = min(n - start, self._chunk - self._pending)
+            at = self._h0 + self._pending
+            self._buf[:, at:at + take] = block[start:start + take].T
+            self._pending += take
+            self._n_samples += take
+            start += take
+            if self._pending == self._chunk:
+                self._flush()
+
+    def break_segment(self) -> None:
+        """
+        End the current contiguous segment (a gap in the data).
+
+        No second difference spans the gap; sums and term counts are kept and pooled
+        with those of the next segment.
+
+        """
+        if self._pending:
+            self._flush()
+        self._h0 = 0
+        self._seg_n = 0
+        for level in self._levels:
+            level.h = 0
+            level.n = 0
+
+    def _work_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # Kept between chunks (not state): avoids page-faulting fresh buffers each time.
+        if self._work is None:
+            a, w = self.n_axes, self._buf.shape[1]
+            self._work = (np.empty((a, w + 1)), np.empty((a, self._chunk + self.exact_max_m)),
+                          np.empty((a, self._chunk)))
+        return self._work
+
+    def _flush(self) -> None:
+        """Process the pending samples of level 0 and feed the decimated levels."""
+        h, p = self._h0, self._pending
+        w = h + p
+        buf = self._buf
+        if not self._ref_set:
+            self._ref = buf[:, h:w].mean(axis=1)
+            self._ref_set = True
+        buf[:, h:w] -= self._ref[:, None]
+        x_all, t_all, d_all = self._work_arrays()
+        x = x_all[:, :w + 1]
+        r = _phase(buf[:, :w], x)
+        _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, t_all, d_all)
+        # Cluster sums for level 1 end at segment indices that are multiples of D_1.
+        base = self._seg_n - h
+        if self._levels:
+            stride = self._levels[0].stride
+            first = (self._seg_n // stride + 1) * stride
+            ends = np.arange(first, self._seg_n + p + 1, stride) - base
+            clusters = x[:, ends] - x[:, ends - stride] + stride * r[:, None]
+        self._seg_n += p
+        keep = min(self._hist_cap, self._seg_n)
+        buf[:, :keep] = buf[:, w - keep:w]
+        self._h0, self._pending = keep, 0
+        if self._levels and clusters.shape[1]:
+            self._push(0, clusters)
+
+    def _push(self, k: int, values: np.ndarray) -> None:
+        """Feed cluster sums (n_axes, c) to decimated level k (and on upwards)."""
+        while True:
+            level = self._levels[k]
+            h, c = level.h, values.shape[1]
+            win = np.concatenate((level.hist[:, level.capacity - h:], values), axis=1)
+            x = np.empty((self.n_axes, h + c + 1))
+            r = _phase(win, x)
+            _accumulate(x, h + 1, h + c, level.m_prime, self._sums, self._counts,
+                        level.index[0] if level.index.size else 0)
+            # Pairs of this level's values form the next level's cluster sums.
+            first = (level.n // 2 + 1) * 2
+            ends = np.arange(first, level.n + c + 1, 2) - (level.n - h)
+            level.n += c
+            keep = min(level.capacity, level.n)
+            level.hist[:, level.capacity - keep:] = win[:, h + c - keep:]
+            level.h = keep
+            k += 1
+            if k == len(self._levels) or not ends.size:
+                return
+            values = x[:, ends] - x[:, ends - 2] + 2.0 * r[:, None]
+
+    # ----------------------------------------------------------------- curve
+    def _sums_now(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pooled sums and counts including pending samples, leaving self unchanged."""
+        if not self._pending:
+            return self._sums, self._counts
+        clone = self._copy()
+        clone._flush()
+        return clone._sums, clone._counts
+
+    def curve(self, confidence: float = 0.683, alpha=None, min_terms: int = 1) -> AllanCurve:
+        """
+        Overlapping Allan curve of all axes from the data added so far.
+
+        Parameters
+        ----------
+        confidence : float
+            Two-sided confidence level of adev_lo/adev_hi, e.g. 0.683 or 0.95.
+        alpha : float or np.ndarray, optional
+            Power-law exponent(s) for the EDF, broadcastable to (k, n_axes); by default
+            estimated from the local slope (:func:`imu_allan.allan.alpha_from_slope`).
+        min_terms : int
+            Taus with fewer pooled second differences are left out.  The default 1
+            keeps every tau with data, m <= M // 2 for one segment of M samples, as
+            :func:`imu_allan.allan.tau_grid` does; the EDF says how little the last
+            taus are worth.
+
+        Returns
+        -------
+        AllanCurve
+            method 'overlapping'; edf from the level's effective (m', N_eff) as in the
+            module docstring; taus with ``m <= exact_max_m`` are exact.
+
+        """
+        if not 0.0 < confidence < 1.0:
+            raise InputError(f'confidence must lie strictly between 0 and 1, not {confidence}')
+        sums, counts = self._sums_now()
+        sel = counts >= max(int(min_terms), 1)
+        m = self._m[sel]
+        n_terms = counts[sel]
+        tau_s = m / self.rate_hz
+        avar = sums[sel] / (2.0 * m.astype(float) ** 2 * n_terms)[:, None]
+        k, a = m.size, self.n_axes
+        if k == 0:
+            empty = np.zeros((0, a))
+            return AllanCurve(tau_s, m, empty, n_terms, empty, np.zeros((0, a), np.int64),
+                              empty, empty, float(confidence), 'overlapping', self.rate_hz)
+        if alpha is None:
+            alpha = alpha_from_slope(tau_s, avar)
+        try:
+            alpha_f = np.broadcast_to(np.asarray(alpha, dtype=float), (k, a))
+        except ValueError:
+            raise InputError(f'alpha must broadcast to ({k}, {a})') from None
+        if not np.isin(alpha_f, (-2, -1, 0, 1, 2)).all():
+            raise InputError('alpha must be an integer in -2..2 (S_y ~ f^alpha)')
+        alpha_arr = alpha_f.astype(np.int64)
+        m_eff = m // self._stride[sel]
+        n_eff = n_terms + 2 * m_eff - 1
+        edf = np.broadcast_to(np.asarray(edf_overlapping(alpha_arr, m_eff[:, None],
+                                                         n_eff[:, None]), dtype=float),
+                              (k, a)).copy()
+        adev_lo, adev_hi = confidence_bounds(avar, edf, confidence)
+        return AllanCurve(tau_s, m, avar, n_terms, edf, alpha_arr, np.asarray(adev_lo),
+                          np.asarray(adev_hi), float(confidence), 'overlapping',
+                          self.rate_hz)
+
+    # ------------------------------------------------------------ save/load
+    def _copy(self) -> 'AllanAccumulator':
+        new = AllanAccumulator(self.n_axes, self.rate_hz, self.exact_max_m, self.per_decade)
+        new._set_state(*self._get_state())
+        return new
+
+    def _get_state(self) -> tuple[dict, dict]:
+        meta = {
+            'format': STATE_FORMAT, 'version': STATE_VERSION, 'n_axes': self.n_axes,
+            'rate_hz': self.rate_hz, 'exact_max_m': self.exact_max_m,
+            'per_decade': self.per_decade, 'n_samples': self._n_samples,
+            'n_segments': self._n_segments, 'seg_n': self._seg_n, 'h0': self._h0,
+            'pending': self._pending, 'ref_set': self._ref_set,
+            'level_h': [lv.h for lv in self._levels],
+            'level_n': [lv.n for lv in self._levels],
+        }
+        arrays = {
+            'buf': self._buf[:, :self._h0 + self._pending].copy(),
+            'ref': self._ref.copy(),
+            'level_hist': np.stack([lv.hist for lv in self._levels]),
+            'sums': self._sums.copy(), 'counts': self._counts.copy(), 'm': self._m.copy(),
+        }
+        return meta, arrays
+
+    def _set_state(self, meta: dict, arrays: dict) -> None:
+        w = meta['h0'] + meta['pending']
+        self._buf[:, :w] = arrays['buf']
+        self._ref = arrays['ref'].astype(float)
+        self._sums = arrays['sums'].astype(float)
+        self._counts = arrays['counts'].astype(np.int64)
+        for lv, hist, h, n in zip(self._levels, arrays['level_hist'], meta['level_h'],
+                                  meta['level_n']):
+            lv.hist[...] = hist
+            lv.h, lv.n = int(h), int(n)
+        self._n_samples, self._n_segments = int(meta['n_samples']), int(meta['n_segments'])
+        self._seg_n, self._h0 = int(meta['seg_n']), int(meta['h0'])
+        self._pending, self._ref_set = int(meta['pending']), bool(meta['ref_set'])
+
+    def save(self, path) -> None:
+        """
+        Write the whole state to an .npz file atomically (temporary file, then rename).
+
+        Parameters
+        ----------
+        path : str or Path
+            Target file, written exactly at this name; no pickled objects inside
+            (metadata is a JSON string).
+
+        """
+        path = Path(path)
+        meta, arrays = self._get_state()
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + '.', suffix='.tmp')
+        try:
+            with os.fdopen(fd, 'wb') as f:
+                np.savez(f, meta=np.array(json.dumps(meta)), **arrays)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            raise
+
+    @classmethod
+    def load(cls, path) -> 'AllanAccumulator':
+        """
+        Restore an accumulator written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or Path
+            State file.
+
+        Returns
+        -------
+        AllanAccumulator
+            Ready for more samples; continuing gives the same sums as never stopping.
+
+        Raises
+        ------
+        InputError
+            The file is missing, corrupt, or not a state of this format and version.
+
+        """
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z['meta']))
+                arrays = {k: z[k] for k in ('buf', 'ref', 'level_hist', 'sums', 'counts',
+                                            'm')}
+        except FileNotFoundError:
+            raise InputError(f'accumulator state {path} does not exist') from None
+        except Exception as exc:  # zip, JSON, missing keys: all mean a bad file
+            raise InputError(f'accumulator state {path} is unreadable or corrupt '
+                             f'({type(exc).__name__})') from None
+        try:
+            acc = cls._from_state(meta, arrays)
+        except InputError as exc:
+            raise InputError(f'accumulator state {path}: {exc}') from None
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f'accumulator state {path} is inconsistent '
+                             f'({type(exc).__name__}: {exc})') from None
+        return acc
+
+    @classmethod
+    def _from_state(cls, meta, arrays: dict) -> 'AllanAccumulator':
+        if not isinstance(meta, dict) or meta.get('format') != STATE_FORMAT:
+            raise InputError('not an imu_allan accumulator state')
+        if meta.get('version') != STATE_VERSION:
+            raise InputError(f'state version {meta.get("version")} is not supported '
+                             f'(expected {STATE_VERSION})')
+        if arrays['ref'].shape != (int(meta['n_axes']),):
+            raise InputError(f'{meta["n_axes"]} axes in its settings but '
+                             f'{arrays["ref"].shape} reference values')
+        acc = cls(meta['n_axes'], meta['rate_hz'], meta['exact_max_m'], meta['per_decade'])
+        a, n_lv = acc.n_axes, len(acc._levels)
+        h0, pending = int(meta['h0']), int(meta['pending'])
+        seg_n = int(meta['seg_n'])
+        expect = {
+            'buf': (a, h0 + pending), 'ref': (a,),
+            'level_hist': (n_lv, a, 4 * _M_LO),
+            'sums': (acc._m.size, a), 'counts': (acc._m.size,), 'm': (acc._m.size,),
+        }
+        for key, shape in expect.items():
+            arr = arrays[key]
+            if arr.shape != shape or arr.dtype.kind not in 'fi':
+                raise InputError(f'array {key!r} has shape {arr.shape} and type {arr.dtype}, '
+                                 f'expected {shape}')
+            if not np.isfinite(arr).all():
+                raise InputError(f'array {key!r} holds non-finite values')
+        if not np.array_equal(arrays['m'], acc._m):
+            raise InputError('its tau grid does not match its settings')
+        if (arrays['counts'] < 0).any() or (arrays['sums'] < 0).any():
+            raise InputError('negative sums or term counts')
+        level_h, level_n = list(meta['level_h']), list(meta['level_n'])
+        if len(level_h) != n_lv or len(level_n) != n_lv:
+            raise InputError('wrong number of decimated levels')
+        ok = (0 <= pending < acc._chunk and 0 <= h0 == min(acc._hist_cap, seg_n)
+              and int(meta['n_samples']) >= seg_n + pending
+              and int(meta['n_segments']) >= 0
+              and all(0 <= h == min(4 * _M_LO, n) for h, n in zip(level_h, level_n)))
+        if not ok:
+            raise InputError('inconsistent buffer counters')
+        acc._set_state(meta, arrays)
+        return acc
+
+
+def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """
+    Compute the running sum of a window, from zero, after removing the window's mean.
+
+    Parameters
+    ----------
+    win : np.ndarray
+        Shape (n_axes, w), samples [unit].
+    x : np.ndarray
+        Shape (n_axes, w + 1), output: x[:, 0] = 0, x[:, j] = sum of the first j
+        centred samples [unit * samples].
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n_axes,), the mean that was removed [unit].
+
+    """
+    r = win.mean(axis=1)
+    x[:, 0] = 0.0
+    np.subtract(win, r[:, None], out=x[:, 1:])
+    np.cumsum(x[:, 1:], axis=1, out=x[:, 1:])
+    return r
+
+
+def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray,
+                sums: np.ndarray, counts: np.ndarray, row0: int,
+                t_buf: np.ndarray | None = None, d_buf: np.ndarray | None = None) -> None:
+    """
+    Add the squared second differences that end at x[:, j_first:j_last + 1].
+
+    Parameters
+    ----------
+    x : np.ndarray
+        Shape (n_axes, w + 1), running sum; index 0 is the oldest point held.
+    j_first, j_last : int
+        First and last new end points (local indices into x).
+    ms : np.ndarray
+        Shape (k,), cluster sizes in units of x's samples.
+    sums, counts : np.ndarray
+        Shapes (K, n_axes) and (K,), updated in place at rows row0 .. row0 + k - 1.
+    row0 : int
+        Row of ms[0] in sums and counts.
+    t_buf, d_buf : np.ndarray, optional
+        Scratch arrays of at least (n_axes, j_last - j_first + 1 + max(ms)) and
+        (n_axes, j_last - j_first + 1).
+
+    """
+    for k, m in enumerate(ms.tolist()):
+        j0 = max(j_first, 2 * m)
+        n = j_last - j0 + 1
+        if n <= 0:
+            continue
+        # d_j = T[j] - T[j - m] with T[j] = X[j] - X[j - m] (cluster sums): 3 passes.
+        t = np.subtract(x[:, j0 - m:j_last + 1], x[:, j0 - 2 * m:j_last + 1 - m],
+                        out=None if t_buf is None else t_buf[:, :n + m])
+        d = np.subtract(t[:, m:], t[:, :n], out=None if d_buf is None else d_buf[:, :n])
+        # einsum, not np.dot/vecdot: OpenBLAS threads its ddot, which stalls badly on a
+        # busy machine; numpy's own loop is as fast single-threaded.
+        sums[row0 + k] += np.einsum('ij,ij->i', d, d)
+        counts[row0 + k] += n
