@@ -1,0 +1,241 @@
+"""
+From a pipeline session to the result every output is made of.
+
+:func:`analyze` fits each axis of the session's Allan curve and bundles the fits, the
+Kalman matrices, the Kalibr file and the Imu covariances in one frozen
+:class:`AnalysisResult`; its :meth:`AnalysisResult.to_json` is the result JSON of
+DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
+"""
+
+from dataclasses import asdict, dataclass
+import math
+
+import numpy as np
+
+from imu_allan import AXES, AXIS_UNITS
+from imu_allan.allan import AllanCurve
+from imu_allan.errors import InputError
+from imu_allan.fit import AxisFit, fit_curve
+from imu_allan.kalman import imu_covariance, kalibr_yaml, kalman_model, KalmanModel
+from imu_allan.noise_params import AxisNoise
+from imu_allan.units import format_quoted, sensor_of
+
+#: Confidence of the reported Allan bands and parameter intervals.
+CONFIDENCE = 0.95
+B_CONVENTION = ('B is the bias instability read off the ADEV floor (ADEV_min = 0.664 B); '
+                'its Gauss-Markov driving PSD is S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B) '
+                '(Maia et al. eq. 8)')
+_CORE = ('N', 'B', 'K', 'T_B')
+
+
+@dataclass(frozen=True)
+class AnalysisResult:
+    """
+    Everything one analysis produced, for every output (JSON, topics, files, plots).
+
+    Attributes
+    ----------
+    rate_hz : float
+        Sample rate [Hz].
+    duration_s : float
+        Duration of the samples used [s].
+    n_samples : int
+        Samples used.
+    warnings : tuple of str
+        One line per kind of input problem.
+    hygiene : dict
+        Counters of the input checks (pipeline.HygieneStats as a dict).
+    curve : AllanCurve
+        Measured curve of the six axes at 95 % confidence.
+    fits : dict of str to AxisFit or None
+        Fit per axis; None where the axis cannot be fitted (frozen, no noise).
+    kalman : KalmanModel
+        Six-axis bias model (paper eqs. 16-17) with continuous and discrete matrices.
+    source : str
+        What was analysed (file name, topic).
+
+    """
+
+    rate_hz: float
+    duration_s: float
+    n_samples: int
+    warnings: tuple
+    hygiene: dict
+    curve: AllanCurve
+    fits: dict
+    kalman: KalmanModel
+    source: str = ''
+
+    def models(self) -> dict:
+        """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""
+        return {a: (f.model if f is not None else AxisNoise()) for a, f in self.fits.items()}
+
+    def _sources(self) -> dict:
+        return {a: (f if f is not None else AxisNoise()) for a, f in self.fits.items()}
+
+    def kalibr_yaml(self, rostopic: str = '/imu/data') -> str:
+        """Kalibr imu.yaml text (continuous densities; worst axis of each sensor)."""
+        return kalibr_yaml(self._sources(), self.rate_hz, rostopic=rostopic)
+
+    def process_noise(self) -> tuple[np.ndarray, list]:
+        """Discrete process noise Qd (12, 12) [unit^2] and its state order."""
+        return self.kalman.Qd, list(self.kalman.state_labels)
+
+    def measurement_noise(self) -> tuple[np.ndarray, list]:
+        """Discrete measurement noise Rd (6, 6) [unit^2] and its order."""
+        return self.kalman.Rd, list(self.kalman.measurement_labels)
+
+    def imu_covariances(self) -> dict:
+        """The sensor_msgs/Imu covariance fields for robot_localization."""
+        cov = imu_covariance(self._sources(), self.rate_hz)
+        return {'angular_velocity_covariance': list(cov.angular_velocity_covariance),
+                'linear_acceleration_covariance': list(cov.linear_acceleration_covariance),
+                'clamped_to_1e-9': list(cov.clamped)}
+
+    def axis_status(self, axis: str) -> tuple[str, str, list]:
+        """
+        Level, message and key/values of one axis for a diagnostic status.
+
+        Returns
+        -------
+        level : str
+            'ok' when N and B are estimates with reasonably tight intervals and the
+            input was clean, 'warn' when the numbers are not to be trusted yet,
+            'error' when the axis cannot be characterised.
+        message : str
+            One line with the values in customary units.
+        values : list of (str, str)
+            Every parameter with its interval and unit, samples, duration, rate.
+
+        """
+        fit = self.fits.get(axis)
+        base = [('samples', str(self.n_samples)), ('duration_s', f'{self.duration_s:.1f}'),
+                ('rate_hz', f'{self.rate_hz:.4f}')]
+        if fit is None:
+            return 'error', f'{axis}: no usable noise (frozen or constant axis)', base
+        values = []
+        for sym, p in fit.optimised.items():
+            values += [(sym, _g(p.value)), (f'{sym}_ci95_lo', _g(p.ci95[0])),
+                       (f'{sym}_ci95_hi', _g(p.ci95[1])), (f'{sym}_unit', p.unit),
+                       (f'{sym}_kind', p.kind)]
+        problems = _trust_problems(fit)
+        if any(k in self.hygiene and self.hygiene[k] for k in ('n_motion_events',)):
+            problems.append('motion was detected')
+        level = 'warn' if problems else 'ok'
+        message = self.summary_line(axis)
+        if problems:
+            message += ' | not trusted yet: ' + '; '.join(problems)
+        return level, message, values + base
+
+    def summary_line(self, axis: str) -> str:
+        """One human line: the core parameters in the units people quote."""
+        fit = self.fits.get(axis)
+        if fit is None:
+            return f'{axis}: no usable noise (frozen or constant axis)'
+        sensor = sensor_of(axis)
+        parts = []
+        for sym in _CORE:
+            p = fit.optimised.get(sym)
+            if p is None or p.kind == 'not_identified':
+                parts.append(f'{sym} n/a')
+                continue
+            text = format_quoted(sym, sensor, p.value, digits=3)
+            parts.append(f'{sym} < {text}' if p.kind == 'upper_bound' else f'{sym} {text}')
+        return f'{axis}: ' + ', '.join(parts)
+
+    def summary_lines(self) -> list:
+        """One summary line per axis."""
+        return [self.summary_line(a) for a in AXES]
+
+    def to_json(self) -> dict:
+        """Return the result JSON of DESIGN.md (SI units; None for NaN/inf)."""
+        axes = {}
+        for j, axis in enumerate(AXES):
+            fit = self.fits.get(axis)
+            entry = {'unit': AXIS_UNITS[axis],
+                     'tau_s': _floats(self.curve.tau_s),
+                     'adev': _floats(self.curve.adev[:, j]),
+                     'adev_lo': _floats(self.curve.adev_lo[:, j]),
+                     'adev_hi': _floats(self.curve.adev_hi[:, j]),
+                     'edf': _floats(self.curve.edf[:, j]),
+                     'n_terms': [int(n) for n in self.curve.n_terms]}
+            if fit is None:
+                entry.update(params={}, nominal={}, terms=[],
+                             notes=['no usable noise (frozen or constant axis)'])
+            else:
+                entry.update(fit.to_json())
+                entry['quoted'] = {
+                    sym: format_quoted(sym, sensor_of(axis), p.value, digits=4)
+                    for sym, p in fit.optimised.items()
+                    if sym in _CORE and p.kind in ('estimate', 'upper_bound')}
+            axes[axis] = entry
+        return {
+            'source': self.source,
+            'sample_rate_hz': self.rate_hz,
+            'duration_s': self.duration_s,
+            'n_samples': int(self.n_samples),
+            'confidence': CONFIDENCE,
+            'warnings': list(self.warnings),
+            'hygiene': self.hygiene,
+            'b_convention': B_CONVENTION,
+            'axes': axes,
+            'kalman': self.kalman.to_json(),
+            'imu_covariance': self.imu_covariances(),
+        }
+
+
+def analyze(session, source: str = '') -> AnalysisResult | None:
+    """
+    Fit every axis of a session's current Allan curve.
+
+    Parameters
+    ----------
+    session : imu_allan.pipeline.Session
+        The session (node or offline) after its samples were added.
+    source : str
+        What was analysed, for the report.
+
+    Returns
+    -------
+    AnalysisResult or None
+        None while no Allan deviation can be computed yet.
+
+    """
+    curve = session.curve(confidence=CONFIDENCE)
+    if curve is None or curve.tau_s.size < 3:
+        return None
+    fits = {}
+    for j, axis in enumerate(AXES):
+        avar = curve.avar[:, j]
+        if not np.all(np.isfinite(avar)) or np.count_nonzero(avar > 0) < 3:
+            fits[axis] = None
+            continue
+        try:
+            fits[axis] = fit_curve(curve, j, session.stats.n_used, unit=AXIS_UNITS[axis])
+        except InputError:
+            fits[axis] = None
+    sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
+    return AnalysisResult(
+        rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
+        n_samples=int(session.stats.n_used), warnings=tuple(session.warnings),
+        hygiene=asdict(session.stats), curve=curve, fits=fits,
+        kalman=kalman_model(sources, session.rate_hz), source=source)
+
+
+def _trust_problems(fit: AxisFit) -> list:
+    problems = []
+    for sym, max_ratio in (('N', 1.5), ('B', 4.0)):
+        p = fit.optimised.get(sym)
+        if p is None or p.kind != 'estimate':
+            problems.append(f'{sym} not identified yet')
+        elif not (p.ci95[0] > 0 and p.ci95[1] / p.ci95[0] <= max_ratio):
+            problems.append(f'{sym} interval still wide')
+    return problems
+
+
+def _g(x: float) -> str:
+    return f'{x:.6g}' if math.isfinite(x) else 'nan'
+
+
+def _floats(a) -> list:
+    return [float(v) if math.isfinite(v) else None for v in np.asarray(a, dtype=float)]

@@ -1,0 +1,164 @@
+"""
+The node's parameters: one table for declaration, validation, config YAML and README.
+
+No ROS import here: the node turns each row into a declared parameter with a
+descriptor and range; ``python -m imu_allan.node_params yaml|markdown`` prints the
+config file and the README table from the same rows (a test checks both are in sync).
+"""
+
+from dataclasses import dataclass
+import sys
+
+from imu_allan.pipeline import MOTION_POLICIES, SessionConfig
+
+
+@dataclass(frozen=True)
+class Param:
+    """
+    One node parameter.
+
+    Attributes
+    ----------
+    name : str
+        Parameter name.
+    value_type : type
+        bool, int, float or str.
+    default : object
+        Default value.
+    unit : str
+        Unit ('' for none).
+    limits : tuple
+        (low, high) for numbers, the allowed strings for str, () for bool.
+    description : str
+        What it does, one line.
+
+    """
+
+    name: str
+    value_type: type
+    default: object
+    unit: str
+    limits: tuple
+    description: str
+
+    def check(self, value) -> str | None:
+        """Return why ``value`` is refused, or None when it is valid."""
+        if self.value_type is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        wrong_int = self.value_type is int and isinstance(value, bool)
+        if not isinstance(value, self.value_type) or wrong_int:
+            return f'{self.name} must be {self.value_type.__name__}, got {type(value).__name__}'
+        if self.value_type in (int, float) and self.limits:
+            lo, hi = self.limits
+            if not lo <= value <= hi:
+                return f'{self.name} = {value} is outside [{lo}, {hi}] {self.unit}'.rstrip()
+        if self.value_type is str and self.limits and value not in self.limits:
+            return f'{self.name} must be one of {", ".join(self.limits)}, got {value!r}'
+        return None
+
+
+_S = SessionConfig()
+
+PARAMS: tuple[Param, ...] = (
+    Param('rate_hz', float, _S.rate_hz, 'Hz', (0.0, 100000.0),
+          'Nominal IMU rate; 0 estimates it from the first stamps'),
+    Param('min_duration_s', float, 3600.0, 's', (1.0, 1.0e6),
+          'Recording length before results are published'),
+    Param('publish_period_s', float, 30.0, 's', (0.1, 86400.0),
+          'Period of the fit and of the result topics once min_duration_s is reached'),
+    Param('process_period_s', float, 0.2, 's', (0.005, 10.0),
+          'Period of the timer that moves buffered messages into the pipeline'),
+    Param('progress_period_s', float, 10.0, 's', (0.1, 3600.0),
+          'Period of progress reports before min_duration_s'),
+    Param('qos_depth', int, 2000, 'messages', (1, 1000000),
+          'Depth of the Imu subscription queue'),
+    Param('qos_reliability', str, 'best_effort', '', ('best_effort', 'reliable'),
+          'Reliability of the Imu subscription (sensor-data QoS is best effort)'),
+    Param('max_buffer_messages', int, 1000000, 'messages', (100, 100000000),
+          'Messages held between timer ticks; beyond it the oldest are dropped and counted'),
+    Param('output_dir', str, '~/.ros/imu_allan', '', (),
+          'Where ~/save, shutdown and checkpoints write their files'),
+    Param('checkpoint_period_s', float, 60.0, 's', (0.0, 86400.0),
+          'Period of the atomic accumulator checkpoint; 0 disables it'),
+    Param('resume', bool, False, '', (),
+          'Continue from the checkpoint in output_dir when rate and axes match'),
+    Param('publish_imu_with_covariance', bool, False, '', (),
+          'Republish the Imu messages on ~/imu_with_covariance with fitted covariances'),
+    Param('gyro_range_rad_s', float, _S.gyro_range_rad_s, 'rad/s', (0.0, 1.0e4),
+          'Gyro full scale for the saturation check; 0 disables it'),
+    Param('accel_range_m_s2', float, _S.accel_range_m_s2, 'm/s^2', (0.0, 1.0e5),
+          'Accelerometer full scale for the saturation check; 0 disables it'),
+    Param('frozen_samples', int, _S.frozen_samples, 'samples', (2, 100000000),
+          'Identical consecutive values that mark an axis as frozen'),
+    Param('gap_factor', float, _S.gap_factor, 'periods', (1.01, 1000.0),
+          'A stamp step longer than this many periods is a gap'),
+    Param('rate_tolerance', float, _S.rate_tolerance, '', (0.001, 1.0),
+          'Relative rate change that is reported (and refuses a resume)'),
+    Param('motion_window_s', float, _S.motion_window_s, 's', (0.05, 60.0),
+          'Window of the motion detector'),
+    Param('motion_gyro_rad_s', float, _S.motion_gyro_rad_s, 'rad/s', (1.0e-6, 100.0),
+          'Change of a gyro window mean that counts as motion'),
+    Param('motion_accel_m_s2', float, _S.motion_accel_m_s2, 'm/s^2', (1.0e-6, 1000.0),
+          'Change of an accelerometer window mean that counts as motion'),
+    Param('motion_std_ratio', float, _S.motion_std_ratio, '', (1.5, 1.0e6),
+          'Growth of the window noise that counts as motion (vibration)'),
+    Param('on_motion', str, _S.on_motion, '', MOTION_POLICIES,
+          'warn keeps the samples, pause drops them until still, restart starts over'),
+    Param('settle_s', float, _S.settle_s, 's', (0.0, 3600.0),
+          'Stillness needed after motion before samples count again'),
+    Param('hardware_id', str, 'imu', '', (),
+          'hardware_id of the diagnostic statuses'),
+)
+
+BY_NAME = {p.name: p for p in PARAMS}
+
+
+def session_config(values: dict) -> SessionConfig:
+    """Build the pipeline settings from node parameter values (name -> value)."""
+    keys = set(SessionConfig.__dataclass_fields__) & set(values)
+    return SessionConfig(**{k: values[k] for k in keys})
+
+
+def _yaml_value(value) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, str):
+        return f"'{value}'"
+    return repr(value)
+
+
+def config_yaml() -> str:
+    """Return config/imu_allan.yaml: every parameter with its unit, range and meaning."""
+    lines = ['# imu_allan_node parameters (generated from imu_allan/node_params.py:',
+             '# python -m imu_allan.node_params yaml > config/imu_allan.yaml)',
+             '/**:', '  ros__parameters:']
+    for p in PARAMS:
+        if p.value_type in (int, float) and p.limits:
+            rng = f'[{p.limits[0]}, {p.limits[1]}]'
+        elif p.value_type is str and p.limits:
+            rng = '{' + ', '.join(p.limits) + '}'
+        else:
+            rng = ''
+        meta = ', '.join(x for x in (p.unit, rng) if x)
+        lines.append(f'    # {p.description}' + (f' ({meta})' if meta else ''))
+        lines.append(f'    {p.name}: {_yaml_value(p.default)}')
+    return '\n'.join(lines) + '\n'
+
+
+def markdown_table() -> str:
+    """Return the README parameter table."""
+    rows = ['| name | type | default | unit | range | description |',
+            '| --- | --- | --- | --- | --- | --- |']
+    for p in PARAMS:
+        if p.value_type in (int, float) and p.limits:
+            rng = f'{p.limits[0]} .. {p.limits[1]}'
+        else:
+            rng = ', '.join(p.limits)
+        rows.append(f'| `{p.name}` | {p.value_type.__name__} | `{_yaml_value(p.default)}` | '
+                    f'{p.unit} | {rng} | {p.description} |')
+    return '\n'.join(rows) + '\n'
+
+
+if __name__ == '__main__':
+    what = sys.argv[1] if len(sys.argv) > 1 else 'yaml'
+    sys.stdout.write(config_yaml() if what == 'yaml' else markdown_table())

@@ -1,0 +1,614 @@
+"""
+The one analysis session that both the live node and the offline readers feed.
+
+A :class:`Session` takes blocks of ``(stamp_ns (n,), samples (n, 6))`` in AXES order,
+checks them (rate, gaps, duplicate or out-of-order stamps, NaN/Inf, saturation, frozen
+axes, motion), streams the clean samples through one
+:class:`~imu_allan.accumulator.AllanAccumulator`, and fits the noise model on demand.
+Because every mode goes through this object, the numbers cannot differ between them.
+"""
+
+from dataclasses import asdict, dataclass, field, fields, replace
+import json
+import math
+import os
+from pathlib import Path
+import tempfile
+from typing import Callable
+
+import numpy as np
+
+from imu_allan import AXES, AXIS_UNITS
+from imu_allan.accumulator import AllanAccumulator
+from imu_allan.allan import AllanCurve
+from imu_allan.errors import InputError
+
+N_AXES = len(AXES)
+_NS = 1_000_000_000
+
+#: How a session reacts to motion (the robot was bumped or driven).
+MOTION_POLICIES = ('warn', 'pause', 'restart')
+
+
+@dataclass(frozen=True)
+class SessionConfig:
+    """
+    Settings of the input checks and of the accumulator (SI units throughout).
+
+    Attributes
+    ----------
+    rate_hz : float
+        Nominal sample rate [Hz]; 0 estimates it from the first ``rate_window``
+        samples (mean rate, robust to bursty arrival stamps).
+    rate_window : int
+        Samples used to estimate the rate [samples].
+    gap_factor : float
+        A step longer than ``gap_factor`` nominal periods is a gap (regular stamps).
+    irregular_gap_s : float
+        With irregular (jittery) stamps, only a step longer than this is a gap [s].
+    rate_tolerance : float
+        Relative deviation of a block's mean rate that counts as a rate change.
+    gyro_range_rad_s, accel_range_m_s2 : float
+        Sensor full scale [rad/s], [m/s^2]; |value| >= 0.999 of it is saturated;
+        0 disables the check.
+    frozen_samples : int
+        An axis repeating one value this many samples in a row is frozen [samples].
+    motion_window_s : float
+        Window over which motion statistics are computed [s].
+    motion_gyro_rad_s : float
+        A window mean that departs this far from the reference is motion [rad/s].
+    motion_accel_m_s2 : float
+        The same for the accelerometers (tilt or acceleration) [m/s^2].
+    motion_std_ratio : float
+        A window standard deviation this many times the reference one is motion
+        (vibration from driving).
+    on_motion : str
+        'warn' keeps the samples, 'pause' drops them until the IMU is still again,
+        'restart' discards the segment collected so far and starts again.
+    settle_s : float
+        Stillness needed after motion before samples are used again [s].
+    exact_max_m : int
+        Largest cluster size the accumulator computes exactly [samples]; 0 = default.
+
+    """
+
+    rate_hz: float = 0.0
+    rate_window: int = 200
+    gap_factor: float = 1.5
+    irregular_gap_s: float = 2.0
+    rate_tolerance: float = 0.05
+    gyro_range_rad_s: float = 0.0
+    accel_range_m_s2: float = 0.0
+    frozen_samples: int = 200
+    motion_window_s: float = 1.0
+    motion_gyro_rad_s: float = 0.05
+    motion_accel_m_s2: float = 0.5
+    motion_std_ratio: float = 8.0
+    on_motion: str = 'pause'
+    settle_s: float = 5.0
+    exact_max_m: int = 0
+
+    def __post_init__(self):
+        if self.on_motion not in MOTION_POLICIES:
+            raise InputError(f'on_motion must be one of {", ".join(MOTION_POLICIES)}, '
+                             f'not {self.on_motion!r}')
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name != 'on_motion' and (not math.isfinite(value) or value < 0):
+                raise InputError(f'{f.name} must be a finite number >= 0, not {value!r}')
+
+
+@dataclass
+class HygieneStats:
+    """
+    Counters of what the input checks found; all counts are in samples unless named.
+
+    Attributes
+    ----------
+    n_received, n_used : int
+        Samples offered to the session, and samples that reached the accumulator.
+    n_nonfinite, n_duplicate, n_out_of_order, n_saturated, n_motion_dropped : int
+        Samples dropped for each reason.
+    n_gaps, n_missing : int
+        Gaps in the stamps, and the samples they are estimated to have lost.
+    n_rate_changes, n_motion_events, n_restarts : int
+        Episodes of a changed rate, of motion, and motion restarts.
+    frozen_axes, saturated_axes : list of str
+        Axes seen frozen or saturated.
+    jitter_rel : float
+        Standard deviation of the stamp steps over the nominal period.
+    irregular_stamps : bool
+        True when the stamps are too jittery to locate gaps step by step.
+
+    """
+
+    n_received: int = 0
+    n_used: int = 0
+    n_nonfinite: int = 0
+    n_duplicate: int = 0
+    n_out_of_order: int = 0
+    n_saturated: int = 0
+    n_motion_dropped: int = 0
+    n_gaps: int = 0
+    n_missing: int = 0
+    n_rate_changes: int = 0
+    n_motion_events: int = 0
+    n_restarts: int = 0
+    frozen_axes: list = field(default_factory=list)
+    saturated_axes: list = field(default_factory=list)
+    jitter_rel: float = 0.0
+    irregular_stamps: bool = False
+
+
+class Session:
+    """
+    Input checks plus streaming Allan accumulation for the six IMU axes.
+
+    Parameters
+    ----------
+    config : SessionConfig
+        Check and accumulator settings.
+    on_warning : callable, optional
+        Called with each new one-line warning (the node logs it; the CLI prints it).
+
+    """
+
+    def __init__(self, config: SessionConfig = SessionConfig(),
+                 on_warning: Callable[[str], None] | None = None):
+        self.config = config
+        self.stats = HygieneStats()
+        self._on_warning = on_warning
+        self._warn_text: dict[str, str] = {}
+        self._warn_count: dict[str, int] = {}
+        self.rate_hz = float(config.rate_hz)
+        self.acc: AllanAccumulator | None = None
+        self._pending_t: list[np.ndarray] = []
+        self._pending_y: list[np.ndarray] = []
+        self.first_stamp_ns: int | None = None
+        self.last_stamp_ns: int | None = None
+        self._newest_ns: int | None = None
+        self._n_stamped = 0
+        # Motion reference: per-axis mean and std of the first still window.
+        self._ref_mean: np.ndarray | None = None
+        self._ref_std: np.ndarray | None = None
+        self._win_t: list[np.ndarray] = []
+        self._win_y: list[np.ndarray] = []
+        self._moving = False
+        self._in_motion = False
+        self._still_since_ns: int | None = None
+        self._last_value = np.full(N_AXES, np.nan)
+        self._repeat = np.zeros(N_AXES, dtype=np.int64)
+        if self.rate_hz > 0:
+            self._start_accumulator()
+
+    # ------------------------------------------------------------------ input
+    def add(self, stamp_ns, samples) -> None:
+        """
+        Check a block of samples and accumulate the clean ones.
+
+        Parameters
+        ----------
+        stamp_ns : array_like
+            Shape (n,), header stamps [ns] (int64).
+        samples : array_like
+            Shape (n, 6), rates [rad/s] and accelerations [m/s^2] in AXES order.
+
+        """
+        stamp_ns, samples = _as_block(stamp_ns, samples)
+        n = stamp_ns.size
+        if n == 0:
+            return
+        self.stats.n_received += n
+        finite = np.isfinite(samples).all(axis=1)
+        if not finite.all():
+            bad = int(n - finite.sum())
+            self.stats.n_nonfinite += bad
+            self._warn('nonfinite', f'{bad} samples with NaN/Inf values dropped '
+                       '(the segment is broken there)')
+        # A NaN sample is a missing sample: the segment breaks there.  A repeated or
+        # out-of-order stamp is a re-sent message: dropping it breaks nothing.
+        for t_part, y_part, broken in _split_runs(stamp_ns, samples, finite):
+            if broken and self.acc is not None:
+                self._flush_motion(break_after=True)
+            ok = self._monotonic_mask(t_part)
+            self._ingest(t_part[ok], y_part[ok])
+
+    def _monotonic_mask(self, stamp_ns: np.ndarray) -> np.ndarray:
+        """Mask out duplicate and out-of-order stamps against the newest accepted one."""
+        newest = self._newest_ns if self._newest_ns is not None else np.iinfo(np.int64).min
+        prev_max = np.maximum.accumulate(np.concatenate(([newest], stamp_ns[:-1])))
+        dup = stamp_ns == prev_max
+        back = stamp_ns < prev_max
+        if dup.any():
+            self.stats.n_duplicate += int(dup.sum())
+            self._warn('duplicate', f'{int(dup.sum())} samples with a repeated stamp dropped',
+                       once=False)
+        if back.any():
+            self.stats.n_out_of_order += int(back.sum())
+            self._warn('order', f'{int(back.sum())} samples with out-of-order stamps dropped',
+                       once=False)
+        self._newest_ns = max(newest, int(stamp_ns.max())) if stamp_ns.size else newest
+        return ~dup & ~back
+
+    def _ingest(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
+        if stamp_ns.size == 0:
+            return
+        if self.first_stamp_ns is None:
+            self.first_stamp_ns = int(stamp_ns[0])
+        if self.acc is None:
+            self._pending_t.append(stamp_ns)
+            self._pending_y.append(samples)
+            if sum(t.size for t in self._pending_t) >= max(self.config.rate_window, 3):
+                t = np.concatenate(self._pending_t)
+                y = np.concatenate(self._pending_y)
+                self._pending_t, self._pending_y = [], []
+                self._estimate_rate(t)
+                self._start_accumulator()
+                self._ingest_regular(t, y, first=True)
+            return
+        self._ingest_regular(stamp_ns, samples)
+
+    def _estimate_rate(self, t: np.ndarray) -> None:
+        steps = np.diff(t).astype(np.float64)
+        # Mean rate over the window: arrival bursts cancel out, a sensor clock does not.
+        self.rate_hz = (t.size - 1) * _NS / float(t[-1] - t[0])
+        self._judge_jitter(steps)
+
+    def _judge_jitter(self, steps_ns: np.ndarray) -> None:
+        period = _NS / self.rate_hz
+        jitter = float(np.std(steps_ns) / period) if steps_ns.size > 1 else 0.0
+        self.stats.jitter_rel = jitter
+        if jitter > 0.25 and not self.stats.irregular_stamps:
+            self.stats.irregular_stamps = True
+            self._warn('irregular', f'irregular stamps (jitter {100 * jitter:.0f}% of the '
+                       f'{period / 1e6:.2f} ms period): samples are taken as evenly spaced at '
+                       f'{self.rate_hz:.3f} Hz; only steps over {self.config.irregular_gap_s} s '
+                       'count as gaps')
+
+    def _start_accumulator(self) -> None:
+        kwargs = {'exact_max_m': self.config.exact_max_m} if self.config.exact_max_m else {}
+        self.acc = AllanAccumulator(N_AXES, self.rate_hz, **kwargs)
+
+    def _ingest_regular(self, stamp_ns: np.ndarray, samples: np.ndarray,
+                        first: bool = False) -> None:
+        period_ns = _NS / self.rate_hz
+        prev = self.last_stamp_ns
+        steps = np.diff(stamp_ns, prepend=stamp_ns[0] if prev is None or first else prev)
+        if not first and steps.size > 8:
+            block_rate = (steps.size * _NS / float(steps.sum())) if steps.sum() > 0 else 0
+            if (not self.stats.irregular_stamps and steps.size >= 50
+                    and abs(block_rate / self.rate_hz - 1) > self.config.rate_tolerance):
+                self.stats.n_rate_changes += 1
+                self._warn('rate', f'sample rate changed: {block_rate:.2f} Hz against the '
+                           f'nominal {self.rate_hz:.2f} Hz (gaps are located with the nominal '
+                           'rate)', once=False)
+            self._judge_jitter(steps)
+        self._n_stamped += stamp_ns.size
+        if self.stats.irregular_stamps and self.first_stamp_ns is not None:
+            # Arrival bursts average out over the whole record: refine the mean rate.
+            span_ns = float(stamp_ns[-1] - self.first_stamp_ns)
+            if span_ns > 0 and self._n_stamped > 1:
+                self.rate_hz = (self._n_stamped - 1) * _NS / span_ns
+                self.acc.rate_hz = self.rate_hz
+        limit = (self.config.irregular_gap_s * _NS if self.stats.irregular_stamps
+                 else self.config.gap_factor * period_ns)
+        gap_idx = np.flatnonzero(steps > limit)
+        start = 0
+        for g in list(gap_idx) + [stamp_ns.size]:
+            if g > start:
+                self._accumulate(stamp_ns[start:g], samples[start:g])
+            if g < stamp_ns.size:
+                missing = int(round(steps[g] / period_ns)) - 1
+                self.stats.n_gaps += 1
+                self.stats.n_missing += max(missing, 1)
+                self._warn('gap', f'gap of {steps[g] / 1e9:.3f} s (~{max(missing, 1)} samples) '
+                           'in the stamps: the segment is split there, no term spans it',
+                           once=False)
+                self._flush_motion(break_after=True)
+            start = g
+        self.last_stamp_ns = int(stamp_ns[-1])
+
+    def _accumulate(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
+        """Gap-free run: saturation split, frozen check, then the motion stage."""
+        limits = np.array([self.config.gyro_range_rad_s] * 3 + [self.config.accel_range_m_s2] * 3)
+        sat = (np.abs(samples) >= 0.999 * limits) & (limits > 0)
+        rows = sat.any(axis=1)
+        if rows.any():
+            for j in np.flatnonzero(sat.any(axis=0)):
+                if AXES[j] not in self.stats.saturated_axes:
+                    self.stats.saturated_axes.append(AXES[j])
+            self.stats.n_saturated += int(rows.sum())
+            self._warn('saturated', f'{int(rows.sum())} saturated samples on '
+                       f'{", ".join(self.stats.saturated_axes)} dropped (segment split there)',
+                       once=False)
+        for t_part, y_part, broken in _split_runs(stamp_ns, samples, ~rows):
+            if broken:
+                self._flush_motion(break_after=True)
+            self._check_frozen(y_part)
+            self._motion_stage(t_part, y_part)
+
+    def _check_frozen(self, samples: np.ndarray) -> None:
+        # Length of the run of identical values that ends each axis' block.
+        same = np.diff(samples, axis=0, prepend=self._last_value[None, :]) == 0
+        for j in range(N_AXES):
+            col = same[:, j]
+            if col.all():
+                run = longest = self._repeat[j] + col.size
+            else:
+                breaks = np.flatnonzero(~col)
+                runs = np.diff(np.concatenate((breaks, [col.size]))) - 1
+                longest = max(self._repeat[j] + breaks[0], int(runs.max()))
+                run = col.size - 1 - breaks[-1]
+            self._repeat[j] = run
+            if longest >= self.config.frozen_samples and AXES[j] not in self.stats.frozen_axes:
+                self.stats.frozen_axes.append(AXES[j])
+                self._warn(f'frozen-{AXES[j]}', f'{AXES[j]} is frozen: one value repeated for '
+                           f'{longest} samples (a dead or disconnected sensor, or a replayed '
+                           'constant)')
+        self._last_value = samples[-1].copy()
+
+    def _motion_stage(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
+        """
+        Hold samples until their motion window is judged, then accumulate or drop them.
+
+        Rows wait at most one window (``motion_window_s``), so no sample reaches the
+        accumulator before the check that could reject it.
+        """
+        self._win_t.append(stamp_ns)
+        self._win_y.append(samples)
+        t = np.concatenate(self._win_t)
+        y = np.concatenate(self._win_y)
+        win = max(int(round(self.config.motion_window_s * self.rate_hz)), 2)
+        n_full = (y.shape[0] // win) * win
+        self._win_t, self._win_y = [t[n_full:]], [y[n_full:]]
+        for k in range(0, n_full, win):
+            self._judge_window(t[k:k + win], y[k:k + win])
+
+    def _flush_motion(self, break_after: bool = False) -> None:
+        """Accumulate the held partial window as still (end of data or a segment break)."""
+        if self._win_y and self._win_y[0].shape[0]:
+            t, y = np.concatenate(self._win_t), np.concatenate(self._win_y)
+            if not self._moving:
+                self._use(t, y)
+        self._win_t, self._win_y = [], []
+        if break_after and self.acc is not None:
+            self.acc.break_segment()
+
+    def _judge_window(self, t: np.ndarray, y: np.ndarray) -> None:
+        moving = self._window_moving(y)
+        if moving and not self._in_motion:
+            self.stats.n_motion_events += 1
+        self._in_motion = moving
+        policy = self.config.on_motion
+        if policy == 'warn':
+            self._use(t, y)
+            return
+        if moving:
+            self._still_since_ns = None
+            self.stats.n_motion_dropped += t.size
+            if not self._moving:
+                self._moving = True
+                self.acc.break_segment()
+                if policy == 'restart':
+                    self.stats.n_restarts += 1
+                    self._start_accumulator()
+                    self.stats.n_used = 0
+            return
+        if self._moving:
+            # Still again: wait settle_s before trusting the samples.
+            if self._still_since_ns is None:
+                self._still_since_ns = int(t[0])
+            if t[-1] - self._still_since_ns < self.config.settle_s * _NS:
+                self.stats.n_motion_dropped += t.size
+                return
+            self._moving = False
+            self._warn('resume', 'the IMU is still again: accumulation resumed', once=False)
+        self._use(t, y)
+
+    def _use(self, t: np.ndarray, y: np.ndarray) -> None:
+        self.acc.add(y)
+        self.stats.n_used += t.size
+
+    def _window_moving(self, w: np.ndarray) -> bool:
+        mean = w.mean(axis=0)
+        std = w.std(axis=0)
+        thr = np.array([self.config.motion_gyro_rad_s] * 3 + [self.config.motion_accel_m_s2] * 3)
+        if self._ref_mean is None:
+            # Quantised sensors can show zero spread: floor the reference noise.
+            self._ref_mean, self._ref_std = mean, np.maximum(std, thr / 20)
+            return False
+        dev = np.abs(mean - self._ref_mean)
+        ratio = std / self._ref_std
+        moving_axes = (dev > thr) | (ratio > self.config.motion_std_ratio)
+        if moving_axes.any():
+            names = ', '.join(AXES[j] for j in np.flatnonzero(moving_axes))
+            action = {'warn': 'samples kept (on_motion=warn)',
+                      'pause': 'accumulation paused until still',
+                      'restart': 'restarting from scratch once still'}[self.config.on_motion]
+            self._warn('motion', f'motion detected on {names} (mean off by up to '
+                       f'{dev.max():.3g}, noise x{ratio.max():.1f}): the IMU is not '
+                       f'stationary; {action}', once=False)
+            return True
+        # Follow slow bias drift so that temperature drift is not taken for motion.
+        self._ref_mean = 0.99 * self._ref_mean + 0.01 * mean
+        return False
+
+    def flush(self) -> None:
+        """Accumulate samples still held back (call at the end of a recording)."""
+        if self.acc is None and self._pending_t:
+            t = np.concatenate(self._pending_t)
+            y = np.concatenate(self._pending_y)
+            self._pending_t, self._pending_y = [], []
+            if t.size >= 3:
+                self._estimate_rate(t)
+                self._start_accumulator()
+                self._ingest_regular(t, y, first=True)
+        self._flush_motion()
+
+    # ----------------------------------------------------------------- output
+    @property
+    def duration_s(self) -> float:
+        """Duration of the samples used so far [s]."""
+        return self.stats.n_used / self.rate_hz if self.rate_hz > 0 else 0.0
+
+    def curve(self, confidence: float = 0.95) -> AllanCurve | None:
+        """Allan curve of the samples used so far, or None before any tau is computable."""
+        if self.acc is None or self.acc.n_samples < 4:
+            return None
+        return self.acc.curve(confidence=confidence)
+
+    @property
+    def warnings(self) -> list[str]:
+        """One line per kind of problem seen, with how often it happened."""
+        return list(self._warn_text.values())
+
+    def _warn(self, key: str, text: str, once: bool = True) -> None:
+        n = self._warn_count.get(key, 0) + 1
+        self._warn_count[key] = n
+        if once and n > 1:
+            return
+        self._warn_text[key] = text if n == 1 else f'{text} [{n} times so far]'
+        # Tell the user at 1, 2, 4, 8 ... occurrences: informative without flooding.
+        if self._on_warning is not None and n & (n - 1) == 0:
+            self._on_warning(self._warn_text[key])
+
+    # ------------------------------------------------------------- checkpoint
+    def save_state(self, path) -> None:
+        """
+        Save the whole session atomically (accumulator state plus counters; no pickle).
+
+        Parameters
+        ----------
+        path : str or Path
+            Target file; written to a temporary file first, then renamed.
+
+        """
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if self.acc is None:
+            return
+        meta = {
+            'version': 1, 'rate_hz': self.rate_hz, 'axes': list(AXES),
+            'config': asdict(self.config), 'stats': asdict(self.stats),
+            'warn_text': self._warn_text, 'warn_count': self._warn_count,
+            'first_stamp_ns': self.first_stamp_ns,
+            'last_stamp_ns': self.last_stamp_ns,
+            'ref_mean': None if self._ref_mean is None else self._ref_mean.tolist(),
+            'ref_std': None if self._ref_std is None else self._ref_std.tolist(),
+        }
+        fd, tmp_acc = tempfile.mkstemp(dir=path.parent, suffix='.acc.npz')
+        os.close(fd)
+        try:
+            self.acc.save(tmp_acc)
+            with np.load(tmp_acc, allow_pickle=False) as z:
+                arrays = {f'acc__{k}': z[k] for k in z.files}
+            arrays['session_meta'] = np.array(json.dumps(meta))
+            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix='.npz')
+            with os.fdopen(fd, 'wb') as f:
+                np.savez(f, **arrays)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp_acc):
+                os.remove(tmp_acc)
+
+    @classmethod
+    def load_state(cls, path, config: SessionConfig | None = None,
+                   on_warning: Callable[[str], None] | None = None) -> 'Session':
+        """
+        Restore a session saved by :meth:`save_state`.
+
+        Parameters
+        ----------
+        path : str or Path
+            Checkpoint file.
+        config : SessionConfig, optional
+            Settings for the resumed session; a rate that differs from the saved one
+            by more than ``rate_tolerance`` refuses the resume with an InputError.
+        on_warning : callable, optional
+            Warning sink of the new session.
+
+        Returns
+        -------
+        Session
+            The restored session, ready for more samples.
+
+        """
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z['session_meta']))
+                acc_arrays = {k[5:]: z[k] for k in z.files if k.startswith('acc__')}
+        except (OSError, ValueError, KeyError) as exc:
+            raise InputError(f'cannot read checkpoint {path}: {exc}') from None
+        if meta.get('axes') != list(AXES):
+            raise InputError(f'checkpoint {path} has axes {meta.get("axes")}, not {list(AXES)}')
+        saved_cfg = SessionConfig(**meta['config'])
+        config = config or saved_cfg
+        rate = float(meta['rate_hz'])
+        if config.rate_hz > 0 and abs(config.rate_hz / rate - 1) > config.rate_tolerance:
+            raise InputError(f'checkpoint {path} was taken at {rate:.3f} Hz but the rate is now '
+                             f'{config.rate_hz:.3f} Hz: not resuming')
+        fd, tmp = tempfile.mkstemp(suffix='.npz')
+        os.close(fd)
+        try:
+            np.savez(tmp, **acc_arrays)
+            acc = AllanAccumulator.load(tmp)
+        finally:
+            os.remove(tmp)
+        session = cls(replace(config, rate_hz=rate), on_warning=on_warning)
+        session.acc = acc
+        session.stats = HygieneStats(**meta['stats'])
+        session._warn_text = dict(meta['warn_text'])
+        session._warn_count = {k: int(v) for k, v in meta['warn_count'].items()}
+        session.first_stamp_ns = meta['first_stamp_ns']
+        session.last_stamp_ns = meta['last_stamp_ns']
+        if meta['ref_mean'] is not None:
+            session._ref_mean = np.array(meta['ref_mean'])
+            session._ref_std = np.array(meta['ref_std'])
+        return session
+
+
+def _as_block(stamp_ns, samples) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a block's types and shapes; return int64 stamps and float64 samples."""
+    try:
+        t = np.asarray(stamp_ns)
+        y = np.asarray(samples, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f'samples must be numbers: {exc}') from None
+    if t.dtype.kind not in 'iu':
+        if t.dtype.kind == 'f' and np.all(np.isfinite(t)):
+            t = np.round(t).astype(np.int64)
+        else:
+            raise InputError(f'stamps must be integer nanoseconds, got dtype {t.dtype}')
+    t = t.astype(np.int64, copy=False).reshape(-1)
+    if y.ndim == 1 and y.size == N_AXES and t.size == 1:
+        y = y[None, :]
+    if y.ndim != 2 or y.shape[1] != N_AXES or y.shape[0] != t.size:
+        raise InputError(f'a block needs stamps (n,) and samples (n, {N_AXES}); got '
+                         f'{t.shape} and {y.shape}')
+    return t, y
+
+
+def _split_runs(stamp_ns: np.ndarray, samples: np.ndarray, keep: np.ndarray):
+    """
+    Yield the runs of kept rows as (stamps, samples, broken).
+
+    ``broken`` is True when rows were dropped just before the run, i.e. the run does
+    not continue the previous data.
+    """
+    if keep.all():
+        yield stamp_ns, samples, False
+        return
+    idx = np.flatnonzero(keep)
+    if idx.size == 0:
+        return
+    cuts = np.flatnonzero(np.diff(idx) > 1) + 1
+    for run in np.split(idx, cuts):
+        broken = run[0] > 0 and not keep[run[0] - 1]
+        yield stamp_ns[run], samples[run], bool(broken)
+
+
+def axis_unit(axis: str) -> str:
+    """Return the SI unit of an axis' samples."""
+    return AXIS_UNITS[axis]

@@ -1,0 +1,119 @@
+"""
+ADEV figures (matplotlib, Agg): measured curves with confidence bands, the fitted
+model and each term's contribution, gyro and accelerometer in two panels with units.
+"""
+
+from pathlib import Path
+
+import matplotlib
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from imu_allan import ACCEL_AXES, AXES, GYRO_AXES  # noqa: E402
+from imu_allan.model import avar_model, avar_terms  # noqa: E402
+
+_COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
+_PANELS = ((GYRO_AXES, 'gyro ADEV [rad/s]'), (ACCEL_AXES, 'accel ADEV [m/s$^2$]'))
+
+
+def _save(fig, base: Path) -> list:
+    paths = []
+    for ext in ('png', 'svg'):
+        path = base.with_suffix(f'.{ext}')
+        fig.savefig(path, dpi=130 if ext == 'png' else None, bbox_inches='tight')
+        paths.append(path)
+    plt.close(fig)
+    return paths
+
+
+def plot_result(result, base) -> list:
+    """
+    Draw the measured ADEV of the six axes with the fitted model and its terms.
+
+    Parameters
+    ----------
+    result : imu_allan.analysis.AnalysisResult
+        The analysis to draw.
+    base : str or Path
+        Output path without suffix; ``.png`` and ``.svg`` are written.
+
+    Returns
+    -------
+    list of Path
+        The two files.
+
+    """
+    curve = result.curve
+    tau = curve.tau_s
+    tau_fine = np.geomspace(tau[0], tau[-1], 200)
+    fig, panels = plt.subplots(1, 2, figsize=(13, 5.2))
+    for ax, (axes, ylabel) in zip(panels, _PANELS):
+        for axis in axes:
+            j = AXES.index(axis)
+            colour = _COLOURS[axis[-1]]
+            ok = curve.avar[:, j] > 0
+            if not ok.any():
+                continue
+            ax.fill_between(tau[ok], curve.adev_lo[ok, j], curve.adev_hi[ok, j],
+                            color=colour, alpha=0.18, lw=0)
+            ax.loglog(tau[ok], curve.adev[ok, j], 'o', ms=3, color=colour,
+                      label=f'{axis} measured (95 % band)')
+            fit = result.fits.get(axis)
+            if fit is None:
+                continue
+            ax.loglog(tau_fine, np.sqrt(avar_model(tau_fine, fit.model)), '-', color=colour,
+                      lw=1.4, label=f'{axis} fitted model')
+            for name, avar in avar_terms(tau_fine, fit.model).items():
+                ax.loglog(tau_fine, np.sqrt(avar), ':', color=colour, lw=0.9, alpha=0.8)
+                k = int(np.argmax(avar))
+                ax.annotate(name, (tau_fine[k], np.sqrt(avar[k])), fontsize=6,
+                            color=colour, alpha=0.8)
+        ax.set_xlabel('averaging time tau [s]')
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which='both', alpha=0.3)
+        ax.legend(fontsize=7, loc='best')
+    fig.suptitle(f'Allan deviation: {result.source or "input"}  ({result.n_samples} samples, '
+                 f'{result.duration_s / 3600:.2f} h at {result.rate_hz:.1f} Hz; dotted: terms)',
+                 fontsize=10)
+    return _save(fig, Path(base))
+
+
+def plot_comparison(results: list, labels: list, base) -> list:
+    """
+    Overlay the measured ADEV of several recordings (run-to-run spread).
+
+    Parameters
+    ----------
+    results : list of AnalysisResult
+        One per input.
+    labels : list of str
+        Their names.
+    base : str or Path
+        Output path without suffix.
+
+    Returns
+    -------
+    list of Path
+        The PNG and SVG files.
+
+    """
+    fig, panels = plt.subplots(2, 3, figsize=(15, 8), sharex=True)
+    cmap = plt.get_cmap('viridis', max(len(results), 2))
+    for j, axis in enumerate(AXES):
+        ax = panels[j // 3, j % 3]
+        for k, (res, label) in enumerate(zip(results, labels)):
+            c = res.curve
+            ok = c.avar[:, j] > 0
+            ax.fill_between(c.tau_s[ok], c.adev_lo[ok, j], c.adev_hi[ok, j],
+                            color=cmap(k), alpha=0.12, lw=0)
+            ax.loglog(c.tau_s[ok], c.adev[ok, j], '-', color=cmap(k), lw=1, label=label)
+        ax.set_title(axis, fontsize=9)
+        ax.grid(True, which='both', alpha=0.3)
+        if j % 3 == 0:
+            ax.set_ylabel('ADEV [rad/s]' if j < 3 else 'ADEV [m/s$^2$]')
+        if j >= 3:
+            ax.set_xlabel('tau [s]')
+    panels[0, 0].legend(fontsize=7)
+    fig.suptitle('Run-to-run comparison of the Allan deviation (95 % bands)', fontsize=10)
+    return _save(fig, Path(base))

@@ -1,0 +1,103 @@
+"""
+Write an analysis to disk: result JSON, Kalibr file, Q/R, robot_localization values,
+the fitted model as a params YAML, a human summary and the ADEV plot.
+
+Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
+"""
+
+import json
+import os
+from pathlib import Path
+import tempfile
+
+import yaml
+
+from imu_allan.analysis import AnalysisResult, B_CONVENTION
+from imu_allan.noise_params import dump_params, NoiseSpec
+
+#: File names inside the output directory (stable: other tools read them).
+FILES = {
+    'json': 'result.json',
+    'kalibr': 'imu.yaml',
+    'kalman': 'kalman_qr.yaml',
+    'robot_localization': 'imu_covariance.yaml',
+    'model': 'noise_model.yaml',
+    'summary': 'summary.txt',
+}
+
+
+def _atomic_write(path: Path, text: str) -> Path:
+    """Write text to path through a temporary file, so a crash never leaves half a file."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.')
+    with os.fdopen(fd, 'w') as f:
+        f.write(text)
+    os.replace(tmp, path)
+    return path
+
+
+def summary_text(result: AnalysisResult) -> str:
+    """Return the human summary: one line per axis plus the input warnings."""
+    lines = [f'imu_allan result for {result.source or "input"}: {result.n_samples} samples, '
+             f'{result.duration_s / 3600:.3f} h at {result.rate_hz:.3f} Hz',
+             f'B convention: {B_CONVENTION}', '']
+    lines += result.summary_lines()
+    for axis, fit in result.fits.items():
+        if fit is not None and fit.notes:
+            lines += [f'  {axis} note: {n}' for n in fit.notes]
+    if result.warnings:
+        lines += ['', 'input warnings:'] + [f'  - {w}' for w in result.warnings]
+    return '\n'.join(lines) + '\n'
+
+
+def kalman_yaml(result: AnalysisResult) -> str:
+    """Return the Q/R matrices with their state order as YAML (discrete and continuous)."""
+    k = result.kalman.to_json()
+    header = ('# Bias-state Kalman model per axis (Maia et al. eqs. 16-17): states b_gm '
+              '(Gauss-Markov) and b_rw (random walk).\n# Discrete forms for dt_s; '
+              'Rd = S_N / dt. Units: rad, m, s.\n')
+    return header + yaml.safe_dump(k, sort_keys=False, width=120)
+
+
+def covariance_yaml(result: AnalysisResult) -> str:
+    """Return the sensor_msgs/Imu covariance fields for robot_localization."""
+    header = ('# Paste into the IMU driver (or imu_with_covariance): robot_localization '
+              'reads noise from these message fields.\n# variance = N^2 * rate_hz '
+              '(white noise at the sample rate), clamped to >= 1e-9.\n')
+    return header + yaml.safe_dump(result.imu_covariances(), sort_keys=False)
+
+
+def write_outputs(result: AnalysisResult, out_dir, plot: bool = True) -> list:
+    """
+    Write every output file of one analysis into ``out_dir``.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        The analysis.
+    out_dir : str or Path
+        Directory (created when missing).
+    plot : bool
+        Also draw adev.png and adev.svg.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    """
+    out = Path(out_dir).expanduser()
+    out.mkdir(parents=True, exist_ok=True)
+    spec = NoiseSpec(name=f'fitted from {result.source or "input"}', axes=result.models())
+    written = [
+        _atomic_write(out / FILES['json'], json.dumps(result.to_json(), indent=1) + '\n'),
+        _atomic_write(out / FILES['kalibr'], result.kalibr_yaml()),
+        _atomic_write(out / FILES['kalman'], kalman_yaml(result)),
+        _atomic_write(out / FILES['robot_localization'], covariance_yaml(result)),
+        _atomic_write(out / FILES['model'],
+                      yaml.safe_dump(dump_params(spec), sort_keys=False)),
+        _atomic_write(out / FILES['summary'], summary_text(result)),
+    ]
+    if plot:
+        from imu_allan.plot import plot_result
+        written += plot_result(result, out / 'adev')
+    return written

@@ -1,0 +1,35 @@
+"""The parameter table drives config/imu_allan.yaml and the README table."""
+
+import yaml
+
+from conftest import REPO
+from imu_allan.node_params import BY_NAME, config_yaml, markdown_table, PARAMS, session_config
+
+
+def test_config_file_is_generated_from_the_table():
+    text = (REPO / 'config' / 'imu_allan.yaml').read_text()
+    assert text == config_yaml(), 'regenerate: python -m imu_allan.node_params yaml'
+    values = yaml.safe_load(text)['/**']['ros__parameters']
+    assert set(values) == set(BY_NAME)
+    for p in PARAMS:
+        assert values[p.name] == p.default
+        assert p.check(p.default) is None, p.name
+
+
+def test_readme_table_is_generated_from_the_table():
+    assert markdown_table() in (REPO / 'README.md').read_text(), \
+        'regenerate: python -m imu_allan.node_params markdown'
+
+
+def test_checks_refuse_bad_values_with_a_reason():
+    assert 'outside' in BY_NAME['min_duration_s'].check(0.0)
+    assert 'must be float' in BY_NAME['min_duration_s'].check('long')
+    assert 'one of' in BY_NAME['on_motion'].check('panic')
+    assert 'must be int' in BY_NAME['qos_depth'].check(True)
+    assert BY_NAME['min_duration_s'].check(600) is None   # an int for a float is fine
+
+
+def test_session_config_takes_the_matching_values():
+    cfg = session_config({'on_motion': 'restart', 'motion_gyro_rad_s': 0.2,
+                          'publish_period_s': 3.0})
+    assert cfg.on_motion == 'restart' and cfg.motion_gyro_rad_s == 0.2
