@@ -86,7 +86,7 @@ class AnalysisResult:
         return self.kalman.Rd, list(self.kalman.measurement_labels)
 
     def imu_covariances(self) -> dict:
-        """The sensor_msgs/Imu covariance fields for robot_localization."""
+        """Return the sensor_msgs/Imu covariance fields for robot_localization."""
         cov = imu_covariance(self._sources(), self.rate_hz)
         return {'angular_velocity_covariance': list(cov.angular_velocity_covariance),
                 'linear_acceleration_covariance': list(cov.linear_acceleration_covariance),

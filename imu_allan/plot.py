@@ -1,6 +1,8 @@
 """
-ADEV figures (matplotlib, Agg): measured curves with confidence bands, the fitted
-model and each term's contribution, gyro and accelerometer in two panels with units.
+ADEV figures drawn with matplotlib (Agg backend).
+
+Measured curves with confidence bands, the fitted model and each term's
+contribution, gyro and accelerometer in two panels with units.
 """
 
 from pathlib import Path

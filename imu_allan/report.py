@@ -1,6 +1,8 @@
 """
-Write an analysis to disk: result JSON, Kalibr file, Q/R, robot_localization values,
-the fitted model as a params YAML, a human summary and the ADEV plot.
+Write an analysis to disk.
+
+The result JSON, Kalibr file, Q/R, robot_localization values, the fitted model
+as a params YAML, a human summary and the ADEV plot.
 
 Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
 """

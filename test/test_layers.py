@@ -10,7 +10,7 @@ import sys
 
 from conftest import REPO
 
-CORE = ('allan', 'accumulator', 'model', 'fit', 'simulate', 'kalman', 'diagnose',
+CORE = ('allan', 'analysis', 'accumulator', 'model', 'fit', 'simulate', 'kalman', 'diagnose',
         'noise_params', 'units', 'csv_io', 'pipeline', 'errors', 'node_params')
 FORBIDDEN = ('rclpy', 'rosbags', 'mcap', 'sensor_msgs', 'std_msgs', 'std_srvs',
              'diagnostic_msgs', 'builtin_interfaces', 'matplotlib', 'launch')

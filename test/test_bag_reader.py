@@ -1,0 +1,408 @@
+"""
+Tests of imu_allan.bag_reader: every storage, odd layouts, bad inputs, real bags.
+
+Reference values come from rosbags' own per-message (de)serialisers, from the
+mcap package's writer, or from the data that was written (exact round trips:
+float64 values and integer nanoseconds must come back bit for bit).
+"""
+
+import os
+from pathlib import Path
+
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, IndexType, Writer as McapWriter
+import numpy as np
+from numpy.testing import assert_array_equal
+import pytest
+from rosbags.rosbag1 import Writer as Ros1Writer
+from rosbags.rosbag2 import StoragePlugin, Writer as Ros2Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.typesys import get_typestore, Stores
+
+from imu_allan.bag_reader import (decode_imu_cdr, decode_imu_payloads, ImuBlock,
+                                  list_imu_topics, list_topics, open_imu)
+from imu_allan.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
+from imu_allan.errors import InputError
+
+IMU = 'sensor_msgs/msg/Imu'
+ROS2 = get_typestore(Stores.ROS2_JAZZY)
+ROS1 = get_typestore(Stores.ROS1_NOETIC)
+T0_NS = 1_700_000_000_000_000_000
+
+
+def _recording(n: int, seed: int, rate_hz: float = 400.0):
+    """Return (stamps_ns (n,) int64 with jitter, samples (n, 6) float64)."""
+    rng = np.random.default_rng(seed)
+    stamps = T0_NS + np.round(np.arange(n) * 1e9 / rate_hz + rng.uniform(0, 2e5, n))
+    samples = rng.normal(size=(n, 6)) * [1e-2, 1e-2, 1e-2, 0.1, 0.1, 0.1]
+    samples[:, 5] += 9.80665
+    return stamps.astype(np.int64), samples
+
+
+def _imu_msg(store, stamp_ns: int, values, frame_id: str):
+    """Build a sensor_msgs/Imu object of a rosbags type store."""
+    types = store.types
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    header = {'stamp': types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec),
+              'frame_id': frame_id}
+    if store is ROS1:
+        header['seq'] = 0
+    vec = types['geometry_msgs/msg/Vector3']
+    return types[IMU](
+        header=types['std_msgs/msg/Header'](**header),
+        orientation=types['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=np.r_[-1.0, np.zeros(8)],
+        angular_velocity=vec(x=values[0], y=values[1], z=values[2]),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=vec(x=values[3], y=values[4], z=values[5]),
+        linear_acceleration_covariance=np.zeros(9))
+
+
+def _write_rosbags2(path: Path, topics: dict, storage: StoragePlugin,
+                    extra_topic: bool = True) -> None:
+    """
+    Write a rosbag2 bag with rosbags' per-message serialisation.
+
+    topics maps name -> (stamps_ns, recv_ns, samples, frame_ids); messages of all topics
+    are interleaved by receive time, as a recorder writes them.
+    """
+    with Ros2Writer(path, version=9, storage_plugin=storage) as writer:
+        rows = []
+        for name, (stamps, recv, samples, frames) in topics.items():
+            conn = writer.add_connection(name, IMU, typestore=ROS2)
+            for i in range(stamps.size):
+                rows.append((int(recv[i]), conn, _imu_msg(ROS2, stamps[i], samples[i], frames[i])))
+        if extra_topic:
+            conn = writer.add_connection('/status', 'std_msgs/msg/String', typestore=ROS2)
+            status = ROS2.types['std_msgs/msg/String'](data='ok')
+            rows += [(T0_NS + k * 10**8, conn, status) for k in range(5)]
+        for recv, conn, msg in sorted(rows, key=lambda r: r[0]):
+            writer.write(conn, recv, bytes(ROS2.serialize_cdr(msg, conn.msgtype)))
+
+
+def _assert_topic(block: ImuBlock, stamps, recv, samples) -> None:
+    assert_array_equal(block.stamp_ns, stamps)
+    assert_array_equal(block.recv_ns, recv)
+    assert_array_equal(block.samples, samples)
+    assert block.stamp_ns.dtype == np.int64 and block.samples.dtype == np.float64
+
+
+# -- round trips through the project's writer ---------------------------------------
+
+@pytest.mark.parametrize('name, storage, expected', [
+    ('single.mcap', None, 'mcap'), ('single.db3', None, 'sqlite3'),
+    ('dir_mcap', None, 'mcap'), ('dir_sqlite', 'sqlite3', 'sqlite3'), ('ros1.bag', None, 'ros1')])
+def test_round_trip_is_exact(tmp_path, name, storage, expected):
+    stamps, samples = _recording(7000, seed=1)
+    write_imu_bag(tmp_path / name, stamps, samples, storage=storage)
+    with open_imu(tmp_path / name) as source:
+        assert (source.topic, source.n_messages, source.storage) == ('/imu/data', 7000,
+                                                                     expected)
+        blocks = list(source.blocks(block_size=3000))
+        assert [b.stamp_ns.size for b in blocks] == [3000, 3000, 1000]
+        _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
+        assert source.warnings == []
+    assert list_imu_topics(tmp_path / name) == [
+        ('/imu/data', 'sensor_msgs/Imu' if expected == 'ros1' else IMU, 7000)]
+
+
+# -- bags written message by message with rosbags ------------------------------------
+
+@pytest.mark.parametrize('storage', [StoragePlugin.SQLITE3, StoragePlugin.MCAP])
+def test_rosbags_written_bag_with_two_imu_topics(tmp_path, storage):
+    stamps_a, samples_a = _recording(600, seed=2)
+    stamps_b, samples_b = _recording(300, seed=3, rate_hz=200.0)
+    # Receive time is not header.stamp: later, with its own jitter.
+    recv_a = stamps_a + 3_000_000 + np.arange(600) % 7 * 1000
+    recv_b = stamps_b + 5_000_000
+    # frame_id lengths 1..12 bytes change the payload layout (padding) message by message.
+    frames_a = [('imu' + 'x' * (i % 10))[: i % 12] for i in range(600)]
+    frames_b = ['imu_b'] * 300
+    bag = tmp_path / 'bag'
+    _write_rosbags2(bag, {'/imu/a': (stamps_a, recv_a, samples_a, frames_a),
+                          '/imu/b': (stamps_b, recv_b, samples_b, frames_b)}, storage)
+    with pytest.raises(InputError, match=r'2 Imu topics: /imu/a \(sensor_msgs/msg/Imu, 600 '
+                                         r'messages\), /imu/b .*--topic'):
+        open_imu(bag)
+    for name, stamps, recv, samples in [('/imu/a', stamps_a, recv_a, samples_a),
+                                        ('imu/b', stamps_b, recv_b, samples_b)]:
+        with open_imu(bag, topic=name) as source:
+            _assert_topic(source.read_all(), stamps, recv, samples)
+            assert source.warnings == []
+    assert [t.topic for t in list_imu_topics(bag)] == ['/imu/a', '/imu/b']
+    assert {t.topic: t.n_messages for t in list_topics(bag)}['/status'] == 5
+    with pytest.raises(InputError, match='/status is std_msgs/msg/String, not sensor_msgs'):
+        open_imu(bag, topic='/status')
+    with pytest.raises(InputError, match='no topic /nope; Imu topics: /imu/a'):
+        open_imu(bag, topic='/nope')
+
+
+@pytest.mark.parametrize('mode', [CompressionMode.FILE, CompressionMode.MESSAGE])
+def test_zstd_compressed_rosbag2(tmp_path, mode):
+    stamps, samples = _recording(200, seed=4)
+    bag = tmp_path / 'bag'
+    writer = Ros2Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    writer.set_compression(mode, CompressionFormat.ZSTD)
+    with writer:
+        conn = writer.add_connection('/imu', IMU, typestore=ROS2)
+        for i in range(200):
+            msg = _imu_msg(ROS2, stamps[i], samples[i], 'imu')
+            writer.write(conn, int(stamps[i]), bytes(ROS2.serialize_cdr(msg, IMU)))
+    with open_imu(bag) as source:
+        _assert_topic(source.read_all(), stamps, stamps, samples)
+
+
+def test_ros1_bag_written_by_rosbags(tmp_path):
+    stamps, samples = _recording(500, seed=5)
+    bag = tmp_path / 'r1.bag'
+    with Ros1Writer(bag) as writer:
+        conn = writer.add_connection('/imu/raw', IMU, typestore=ROS1)
+        other = writer.add_connection('/chatter', 'std_msgs/msg/String', typestore=ROS1)
+        for i in range(500):
+            msg = _imu_msg(ROS1, stamps[i], samples[i], 'imu_link' if i % 3 else 'i')
+            writer.write(conn, int(stamps[i]) + 1_000_000, bytes(ROS1.serialize_ros1(msg, IMU)))
+        writer.write(other, T0_NS, bytes(ROS1.serialize_ros1(
+            ROS1.types['std_msgs/msg/String'](data='hi'), 'std_msgs/msg/String')))
+    assert list_imu_topics(bag) == [('/imu/raw', 'sensor_msgs/Imu', 500)]
+    with open_imu(bag) as source:
+        assert source.storage == 'ros1'
+        _assert_topic(source.read_all(), stamps, stamps + 1_000_000, samples)
+
+
+def test_mcap_library_files_lz4_chunks_without_index_and_unchunked(tmp_path):
+    # Files from the mcap package's own writer: schema and channel records inside the
+    # chunks, lz4 chunks without message indexes, or no chunks at all.
+    stamps, samples = _recording(3000, seed=6)
+    payloads = serialize_imu(stamps, samples, 'imu')
+    msgdef, _ = ROS2.generate_msgdef(IMU, ros_version=2)
+    for name, options in [('lz4.mcap', {'compression': CompressionType.LZ4,
+                                        'index_types': IndexType.NONE, 'chunk_size': 50_000}),
+                          ('plain.mcap', {'use_chunking': False})]:
+        with open(tmp_path / name, 'wb') as stream:
+            writer = McapWriter(stream, **options)
+            writer.start(profile='ros2')
+            schema = writer.register_schema(IMU, 'ros2msg', msgdef.encode())
+            channel = writer.register_channel('/imu', 'cdr', schema)
+            for i in range(stamps.size):
+                writer.add_message(channel, int(stamps[i]) + 7, payloads[i].tobytes(),
+                                   int(stamps[i]))
+            writer.finish()
+        with open_imu(tmp_path / name) as source:
+            assert source.n_messages == 3000
+            _assert_topic(source.read_all(), stamps, stamps + 7, samples)
+    # The ros1 profile: ROS 1 serialised messages in MCAP.
+    with open(tmp_path / 'ros1.mcap', 'wb') as stream:
+        writer = McapWriter(stream)
+        writer.start(profile='ros1')
+        schema = writer.register_schema('sensor_msgs/Imu', 'ros1msg', b'')
+        channel = writer.register_channel('/imu1', 'ros1', schema)
+        for i, raw in enumerate(serialize_imu(stamps[:99], samples[:99], ros1=True)):
+            writer.add_message(channel, int(stamps[i]), raw.tobytes(), int(stamps[i]))
+        writer.finish()
+    assert list_imu_topics(tmp_path / 'ros1.mcap') == [('/imu1', 'sensor_msgs/Imu', 99)]
+    with open_imu(tmp_path / 'ros1.mcap') as source:
+        _assert_topic(source.read_all(), stamps[:99], stamps[:99], samples[:99])
+
+
+def test_decoder_handles_big_endian_odd_lengths_and_garbage():
+    stamps, samples = _recording(6, seed=7)
+    msgs = [_imu_msg(ROS2, stamps[i], samples[i], 'f' * i) for i in range(6)]
+    payloads = [bytes(ROS2.serialize_cdr(m, IMU, little_endian=i % 2 == 0))
+                for i, m in enumerate(msgs)]
+    payloads.append(b'\x00\x01\x00\x00' + b'\x07' * 10)   # too short to be an Imu
+    stamp_ns, values, ok = decode_imu_payloads(
+        np.frombuffer(b''.join(payloads), np.uint8),
+        np.cumsum([0] + [len(p) for p in payloads[:-1]]), [len(p) for p in payloads])
+    assert_array_equal(ok, [True] * 6 + [False])
+    assert_array_equal(stamp_ns[:6], stamps)
+    assert_array_equal(values[:6], samples)
+    assert_array_equal(decode_imu_cdr(payloads[:6])[1], samples)
+    with pytest.raises(InputError, match='1 of 7 payloads'):
+        decode_imu_cdr(payloads)
+
+
+# -- bad inputs ---------------------------------------------------------------------
+
+def test_bad_paths_and_files(tmp_path):
+    with pytest.raises(InputError, match='no such file'):
+        open_imu(tmp_path / 'missing.mcap')
+    (tmp_path / 'empty.mcap').write_bytes(b'')
+    with pytest.raises(InputError, match='empty file'):
+        open_imu(tmp_path / 'empty.mcap')
+    (tmp_path / 'junk.db3').write_bytes(os.urandom(4096))
+    with pytest.raises(InputError, match='not a bag'):
+        list_imu_topics(tmp_path / 'junk.db3')
+    (tmp_path / 'fake.db3').write_bytes(b'SQLite format 3\x00' + bytes(5000))
+    with pytest.raises(InputError, match='damaged or not a sqlite3 database'):
+        open_imu(tmp_path / 'fake.db3')
+    (tmp_path / 'somedir').mkdir()
+    with pytest.raises(InputError, match='not a rosbag2 bag'):
+        open_imu(tmp_path / 'somedir')
+
+
+def test_truncated_sqlite_is_a_clear_error(tmp_path):
+    stamps, samples = _recording(3000, seed=8)
+    write_imu_bag(tmp_path / 'whole.db3', stamps, samples)
+    data = (tmp_path / 'whole.db3').read_bytes()
+    (tmp_path / 'cut.db3').write_bytes(data[:len(data) // 2])
+    with pytest.raises(InputError, match=r'cut.db3: damaged or not a sqlite3 database'):
+        open_imu(tmp_path / 'cut.db3')
+
+
+def test_empty_bag_and_bag_without_imu(tmp_path):
+    write_imu_bag(tmp_path / 'empty.mcap', np.zeros(0, np.int64), np.zeros((0, 6)))
+    with pytest.raises(InputError, match=r'/imu/data has no messages \(empty bag\)'):
+        open_imu(tmp_path / 'empty.mcap')
+    bag = tmp_path / 'status_only'
+    _write_rosbags2(bag, {}, StoragePlugin.SQLITE3)
+    with pytest.raises(InputError, match=r'no sensor_msgs/msg/Imu topic; topics: /status '
+                                         r'\(std_msgs/msg/String, 5 messages\)'):
+        open_imu(bag)
+    assert list_imu_topics(bag) == []
+
+
+@pytest.mark.parametrize('compressed', [True, False])
+def test_truncated_mcap_recovers_every_complete_message(tmp_path, compressed):
+    stamps, samples = _recording(12000, seed=9)
+    whole = tmp_path / 'whole.mcap'
+    if compressed:
+        write_imu_bag(whole, stamps, samples)   # zstd chunks of about 1 MiB
+    else:
+        payloads = serialize_imu(stamps, samples)
+        with open(whole, 'wb') as stream:
+            writer = McapWriter(stream, compression=CompressionType.NONE)
+            writer.start(profile='ros2')
+            schema = writer.register_schema(IMU, 'ros2msg', b'')
+            channel = writer.register_channel('/imu/data', 'cdr', schema)
+            for i in range(stamps.size):
+                writer.add_message(channel, int(stamps[i]), payloads[i].tobytes(),
+                                   int(stamps[i]))
+            writer.finish()
+    data = whole.read_bytes()
+    log_ns = stamps + (DEFAULT_LATENCY_NS if compressed else 0)
+    with open(whole, 'rb') as stream:
+        chunks = make_reader(stream).get_summary().chunk_indexes
+    for fraction in (0.37, 0.81):
+        cut_at = int(len(data) * fraction)
+        cut = tmp_path / f'cut_{fraction}.mcap'
+        cut.write_bytes(data[:cut_at])
+        with open_imu(cut) as source:
+            block = source.read_all()
+            assert any('truncated' in w for w in source.warnings)
+        k = block.stamp_ns.size
+        # Bounds from the intact file: all messages of the chunks before the cut, at most
+        # those of the chunk that is cut (its complete records, or zstd blocks, come back).
+        done = [c for c in chunks if c.chunk_start_offset + c.chunk_length <= cut_at]
+        torn = next(c for c in chunks if c.chunk_start_offset + c.chunk_length > cut_at)
+        k_min = np.count_nonzero(log_ns <= done[-1].message_end_time)
+        k_max = np.count_nonzero(log_ns <= torn.message_end_time)
+        assert k_min <= k <= k_max
+        if not compressed:
+            assert k > k_min   # the torn chunk's complete messages are recovered
+        _assert_topic(block, stamps[:k], log_ns[:k], samples[:k])
+    # Summary and footer lost, data section complete.
+    summary_start = int.from_bytes(data[-37 + 9:-37 + 17], 'little')
+    (tmp_path / 'nosummary.mcap').write_bytes(data[:summary_start])
+    with open_imu(tmp_path / 'nosummary.mcap') as source:
+        assert source.read_all().stamp_ns.size == stamps.size
+        assert source.n_messages == stamps.size
+
+
+def test_metadata_missing_or_broken_falls_back_to_storage_files(tmp_path):
+    stamps, samples = _recording(1000, seed=10)
+    for storage in ('mcap', 'sqlite3'):
+        bag = tmp_path / f'bag_{storage}'
+        write_imu_bag(bag, stamps, samples, storage=storage)
+        (bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: [unclosed\n')
+        with open_imu(bag) as source:
+            _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
+            assert any('metadata.yaml: unparsable' in w for w in source.warnings)
+        (bag / 'metadata.yaml').unlink()
+        with open_imu(bag) as source:
+            assert source.read_all().stamp_ns.size == 1000
+            assert any('no metadata.yaml' in w for w in source.warnings)
+    write_imu_bag(tmp_path / 'intact', stamps, samples)
+    with open_imu(tmp_path / 'intact' / 'metadata.yaml') as source:   # the file names the bag
+        assert source.n_messages == 1000 and source.warnings == []
+
+
+def test_split_bag_reads_files_in_order(tmp_path):
+    stamps, samples = _recording(900, seed=11)
+    bag = tmp_path / 'split'
+    bag.mkdir()
+    for part, (begin, end) in enumerate([(0, 400), (400, 900)]):
+        write_imu_bag(bag / f'split_{part}.db3', stamps[begin:end], samples[begin:end])
+    # Foxy-style metadata (version 4): paths prefixed with the bag name, QoS as a string.
+    (bag / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  version: 4\n  storage_identifier: sqlite3\n'
+        '  relative_file_paths: [split/split_0.db3, split/split_1.db3]\n'
+        '  duration: {nanoseconds: 1}\n  starting_time: {nanoseconds_since_epoch: 1}\n'
+        '  message_count: 900\n  topics_with_message_count:\n'
+        '    - topic_metadata: {name: /imu/data, type: sensor_msgs/msg/Imu,'
+        " serialization_format: cdr, offered_qos_profiles: ''}\n      message_count: 900\n")
+    with open_imu(bag) as source:
+        assert source.n_messages == 900
+        _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
+        assert source.warnings == []
+
+
+def test_zero_header_stamps_are_reported(tmp_path):
+    _, samples = _recording(50, seed=12)
+    write_imu_bag(tmp_path / 'z.mcap', np.zeros(50, np.int64), samples)
+    with open_imu(tmp_path / 'z.mcap') as source:
+        source.read_all()
+        assert any('header.stamp is 0 in 50 of 50' in w for w in source.warnings)
+
+
+# -- real recordings -----------------------------------------------------------------
+
+def test_real_foxy_sqlite_bag_constant_values(shared_dir):
+    bag = shared_dir / 'realdata' / 'rosbag2_foxy_db3' / 'rosbag2_test'
+    assert list_imu_topics(bag) == [('/imu', IMU, 1565)]
+    with open_imu(bag) as source:
+        block = source.read_all()
+        assert source.warnings == []
+    assert block.samples.shape == (1565, 6)
+    assert (block.samples == [131.0, 132.0, 133.0, 151.0, 152.0, 153.0]).all()
+    # header.stamp is the publisher's clock, recv_ns the recorder's: they differ.
+    assert (np.diff(block.stamp_ns) > 0).all() and (block.stamp_ns != block.recv_ns).all()
+    assert abs(block.stamp_ns[0] - block.recv_ns[0]) < 10**9
+    assert 62.0 < (block.stamp_ns[-1] - block.stamp_ns[0]) * 1e-9 < 63.0
+
+
+@pytest.mark.parametrize('name, count', [('test1.bag', 11865), ('test2.bag', 3061)])
+def test_real_ros1_bags_match_rosbags_deserialiser(shared_dir, name, count):
+    from rosbags.rosbag1 import Reader
+
+    bag = shared_dir / 'realdata' / 'ros1_moving_robot' / name
+    with open_imu(bag) as source:
+        assert (source.topic, source.n_messages, source.storage) == ('/imu/data', count,
+                                                                     'ros1')
+        block = source.read_all()
+    assert block.stamp_ns.size == count and np.isfinite(block.samples).all()
+    picks = {0, 1, count // 2, count - 1}
+    with Reader(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == '/imu/data']
+        for i, (_, recv, raw) in enumerate(reader.messages(connections=conns)):
+            if i in picks:
+                msg = ROS1.deserialize_ros1(raw, IMU)
+                stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                av, la = msg.angular_velocity, msg.linear_acceleration
+                assert block.stamp_ns[i] == stamp and block.recv_ns[i] == recv
+                assert_array_equal(block.samples[i], [av.x, av.y, av.z, la.x, la.y, la.z])
+
+
+def test_truncated_ros1_bag_is_a_clear_error(shared_dir, tmp_path):
+    data = (shared_dir / 'realdata' / 'ros1_moving_robot' / 'test2.bag').read_bytes()
+    (tmp_path / 'cut.bag').write_bytes(data[:len(data) // 2])
+    with pytest.raises(InputError, match='unreadable ROS 1 bag .*rosbag reindex'):
+        open_imu(tmp_path / 'cut.bag')
+
+
+def test_single_db3_file_is_read_directly(shared_dir):
+    db3 = shared_dir / 'realdata' / 'rosbag2_foxy_db3' / 'rosbag2_test' / 'rosbag2_test_0.db3'
+    with open_imu(db3) as source:
+        assert source.topic == '/imu'
+        assert source.read_all().stamp_ns.size == 1565
+        assert source.warnings == []
+    assert {t.topic: t.n_messages for t in list_topics(db3)}['/battery'] == 1565

@@ -1,0 +1,170 @@
+"""
+Tests of imu_allan.kalman: densities, exact discretisation, Q/R, Kalibr and ROS exports.
+
+Hand values follow the paper's eqs. 8 and 16-23 (exact forms); the six-axis matrices are
+also checked against the independent single-axis implementation in imu_allan.simulate.
+"""
+
+import math
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+import yaml
+
+from imu_allan import AXES
+from imu_allan.errors import InputError
+from imu_allan.fit import AxisFit, Param
+from imu_allan.kalman import (axis_densities, axis_noise_from, AxisDensities, discretise,
+                              imu_covariance, kalibr_yaml, kalman_model, NOTES)
+from imu_allan.noise_params import AxisNoise, GaussMarkov
+from imu_allan.simulate import state_space_matrices
+
+GYRO = AxisNoise(N=1.2e-4, B=5e-5, T_B=80.0, K=2e-6)
+ACCEL = AxisNoise(N=6e-4, B=3e-4, T_B=60.0, K=1e-5)
+
+
+def _six(gyro=GYRO, accel=ACCEL):
+    return {a: (gyro if a.startswith('gyro') else accel) for a in AXES}
+
+
+def test_densities_follow_paper_eq8():
+    d = axis_densities(GYRO, 'gyro_x')
+    assert_allclose(d.S_N, 1.44e-8, rtol=1e-14)
+    assert_allclose(d.S_K, 4e-12, rtol=1e-14)
+    # S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B), by hand:
+    s_b = 2 * (5e-5) ** 2 * math.log(2) / (math.pi * 0.4365 ** 2 * 80.0)
+    assert_allclose(d.S_B, s_b, rtol=1e-12)
+    assert d.T_B == 80.0
+    flicker = axis_densities(AxisNoise(N=1e-4, B=5e-5))
+    assert flicker.S_B == 0.0 and flicker.T_B is None
+
+
+def test_exact_discretisation_hand_values():
+    d = AxisDensities(axis='x', S_N=4.0, S_B=2.0, T_B=10.0, S_K=3.0)
+    z = discretise(d, 0.1)
+    assert_allclose(z.phi_gm, math.exp(-0.01), rtol=1e-15)
+    assert_allclose(z.qd_gm, 2.0 * 10.0 / 2.0 * (1.0 - math.exp(-0.02)), rtol=1e-13)
+    assert_allclose(z.qd_gm, 0.19801326693244712, rtol=1e-13)
+    assert_allclose(z.qd_rw, 0.3, rtol=1e-15)
+    assert_allclose(z.r, 40.0, rtol=1e-15)
+    # Stationary variance of the discrete AR(1) equals the continuous S_B T_B / 2.
+    assert_allclose(z.qd_gm / (1 - z.phi_gm ** 2), 10.0, rtol=1e-12)
+    # dt << T_B keeps its digits (expm1): Qd ~ S_B dt.
+    tiny = discretise(d, 1e-9)
+    assert_allclose(tiny.qd_gm, 2.0 * 1e-9, rtol=1e-8)
+    with pytest.raises(InputError):
+        discretise(d, 0.0)
+
+
+def test_six_axis_q_and_r_with_labels():
+    km = kalman_model(_six(), rate_hz=100.0)
+    assert km.Qd.shape == (12, 12) and km.Rd.shape == (6, 6) and km.H.shape == (6, 12)
+    assert km.state_labels[:4] == ('gyro_x.b_gm', 'gyro_x.b_rw', 'gyro_y.b_gm', 'gyro_y.b_rw')
+    assert km.state_labels[-1] == 'accel_z.b_rw'
+    assert km.measurement_labels == AXES
+    dt = 0.01
+    for i, axis in enumerate(AXES):
+        noise = GYRO if axis.startswith('gyro') else ACCEL
+        s_b = GaussMarkov(noise.B, noise.T_B).psd
+        g, r = 2 * i, 2 * i + 1
+        assert_allclose(km.F[g, g], -1.0 / noise.T_B, rtol=1e-15)
+        assert km.F[r, r] == 0.0
+        assert_allclose(km.Qc[g, g], s_b, rtol=1e-14)
+        assert_allclose(km.Qc[r, r], noise.K ** 2, rtol=1e-14)
+        assert_allclose(km.Phi[g, g], math.exp(-dt / noise.T_B), rtol=1e-14)
+        assert km.Phi[r, r] == 1.0
+        assert_allclose(km.Qd[g, g], s_b * noise.T_B / 2 * (1 - math.exp(-2 * dt / noise.T_B)),
+                        rtol=1e-9)
+        assert_allclose(km.Qd[r, r], noise.K ** 2 * dt, rtol=1e-14)
+        assert_allclose(km.Rc[i, i], noise.N ** 2, rtol=1e-14)
+        assert_allclose(km.Rd[i, i], noise.N ** 2 / dt, rtol=1e-14)
+        assert km.H[i, g] == km.H[i, r] == 1.0 and km.H[i].sum() == 2.0
+        # Same numbers as the simulator's independent single-axis model.
+        phi, qd, h, rr = state_space_matrices(noise, dt)
+        assert_allclose(np.diag(km.Phi)[g:r + 1], np.diag(phi), rtol=1e-14)
+        assert_allclose(np.diag(km.Qd)[g:r + 1], np.diag(qd), rtol=1e-12)
+        assert_allclose(km.Rd[i, i], rr[0, 0], rtol=1e-14)
+    off = km.Qd - np.diag(np.diag(km.Qd))
+    assert not off.any()
+    doc = km.to_json()
+    assert doc['state_labels'][0] == 'gyro_x.b_gm' and len(doc['discrete']['Qd']) == 12
+
+
+def test_flicker_b_gets_a_frozen_state_and_a_note():
+    km = kalman_model(_six(gyro=AxisNoise(N=1e-4, B=5e-5, K=1e-6)), rate_hz=50.0)
+    assert km.Phi[0, 0] == 1.0 and km.Qd[0, 0] == 0.0 and km.F[0, 0] == 0.0
+    assert any('gyro_x' in n and 'frozen' in n for n in km.notes)
+
+
+def test_kalman_inputs_validated():
+    with pytest.raises(InputError):
+        kalman_model([GYRO] * 5, rate_hz=100.0)
+    with pytest.raises(InputError):
+        kalman_model({'gyro_x': GYRO}, rate_hz=100.0)
+    with pytest.raises(InputError):
+        kalman_model(_six(), rate_hz=-1.0)
+
+
+def _fit_with_k_bound(k_bound: float) -> AxisFit:
+    def p(v, kind='estimate', unit='rad/s'):
+        return Param(v, (0.9 * v, 1.1 * v), kind, unit)
+    opt = {'N': p(1e-4), 'B': p(4e-5), 'T_B': p(50.0),
+           'K': Param(k_bound, (0.0, k_bound), 'upper_bound', 'rad/s/s^0.5')}
+    return AxisFit(nominal=opt, optimised=opt, model=AxisNoise(N=1e-4, B=4e-5, T_B=50.0),
+                   terms=('white', 'bias_instability'), notes=())
+
+
+def test_upper_bounds_are_used_at_their_bound_by_default():
+    fit = _fit_with_k_bound(3e-6)
+    noise, notes = axis_noise_from(fit)
+    assert noise.K == 3e-6 and noise.N == 1e-4 and noise.T_B == 50.0
+    assert notes == ('K used at its 95 % upper bound',)
+    lean, notes = axis_noise_from(fit, use_upper_bounds=False)
+    assert lean.K == 0.0 and notes == ()
+    km = kalman_model({a: fit for a in AXES}, rate_hz=100.0)
+    assert_allclose(km.Qd[1, 1], 9e-12 * 0.01, rtol=1e-12)
+    assert any('upper bound' in n for n in km.notes)
+
+
+def test_kalibr_yaml_keys_units_and_worst_axis():
+    gyros = [AxisNoise(N=1e-4 * (i + 1), K=1e-6 * (3 - i)) for i in range(3)]
+    accels = [AxisNoise(N=6e-4 + 1e-5 * i, K=1e-5) for i in range(3)]
+    sources = gyros + accels
+    text = kalibr_yaml(sources, rate_hz=200.0)
+    doc = yaml.safe_load(text)
+    assert set(doc) == {'accelerometer_noise_density', 'accelerometer_random_walk',
+                        'gyroscope_noise_density', 'gyroscope_random_walk', 'rostopic',
+                        'update_rate'}
+    # Continuous densities, worst axis: noise density = max N, random walk = max K.
+    assert_allclose(doc['gyroscope_noise_density'], 3e-4, rtol=1e-6)
+    assert_allclose(doc['gyroscope_random_walk'], 3e-6, rtol=1e-6)
+    assert_allclose(doc['accelerometer_noise_density'], 6.2e-4, rtol=1e-6)
+    assert_allclose(doc['accelerometer_random_walk'], 1e-5, rtol=1e-6)
+    assert doc['update_rate'] == 200.0
+    assert 'rad/s/sqrt(Hz)' in text and 'm/s^3/sqrt(Hz)' in text
+    assert '#   gyro_y: N = 2.000000e-04' in text  # per-axis values as comments
+    mean = yaml.safe_load(kalibr_yaml(sources, rate_hz=200.0, reduce='mean'))
+    assert_allclose(mean['gyroscope_noise_density'], 2e-4, rtol=1e-6)
+    with pytest.raises(InputError):
+        kalibr_yaml(sources, rate_hz=200.0, reduce='median')
+
+
+def test_robot_localization_covariance_is_n2_rate_and_clamped():
+    sources = _six()
+    sources = dict(sources, accel_y=AxisNoise(N=1e-6))  # variance 1e-10 at 100 Hz
+    cov = imu_covariance(sources, rate_hz=100.0)
+    assert_allclose(cov.angular_velocity_variance, [1.44e-8 * 100.0] * 3, rtol=1e-12)
+    assert_allclose(cov.linear_acceleration_variance, [3.6e-7 * 100.0, 1e-9, 3.6e-5],
+                    rtol=1e-12)
+    assert cov.clamped == ('accel_y',)
+    field = np.array(cov.linear_acceleration_covariance).reshape(3, 3)
+    assert_allclose(np.diag(field), cov.linear_acceleration_variance, rtol=0)
+    assert not (field - np.diag(np.diag(field))).any()
+    assert len(cov.angular_velocity_covariance) == 9
+
+
+def test_notes_cover_the_packages():
+    for name in ('Kalibr', 'OpenVINS', 'ORB-SLAM3', 'VINS-Mono', 'robot_localization',
+                 'sqrt(IMU.Frequency)', '1e-9'):
+        assert name in NOTES
