@@ -35,7 +35,7 @@ from rosbags.typesys import get_typestore, Stores
 import yaml
 import zstandard
 
-from imu_allan import __version__
+from imu_allan import __version__, AXES
 from imu_allan.errors import InputError
 
 IMU_MSGTYPE = 'sensor_msgs/msg/Imu'
@@ -582,7 +582,9 @@ def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
     """
     from imu_allan.csv_io import read_csv
 
-    data = read_csv(csv_path, columns=columns, rate_hz=rate_hz)
+    # Explicit columns: six arbitrary ones taken in file order would be a silent mix-up.
+    data = read_csv(csv_path, columns=list(columns) if columns else list(AXES),
+                    rate_hz=rate_hz)
     samples = np.asarray(data.samples, dtype=np.float64)
     if samples.ndim != 2 or samples.shape[1] != 6:
         raise InputError(f'{csv_path}: need 6 columns (gyro x, y, z, accel x, y, z) for an Imu '

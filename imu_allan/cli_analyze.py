@@ -4,17 +4,25 @@
 Every input (rosbag2 directory, .mcap, .db3, ROS 1 .bag, CSV) is streamed through the
 same :class:`~imu_allan.pipeline.Session` the node uses, fitted, and written as a
 report; several inputs are analysed in parallel and compared.
+
+Reusable pieces (also for ``diagnose``): :func:`open_input` opens any supported input
+as an :class:`InputSource` of ``(stamp_ns, samples)`` blocks, :func:`stream_input`
+feeds one through a Session, :func:`analyze_input` adds the fit.
 """
 
 import argparse
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import as_completed, ProcessPoolExecutor
 from dataclasses import replace
 import json
 import math
 import os
 from pathlib import Path
+import queue
+import stat
 import sys
+import threading
 import time
+from typing import Callable, Iterator, Optional
 
 import numpy as np
 
@@ -24,6 +32,8 @@ from imu_allan.errors import InputError
 from imu_allan.pipeline import Session, SessionConfig
 
 CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
+#: Samples handed to the Session at a time for CSV input.
+CSV_BLOCK = 65536
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -50,191 +60,527 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-class _Progress:
-    """A one-line progress indicator on stderr, shown when the work takes a while."""
+# --------------------------------------------------------------------------------------
+# Progress on stderr
+# --------------------------------------------------------------------------------------
 
-    def __init__(self, label: str, total: int | None):
-        self.label, self.total = label, total
+class Progress:
+    """
+    A one-line progress indicator on stderr, shown only when the work takes a while.
+
+    A daemon thread redraws the line (in place on a terminal, a new line every
+    ``log_interval_s`` otherwise), so slow steps without their own counter (the fit,
+    the plots) still show that work goes on.  Nothing is written to stdout.
+
+    Parameters
+    ----------
+    label : str
+        What is being worked on (a file name).
+    total : int or None
+        Messages expected (None: unknown).
+
+    """
+
+    #: Seconds before anything is shown.
+    delay_s = 2.0
+    #: Redraw period on a terminal, and line period otherwise [s].
+    tty_interval_s = 0.2
+    log_interval_s = 5.0
+
+    def __init__(self, label: str, total: Optional[int] = None, unit: str = 'messages'):
+        self.label, self.total, self.unit = label, total, unit
+        self.stage = 'reading'
+        self.done = 0
         self.start = time.monotonic()
-        self.last = 0.0
         self.tty = sys.stderr.isatty()
+        self.shown = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
 
-    def update(self, done: int) -> None:
-        now = time.monotonic()
-        if now - self.start < 2.0 or now - self.last < (0.2 if self.tty else 5.0):
+    def update(self, done: int, stage: Optional[str] = None) -> None:
+        """Record progress: items done so far, and optionally a new stage name."""
+        self.done = done
+        if stage is not None:
+            self.stage = stage
+
+    def set_stage(self, stage: str) -> None:
+        """Name the current step (e.g. 'fitting', 'writing plots')."""
+        self.stage = stage
+
+    def line(self) -> str:
+        """Return the current progress text."""
+        elapsed = time.monotonic() - self.start
+        if self.stage == 'reading':
+            pct = (f'{100.0 * self.done / self.total:5.1f}% ' if self.total else '')
+            text = f'reading {self.label}: {pct}{self.done:,} {self.unit}'
+            if elapsed > 0:
+                text += f', {self.done / elapsed / 1e6:.2f} M/s'
+        elif self.stage == 'analysed':
+            text = f'analysed {self.done} of {self.total} {self.unit}'
+        else:
+            text = f'{self.stage} {self.label}'
+        return f'imu-allan: {text} ({elapsed:.0f} s)'
+
+    def _draw(self) -> None:
+        text = self.line()
+        if self.tty:
+            print('\r' + text.ljust(79), end='', file=sys.stderr, flush=True)
+        else:
+            print(text, file=sys.stderr, flush=True)
+        self.shown = True
+
+    def _loop(self) -> None:
+        if self._stop.wait(self.delay_s):
             return
-        self.last = now
-        rate = done / (now - self.start)
-        pct = f'{100.0 * done / self.total:5.1f}% ' if self.total else ''
-        line = f'{self.label}: {pct}{done:,} messages, {rate / 1e6:.2f} M msg/s'
-        print(('\r' + line) if self.tty else line, end='' if self.tty else '\n',
-              file=sys.stderr, flush=True)
+        interval = self.tty_interval_s if self.tty else self.log_interval_s
+        while True:
+            self._draw()
+            if self._stop.wait(interval):
+                return
 
     def close(self) -> None:
-        if self.tty and self.last:
-            print(file=sys.stderr)
+        """Stop redrawing; end the terminal line."""
+        self._stop.set()
+        self._thread.join()
+        if self.tty and self.shown:
+            print(file=sys.stderr, flush=True)
+
+    def __enter__(self) -> 'Progress':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
-def iter_blocks(path: Path, topic: str | None):
+# --------------------------------------------------------------------------------------
+# Inputs
+# --------------------------------------------------------------------------------------
+
+class InputSource:
     """
-    Yield (stamp_ns (n,), samples (n, 6)) blocks of an input, and its total if known.
+    One opened input (bag topic or CSV file) as blocks of stamped six-axis samples.
 
-    Returns a tuple (label, total_messages or None, generator, warnings list).
+    Attributes
+    ----------
+    path : pathlib.Path
+        The input.
+    label : str
+        File name plus topic, for reports.
+    kind : str
+        'csv', 'mcap', 'sqlite3' or 'ros1'.
+    topic : str or None
+        The Imu topic read (None for CSV).
+    n_messages : int or None
+        Samples expected, when known before reading.
+    warnings : list of str
+        Reader problems (truncation, skipped messages ...); complete after ``blocks()``.
+
     """
-    name = path.name.lower()
-    if not path.exists():
-        raise InputError(f'{path}: no such file or directory')
-    if name.endswith(CSV_SUFFIXES):
+
+    def __init__(self, path: Path, label: str, kind: str, topic: Optional[str],
+                 n_messages: Optional[int], blocks: Callable[[], Iterator],
+                 warnings: list, close: Callable[[], None] = lambda: None):
+        self.path, self.label, self.kind, self.topic = path, label, kind, topic
+        self.n_messages, self.warnings = n_messages, warnings
+        self._blocks, self._close = blocks, close
+
+    def blocks(self) -> Iterator[tuple]:
+        """
+        Yield the samples in order.
+
+        Yields
+        ------
+        tuple of numpy.ndarray
+            stamp_ns (n,) int64 [ns] and samples (n, 6) float64 in AXES order
+            [rad/s, m/s^2].
+
+        """
+        return self._blocks()
+
+    def close(self) -> None:
+        """Release files."""
+        self._close()
+
+    def __enter__(self) -> 'InputSource':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def is_csv(path: Path) -> bool:
+    """Return True when the name says CSV (.csv, .txt, optionally .gz)."""
+    return path.name.lower().endswith(CSV_SUFFIXES)
+
+
+def _check_path(path: Path) -> None:
+    """Raise InputError for a missing path or one that is neither file nor directory."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise InputError(f'{path}: no such file or directory') from None
+    except OSError as err:
+        raise InputError(f'{path}: cannot access ({err.strerror})') from None
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise InputError(f'{path}: not a regular file or directory')
+    if not os.access(path, os.R_OK | (os.X_OK if stat.S_ISDIR(mode) else 0)):
+        raise InputError(f'{path}: permission denied')
+
+
+def open_input(path, topic: Optional[str] = None) -> InputSource:
+    """
+    Open any supported input for streaming.
+
+    Parameters
+    ----------
+    path : str or Path
+        rosbag2 directory (sqlite3 or MCAP, any metadata version, with or without
+        message definitions), ``.mcap``, ``.db3``, ROS 1 ``.bag``, or CSV
+        (``t,gyro_x,...,accel_z``, optional ``.gz``).
+    topic : str, optional
+        Imu topic of a bag; by default its only Imu topic.  Ignored for CSV.
+
+    Returns
+    -------
+    InputSource
+        Close it (or use it as a context manager) when done.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable path, not a bag or CSV, no (or several) Imu topics, wrong
+        message type, bad CSV columns or values: a one-line message.
+
+    """
+    path = Path(path)
+    _check_path(path)
+    if is_csv(path):
         from imu_allan.csv_io import read_csv
+        if path.is_dir():
+            raise InputError(f'{path}: is a directory, not a CSV file')
         data = read_csv(path, columns=list(AXES))
         if data.t_s is None:
             raise InputError(f'{path}: a t column (seconds) is needed for analyze')
-        stamp_ns = np.round(np.asarray(data.t_s, dtype=np.float64) * 1e9).astype(np.int64)
+        stamp_ns = np.round(data.t_s * 1e9).astype(np.int64)
 
-        def gen():
-            step = 200_000
-            for k in range(0, stamp_ns.size, step):
-                yield stamp_ns[k:k + step], data.samples[k:k + step]
-        return str(path), stamp_ns.size, gen(), []
+        def csv_blocks():
+            for k in range(0, stamp_ns.size, CSV_BLOCK):
+                yield stamp_ns[k:k + CSV_BLOCK], data.samples[k:k + CSV_BLOCK]
+        return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
     from imu_allan.bag_reader import open_imu
     source = open_imu(path, topic)
-    gen = ((b.stamp_ns, b.samples) for b in source.blocks())
-    return f'{path} {source.topic}', source.n_messages, gen, source.warnings
+
+    def bag_blocks():
+        for block in source.blocks():
+            yield block.stamp_ns, block.samples
+    return InputSource(path, f'{path.name} {source.topic}', source.storage, source.topic,
+                       source.n_messages, bag_blocks, source.warnings, source.close)
 
 
-def analyze_input(path: Path, topic: str | None, config: SessionConfig, quiet: bool = False):
-    """Stream one input through a Session and fit it; return (AnalysisResult, seconds)."""
+def iter_blocks(path: Path, topic: Optional[str]):
+    """
+    Open an input; return (label, total or None, block generator, warnings list).
+
+    Kept for callers of the first version; new code uses :func:`open_input`.
+    """
+    source = open_input(path, topic)
+    return source.label, source.n_messages, source.blocks(), source.warnings
+
+
+def stream_input(source: InputSource, config: SessionConfig,
+                 on_warning: Optional[Callable[[str], None]] = None,
+                 progress: Optional[Progress] = None) -> Session:
+    """
+    Feed every block of an input through a new pipeline Session (the node's object).
+
+    Parameters
+    ----------
+    source : InputSource
+        From :func:`open_input`.
+    config : SessionConfig
+        Input checks and accumulator settings.
+    on_warning : callable, optional
+        Gets each session warning as it happens.
+    progress : Progress, optional
+        Updated with the number of samples read.
+
+    Returns
+    -------
+    Session
+        Flushed; its warnings are the session's own (reader warnings stay in
+        ``source.warnings``).
+
+    """
+    session = Session(config, on_warning=on_warning)
+    done = 0
+    for stamp_ns, samples in _prefetch(source.blocks()):
+        session.add(stamp_ns, samples)
+        done += stamp_ns.size
+        if progress is not None:
+            progress.update(done)
+    session.flush()
+    return session
+
+
+def _prefetch(blocks: Iterator, depth: int = 2) -> Iterator:
+    """
+    Yield the items of an iterator that a background thread reads ahead.
+
+    Decoding the next block (numpy, mostly outside the GIL) then overlaps with the
+    Session's work on the current one: on two cores reading costs little extra wall
+    time.  Exceptions of the reader are raised here, in order.
+    """
+    done = object()
+    slots: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def produce():
+        try:
+            for item in blocks:
+                while not stop.is_set():
+                    try:
+                        slots.put((item, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            slots.put((done, None))
+        except BaseException as exc:  # noqa: B902 - handed over to the consumer
+            slots.put((done, exc))
+
+    worker = threading.Thread(target=produce, daemon=True, name='imu-allan-reader')
+    worker.start()
+    try:
+        while True:
+            item, exc = slots.get()
+            if exc is not None:
+                raise exc
+            if item is done:
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join()
+
+
+def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
+                  quiet: bool = False, progress: Optional[bool] = None):
+    """
+    Stream one input through a Session and fit it.
+
+    Parameters
+    ----------
+    path : Path
+        The input.
+    topic : str or None
+        Imu topic of a bag.
+    config : SessionConfig
+        Session settings.
+    quiet : bool
+        Do not print warnings on stderr (they are in the result anyway).
+    progress : bool, optional
+        Show a progress line on stderr for long inputs (default: not ``quiet``).
+
+    Returns
+    -------
+    tuple
+        (AnalysisResult, seconds spent).
+
+    """
     start = time.monotonic()
-    warnings = []
+    path = Path(path)
 
     def warn(text):
-        warnings.append(text)
         if not quiet:
             print(f'imu-allan: warning: {path.name}: {text}', file=sys.stderr)
 
-    label, total, blocks, reader_warnings = iter_blocks(path, topic)
-    session = Session(config, on_warning=warn)
-    progress = _Progress(f'reading {path.name}', total)
-    done = 0
-    for stamp_ns, samples in blocks:
-        session.add(stamp_ns, samples)
-        done += stamp_ns.size
-        progress.update(done)
-    session.flush()
-    progress.close()
-    for text in reader_warnings:
-        warn(text)
-    if session.stats.n_received == 0:
-        raise InputError(f'{path}: no Imu samples in the input')
-    result = analyze(session, source=label)
+    show = (not quiet) if progress is None else progress
+    with open_input(path, topic) as source:
+        bar = Progress(path.name, source.n_messages) if show else None
+        try:
+            session = stream_input(source, config, on_warning=warn, progress=bar)
+            reader_warnings = list(source.warnings)
+            for text in reader_warnings:
+                warn(text)
+            if session.stats.n_received == 0:
+                raise InputError(f'{path}: no Imu samples in the input')
+            if bar is not None:
+                bar.set_stage('fitting the noise model of')
+            result = analyze(session, source=source.label)
+        finally:
+            if bar is not None:
+                bar.close()
     if result is None:
-        raise InputError(f'{path}: too few usable samples ({session.stats.n_used}) '
-                         'for any Allan deviation')
-    if reader_warnings:
-        result = replace(result, warnings=tuple(reader_warnings) + result.warnings)
+        raise InputError(f'{path}: too few usable samples ({session.stats.n_used} of '
+                         f'{session.stats.n_received}) for any Allan deviation'
+                         + (f' ({session.warnings[0]})' if session.warnings else ''))
+    extra = list(reader_warnings)
+    stats = session.stats
+    if stats.n_motion_events:
+        share = stats.n_motion_dropped / max(stats.n_received, 1)
+        kept = ('samples kept (on_motion=warn)' if config.on_motion == 'warn' else
+                f'{100 * share:.2g}% of the samples dropped')
+        if share >= 0.2 or config.on_motion == 'warn':
+            extra.append(f'NOT STATIONARY: motion in {stats.n_motion_events} episode(s), '
+                         f'{kept}; the numbers rest on {stats.n_used} samples '
+                         f'({session.duration_s:.0f} s) and describe a still IMU only if '
+                         'those were still')
+        else:
+            extra.append(f'brief motion or outliers in {stats.n_motion_events} episode(s): '
+                         f'{kept}, {stats.n_used} samples used')
+        warn(extra[-1])
+    if extra:
+        result = replace(result, warnings=tuple(extra) + result.warnings)
     return result, time.monotonic() - start
 
 
 def _job(args):
+    """Analyse and report one input in a worker; errors come back as one line."""
     path, topic, config, out, plot = args
     from imu_allan.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True)
+        files = write_outputs(result, out, plot=plot)
     except InputError as exc:
         return None, str(exc), [], 0.0
-    files = write_outputs(result, out, plot=plot)
+    except Exception as exc:  # noqa: B902 - one line per failed input, the others go on
+        return None, f'{path}: unexpected {type(exc).__name__}: {exc}', [], 0.0
     return result, None, [str(f) for f in files], seconds
 
 
-def spread_table(results: list, labels: list) -> tuple[str, dict]:
+def spread_table(results: list, labels: list) -> tuple:
     """
     Run-to-run spread of N, B, K, T_B per axis (markdown table and JSON).
+
+    Parameters
+    ----------
+    results : list of AnalysisResult
+        One per input.
+    labels : list of str
+        Their names (the columns of the per-run table).
 
     Returns
     -------
     markdown : str
-        One row per axis and parameter: mean, standard deviation, CV, min, max.
+        One row per axis and parameter: every run's value, then mean, standard
+        deviation, CV, min, max and the number of runs with an estimate.
     data : dict
-        ``{axis: {P: {'mean', 'std', 'cv', 'min', 'max', 'values'}}}``.
+        ``{axis: {P: {'mean', 'std', 'cv', 'min', 'max', 'values', 'unit'}}}``; values
+        in SI, None where a run gives no estimate (an upper bound or not identified).
 
     """
-    rows = ['| axis | param | mean | std | CV % | min | max | n |',
-            '| --- | --- | --- | --- | --- | --- | --- | --- |']
+    head = ['axis', 'param', 'unit'] + list(labels) + ['mean', 'std', 'CV %', 'min', 'max',
+                                                       'n']
+    rows = ['| ' + ' | '.join(head) + ' |', '|' + ' --- |' * len(head)]
     data = {}
     for axis in AXES:
         data[axis] = {}
         for sym in ('N', 'B', 'K', 'T_B'):
-            vals = []
+            per_run, unit = [], ''
             for r in results:
                 fit = r.fits.get(axis)
                 p = fit.optimised.get(sym) if fit else None
-                if p is not None and p.kind == 'estimate' and math.isfinite(p.value):
-                    vals.append(p.value)
-            if not vals:
+                ok = p is not None and p.kind == 'estimate' and math.isfinite(p.value)
+                per_run.append(p.value if ok else None)
+                unit = unit or (p.unit if p is not None else '')
+            vals = np.array([v for v in per_run if v is not None])
+            if not vals.size:
                 continue
-            v = np.array(vals)
-            std = float(v.std(ddof=1)) if v.size > 1 else float('nan')
-            entry = {'mean': float(v.mean()), 'std': std, 'cv': std / float(v.mean()),
-                     'min': float(v.min()), 'max': float(v.max()), 'values': vals}
+            std = float(vals.std(ddof=1)) if vals.size > 1 else float('nan')
+            mean = float(vals.mean())
+            entry = {'mean': mean, 'std': _num(std), 'cv': _num(std / mean),
+                     'min': float(vals.min()), 'max': float(vals.max()), 'values': per_run,
+                     'unit': unit}
             data[axis][sym] = entry
-            rows.append(f'| {axis} | {sym} | {entry["mean"]:.4g} | {std:.3g} | '
-                        f'{100 * entry["cv"]:.1f} | {entry["min"]:.4g} | {entry["max"]:.4g} | '
-                        f'{v.size} |')
+            cells = [axis, sym, unit] + [('-' if v is None else f'{v:.4g}') for v in per_run]
+            cells += [f'{mean:.4g}', f'{std:.3g}', f'{100 * std / mean:.1f}',
+                      f'{entry["min"]:.4g}', f'{entry["max"]:.4g}', str(vals.size)]
+            rows.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(rows) + '\n', data
+
+
+def _num(x: float):
+    return float(x) if math.isfinite(x) else None
+
+
+def _finite(obj):
+    """Replace NaN and inf by None everywhere (strict JSON)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def _run_several(jobs: list, n_workers: int) -> list:
+    """Analyse several inputs (in parallel when n_workers > 1), with a progress line."""
+    outcomes = [None] * len(jobs)
+    if n_workers == 1:
+        with Progress('inputs', len(jobs), unit='inputs') as bar:
+            bar.update(0, stage='analysed')
+            for k, job in enumerate(jobs):
+                outcomes[k] = _job(job)
+                bar.update(k + 1)
+        return outcomes
+    with ProcessPoolExecutor(max_workers=n_workers) as pool:
+        # Submit (the workers fork) before the progress thread starts: forking a
+        # multi-threaded process can deadlock the child.
+        futures = {pool.submit(_job, job): k for k, job in enumerate(jobs)}
+        with Progress('inputs', len(jobs), unit='inputs') as bar:
+            bar.update(0, stage='analysed')
+            for done, future in enumerate(as_completed(futures), 1):
+                outcomes[futures[future]] = future.result()
+                bar.update(done)
+    return outcomes
 
 
 def run(args) -> int:
     """Analyse every input; write reports; print a summary or one JSON document."""
     paths = [Path(p) for p in args.inputs]
     for p in paths:
-        if not p.exists():
-            raise InputError(f'{p}: no such file or directory')
+        _check_path(p)
     config = SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
     several = len(paths) > 1
-    outs = [(args.out / _stem(p)) if several else args.out for p in paths]
+    stems = _unique_stems(paths)
+    outs = [(args.out / s) if several else args.out for s in stems]
     jobs = [(p, args.topic, config, o, not args.no_plot) for p, o in zip(paths, outs)]
-    n_workers = args.jobs or min(len(jobs), os.cpu_count() or 1)
-    if several and n_workers > 1:
-        with ProcessPoolExecutor(max_workers=n_workers) as pool:
-            outcomes = list(pool.map(_job, jobs))
-    elif several:
-        outcomes = [_job(j) for j in jobs]
+    if several:
+        n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
+        outcomes = _run_several(jobs, n_workers)
     else:
         from imu_allan.report import write_outputs
         result, seconds = analyze_input(paths[0], args.topic, config)
-        files = write_outputs(result, outs[0], plot=not args.no_plot)
+        with Progress(paths[0].name) as bar:
+            bar.set_stage('writing the report of')
+            files = write_outputs(result, outs[0], plot=not args.no_plot)
         outcomes = [(result, None, [str(f) for f in files], seconds)]
-    failed = [(p, err) for p, (_, err, _, _) in zip(paths, outcomes) if err]
-    for p, err in failed:
+    failed = [err for (_, err, _, _) in outcomes if err]
+    for err in failed:
         print(f'imu-allan: error: {err}', file=sys.stderr)
-    good = [(p, o) for p, o in zip(paths, outcomes) if o[0] is not None]
+    good = [(p, s, o) for p, s, o in zip(paths, stems, outcomes) if o[0] is not None]
     if not good:
         return 2
     comparison = None
-    if several and len(good) > 1:
-        from imu_allan.plot import plot_comparison
-        labels = [_stem(p) for p, _ in good]
-        results = [o[0] for _, o in good]
-        table, data = spread_table(results, labels)
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / 'comparison.md').write_text(
-            '# Run-to-run spread (optimised fit)\n\n' + table)
-        files = [] if args.no_plot else [str(f) for f in plot_comparison(
-            results, labels, args.out / 'comparison')]
-        comparison = {'spread': data, 'files': [str(args.out / 'comparison.md')] + files}
+    if len(good) > 1:
+        comparison = _compare(good, args.out, plot=not args.no_plot)
     if args.format == 'json':
         docs = []
-        for p, (result, _, files, seconds) in good:
+        for p, _, (result, _, files, seconds) in good:
             doc = result.to_json()
+            doc['input'] = str(p)
             doc['files'] = files
             doc['elapsed_s'] = seconds
             docs.append(doc)
         out = docs[0] if not several else {'results': docs, 'comparison': comparison,
-                                           'errors': [e for _, e in failed]}
-        json.dump(out, sys.stdout, allow_nan=False)
+                                           'errors': failed}
+        json.dump(_finite(out), sys.stdout, allow_nan=False)
         sys.stdout.write('\n')
     else:
-        for p, (result, _, files, seconds) in good:
+        for p, _, (result, _, files, seconds) in good:
             print(f'== {p}  ({result.n_samples:,} samples, {result.duration_s / 3600:.2f} h '
                   f'at {result.rate_hz:.2f} Hz, analysed in {seconds:.1f} s)')
             for line in result.summary_lines():
@@ -247,8 +593,37 @@ def run(args) -> int:
     return 2 if failed else 0
 
 
+def _compare(good: list, out: Path, plot: bool) -> dict:
+    """Write comparison.md (spread table) and the comparison plot; return the JSON part."""
+    labels = [stem for _, stem, _ in good]
+    results = [o[0] for _, _, o in good]
+    table, data = spread_table(results, labels)
+    out.mkdir(parents=True, exist_ok=True)
+    text = ('# Run-to-run spread of the optimised fit\n\n'
+            'Per-run values are the estimates of each input ("-": only an upper bound or not '
+            'identified); mean, std (n - 1), CV, min, max over the runs with an estimate. '
+            'SI units.\n\n' + table)
+    (out / 'comparison.md').write_text(text)
+    files = [str(out / 'comparison.md')]
+    if plot:
+        from imu_allan.plot import plot_comparison
+        files += [str(f) for f in plot_comparison(results, labels, out / 'comparison')]
+    return {'labels': labels, 'spread': data, 'files': files}
+
+
 def _stem(path: Path) -> str:
     name = path.name
     for suffix in ('.gz', '.csv', '.txt', '.mcap', '.db3', '.bag'):
         name = name.removesuffix(suffix)
     return name or 'input'
+
+
+def _unique_stems(paths: list) -> list:
+    """Output sub-directory names: the inputs' stems, numbered where they clash."""
+    stems = [_stem(p) for p in paths]
+    seen = {}
+    out = []
+    for s in stems:
+        seen[s] = seen.get(s, 0) + 1
+        out.append(s if stems.count(s) == 1 else f'{s}_{seen[s]}')
+    return out

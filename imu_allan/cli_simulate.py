@@ -5,13 +5,19 @@ Output by file name: ``.csv`` or ``.csv.gz`` -> CSV with header
 ``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z`` (imu_allan.csv_io);
 ``.mcap``, ``.db3``, ``.bag`` (ROS 1) or a directory (a name without suffix) -> bag of
 sensor_msgs/Imu (imu_allan.bag_writer), whose covariance fields carry the white-noise
-variance N^2 * rate of each axis.  A one-line summary goes to stderr.
+variance N^2 * rate of each axis.  A one-line summary goes to stderr.  Bag stamps
+start at the current time (whole seconds) unless ``--start`` is given, so that
+``header.stamp`` looks like a real recording's.
+
+Also registers ``imu-allan csv-to-bag CSV BAG``: legacy CSV logs (the CSV contract of
+DESIGN.md) to the same bags, through :func:`imu_allan.bag_writer.csv_to_bag`.
 """
 
 import argparse
 import math
 from pathlib import Path
 import sys
+import time
 
 import numpy as np
 
@@ -38,12 +44,53 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--out', required=True, metavar='FILE', help='output file or bag directory')
     p.add_argument('--seed', type=int, default=None, metavar='N',
                    help='random seed (default: fresh entropy, printed in the summary)')
-    p.add_argument('--start', type=float, default=0.0, metavar='S',
-                   help='time of the first sample [s] (default 0)')
+    p.add_argument('--start', type=float, default=None, metavar='S',
+                   help='time of the first sample [s]; default 0 for CSV and, for bags, '
+                        'the current time in whole seconds (a realistic header.stamp)')
     p.add_argument('--topic', default='/imu/data', help='bag topic (default /imu/data)')
     p.add_argument('--frame-id', default='imu_link', help='bag frame_id (default imu_link)')
     p.set_defaults(run=run)
+    _add_csv_to_bag_parser(subparsers)
     return p
+
+
+def _add_csv_to_bag_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``csv-to-bag`` (legacy CSV logs to rosbag2 or ROS 1 bags)."""
+    p = subparsers.add_parser(
+        'csv-to-bag', help='convert a CSV IMU log into a bag of sensor_msgs/Imu',
+        description='Convert a CSV log (t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z; t in '
+                    's, rad/s, m/s^2; optional .gz) into a bag: .mcap, .db3, .bag (ROS 1) '
+                    'or a rosbag2 directory (MCAP, or sqlite3 with --storage sqlite3).')
+    p.add_argument('csv', metavar='CSV', help='input CSV file')
+    p.add_argument('out', metavar='BAG', help='output bag file or directory (must not exist)')
+    p.add_argument('--topic', default='/imu/data', help='bag topic (default /imu/data)')
+    p.add_argument('--frame-id', default='imu_link', help='frame_id (default imu_link)')
+    p.add_argument('--storage', choices=('mcap', 'sqlite3'), default=None,
+                   help='storage of a bag directory (default mcap)')
+    p.add_argument('--columns', default=None, metavar='A,B,C,D,E,F',
+                   help='the six CSV columns in gyro x, y, z, accel x, y, z order '
+                        '(default: the contract names)')
+    p.add_argument('--start', type=float, default=0.0, metavar='S',
+                   help='added to t [s]: logs with relative time start at this epoch time')
+    p.set_defaults(run=run_csv_to_bag)
+    return p
+
+
+def run_csv_to_bag(args) -> int:
+    """Convert the CSV; a one-line summary goes to stderr."""
+    from imu_allan.bag_writer import csv_to_bag
+
+    if not math.isfinite(args.start):
+        raise InputError(f'--start must be finite, got {args.start:g}')
+    columns = [c.strip() for c in args.columns.split(',')] if args.columns else None
+    if columns is not None and len(columns) != len(AXES):
+        raise InputError(f'--columns needs {len(AXES)} names, got {len(columns)}')
+    n = csv_to_bag(args.csv, args.out, topic=args.topic, frame_id=args.frame_id,
+                   storage=args.storage, columns=columns,
+                   start_ns=int(round(args.start * 1e9)))
+    print(f'imu-allan: wrote {n} sensor_msgs/Imu messages on {args.topic} -> {args.out}',
+          file=sys.stderr)
+    return 0
 
 
 def _output_kind(path: Path) -> str:
@@ -62,10 +109,12 @@ def run(args) -> int:
     for name, value in (('--rate', args.rate), ('--duration', args.duration)):
         if not (math.isfinite(value) and value > 0):
             raise InputError(f'{name} must be a positive number, got {value:g}')
-    if not math.isfinite(args.start):
-        raise InputError(f'--start must be finite, got {args.start:g}')
     out = Path(args.out)
     kind = _output_kind(out)
+    if args.start is None:
+        args.start = 0.0 if kind == 'csv' else float(int(time.time()))
+    if not math.isfinite(args.start):
+        raise InputError(f'--start must be finite, got {args.start:g}')
     spec = load_params(args.params)
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2**63)
     t_s, samples = simulate_imu(spec, args.rate, args.duration, seed=seed)
@@ -84,8 +133,9 @@ def run(args) -> int:
         except ImportError:
             raise InputError('bag output needs imu_allan.bag_writer') from None
         # Integer nanoseconds from the sample index, so the stamps carry no float drift.
-        stamps_ns = (np.round(args.start * 1e9)
-                     + np.round(np.arange(t_s.size) * (1e9 / args.rate))).astype(np.int64)
+        # (int64 arithmetic: float64 holds an epoch in ns only to 256 ns.)
+        stamps_ns = (int(round(args.start * 1e9))
+                     + np.round(np.arange(t_s.size) * (1e9 / args.rate)).astype(np.int64))
         # Per-sample white-noise variance N^2 * rate, what robot_localization reads.
         variances = [spec.axes[a].N ** 2 * args.rate for a in AXES]
         write_imu_bag(out, stamps_ns, samples, topic=args.topic, frame_id=args.frame_id,

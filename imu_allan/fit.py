@@ -30,7 +30,10 @@ Optimised (generalised least squares on the Allan variance, GMWM-style):
   carries the chi-square spread of each point (its EDF, for the noise mix at that tau)
   and the correlation of neighbouring tau (about 0.5 at octave spacing).  A sinusoid
   adds the spread of its beat with the noise.  Sigma is iterated (re-weighted GLS):
-  first the paper's weights 2 avar^2 / edf, then Sigma(theta) to convergence.
+  first the paper's weights 2 avar^2 / edf, then the *expected* Sigma (Sigma(theta)
+  averaged over the GLS uncertainty of the coefficients, which keeps a record's own
+  low long-tau points from raising their own weight) to convergence, and a last step
+  at the plug-in Sigma(theta) of that solution (:meth:`_Fitter.irls`).
 * Term selection: every subset of the candidate terms is fitted with the weights of the
   full model; the subset minimising J + 2 p (AIC; J the GLS chi-square, p the number
   of parameters) is what the data support (``AxisFit.terms``).
@@ -38,16 +41,17 @@ Optimised (generalised least squares on the Allan variance, GMWM-style):
   (white, bias instability, random walk), so that a weak term still takes its share
   of the curve.  Each interval is a profile interval: the set of values v for which the
   GLS chi-square, minimised over all other parameters with this one held at v, stays
-  within F(0.95; 1, dof) x max(1, J_min / dof) of its minimum (Bates & Watts,
-  nonlinear regression).  The dispersion factor covers a Sigma evaluated at the
-  estimate rather than the truth (a record whose long-tau points run low makes its own
-  Sigma too small there and fits worse than chi-square elsewhere).
+  within chi2(0.95; 1) = 3.84 of its minimum (likelihood-ratio interval with a known
+  covariance; Bates & Watts, nonlinear regression), or within F(0.95; 1, dof) x
+  J_min / dof when the model fits worse than its covariance allows (J_min > dof: a
+  missing effect, or a Sigma evaluated at an estimate whose long-tau points run low).
 * A core or requested term the data do not support is reported as a one-sided 95 %
   upper bound: its coefficient c0 at which the GLS estimate would fall below the
   observed one with 5 % probability, the covariance evaluated under c0 and the term's
   own part treated as a scaled chi-square (:func:`_upper_bound`).
 
-Validation: bench/validate_fit.py (3 h records of the two example IMUs, 50 seeds).
+Validation: bench/validate_fit.py (3 h records of the two example IMUs, 50 seeds; it
+also fits the real ADIS16405 runs with ``--adis``).  Speed: bench/bench_fit.py.
 
 B convention (paper eq. 8): B is the ADEV floor / 0.664; the Gauss-Markov driving PSD
 is S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B).
@@ -59,13 +63,12 @@ import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
-from scipy.linalg import solve_triangular
 from scipy.optimize import brentq, minimize, minimize_scalar, nnls
 from scipy.special import ndtr
 from scipy.stats import chi2
 from scipy.stats import f as fdist
 
-from imu_allan.allan import AllanCurve
+from imu_allan.allan import _single_thread_blas, AllanCurve
 from imu_allan.errors import InputError
 from imu_allan.model import base_name, FLICKER_AVAR, GM_PEAK_TAU, noise_from_terms, Term, TERMS
 from imu_allan.noise_params import AxisNoise
@@ -89,8 +92,11 @@ Z95_ONE_SIDED = 1.6448536269514722
 
 # Lag-sum quadrature: lags within _EXACT of a kink are summed exactly, the rest is
 # integrated with Gauss-Legendre on pieces that double in size away from the kinks.
-_EXACT = 24
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+# (8, 4 points) keeps Sigma within 3e-4 (relative to its diagonal) of (24, 8 points) on
+# 3 h, 100 Hz octave and dense curves and a short 10 Hz one, for T_B from 3 s to
+# 3000 s, with half the nodes (bench/bench_fit.py: the fit's main cost).
+_EXACT = 8
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 _STENCIL = ((0, 1.0), (1, -2.0), (2, 1.0))
 
 
@@ -297,6 +303,7 @@ class _LagQuadrature:
         self.h = np.concatenate(hs)
         self.weight = np.concatenate(ws)
         self.pair = np.concatenate(pair_ids)
+        self.starts = np.concatenate([[0], np.cumsum([h.size for h in hs])[:-1]])
         self.pairs = np.array(pairs, dtype=np.int64)
         self.m1 = m[self.pairs[self.pair, 0]].astype(np.float64)
         self.m2 = m[self.pairs[self.pair, 1]].astype(np.float64)
@@ -352,15 +359,30 @@ class _LagQuadrature:
         """C[a, b] (k, k) = sum of weight * gamma_a * gamma_b per pair, times scale."""
         n = len(gammas)
         out = np.zeros((n, n, self.k, self.k))
+        if n == 0:
+            return out
         p, q = self.pairs[:, 0], self.pairs[:, 1]
-        for a in range(n):
-            for b in range(a, n):
-                s = np.bincount(self.pair, weights=self.weight * gammas[a] * gammas[b],
-                                minlength=len(self.pairs)) * scale[p, q]
-                out[a, b, p, q] = s
-                out[a, b, q, p] = s
-                out[b, a] = out[a, b]
+        a_idx, b_idx = np.triu_indices(n)
+        g = np.stack(gammas)
+        wg = g * self.weight
+        # The nodes are stored pair by pair, so each pair's sum is one reduceat segment.
+        sums = np.add.reduceat(wg[a_idx] * g[b_idx], self.starts, axis=1) * scale[p, q]
+        for s, a, b in zip(sums, a_idx, b_idx):
+            out[a, b, p, q] = s
+            out[a, b, q, p] = s
+            out[b, a] = out[a, b]
         return out
+
+
+def _lru_get(cache: dict, key, size: int, make):
+    """Return cache[key], computed by ``make()`` when absent; drops the oldest entries."""
+    value = cache.pop(key, None)
+    if value is None:
+        value = make()
+    cache[key] = value
+    while len(cache) > size:
+        cache.pop(next(iter(cache)), None)
+    return value
 
 
 def _graded(a: float, b: float, first: float) -> np.ndarray:
@@ -383,7 +405,8 @@ class _CurveCovariance:
         self.scale = 2.0 / (4.0 * np.outer(tau ** 2, tau ** 2) * np.outer(n_terms, n_terms))
         self.n_samples = n_samples
         self._quad: dict[int, _LagQuadrature] = {}
-        self._cache: dict = {}
+        self._gammas: dict = {}     # second-difference covariances at the nodes
+        self._blocks: dict = {}     # per-pair blocks of a term combination (small)
 
     def _quadrature(self, tails: bool) -> _LagQuadrature:
         # Without tails (polynomial covariances) the lags stop at the kinks; with them
@@ -423,20 +446,21 @@ class _CurveCovariance:
             t, nl = terms[i], tuple(2.0 ** (round(32.0 * math.log2(v)) / 32.0)
                                     for v in nonlinear[i])
             key = (id(quad), t.name, nl)
-            if key not in self._cache:
-                if len(self._cache) > 64:
-                    self._cache.clear()
-                self._cache[key] = quad.gamma(t, nl, self.dt)
-            gammas.append(self._cache[key])
+            gamma = _lru_get(self._gammas, key, 24, lambda: quad.gamma(t, nl, self.dt))
+            gammas.append(gamma)
             keys.append(key)
-        bkey = ('blocks',) + tuple(keys)
-        if bkey not in self._cache:
-            self._cache[bkey] = quad.blocks(gammas, self.scale)
-        return self._cache[bkey], active
+        blocks = _lru_get(self._blocks, tuple(keys), 256,
+                          lambda: quad.blocks(gammas, self.scale))
+        return blocks, active
 
-    def sigma(self, terms: Sequence[Term], coef: np.ndarray, nonlinear: Sequence[tuple]):
+    def sigma(self, terms: Sequence[Term], coef: np.ndarray, nonlinear: Sequence[tuple],
+              coef_cov: np.ndarray | None = None):
         """
         Covariance matrix of the Allan estimates under a model.
+
+        Sigma is quadratic in the coefficients, Sigma = sum_ab c_a c_b blocks[a, b]; with
+        ``coef_cov`` the product c_a c_b is replaced by its expectation
+        c_a c_b + cov(c_a, c_b) over uncertain coefficients.
 
         Parameters
         ----------
@@ -446,6 +470,8 @@ class _CurveCovariance:
             Shape (n_terms,), linear coefficients.
         nonlinear : sequence of tuple
             Each term's nonlinear parameter values.
+        coef_cov : np.ndarray, optional
+            Shape (n_terms, n_terms), covariance of the coefficients (same units).
 
         Returns
         -------
@@ -455,7 +481,31 @@ class _CurveCovariance:
         """
         blocks, active = self.blocks(terms, nonlinear)
         c = np.asarray(coef, dtype=np.float64)[active]
-        return np.einsum('a,b,abij->ij', c, c, blocks)
+        moment = np.outer(c, c)
+        if coef_cov is not None:
+            moment = moment + np.asarray(coef_cov, dtype=np.float64)[np.ix_(active, active)]
+        return np.einsum('ab,abij->ij', moment, blocks)
+
+
+_COV_CACHE: dict = {}
+#: Curves whose covariance machinery is kept: the six axes of one Allan curve share the
+#: taus and term counts, so their quadrature nodes and the Sigma blocks of the terms
+#: without nonlinear parameters are built once (about a third of a fit's time).  One
+#: curve: its nodes and cached covariances take some 10-50 MB on a 3 h, 100 Hz record.
+_COV_CACHE_SIZE = 1
+
+
+def _shared_covariance(m: np.ndarray, n_terms: np.ndarray, dt: float,
+                       n_samples: int) -> _CurveCovariance:
+    """Return the cached :class:`_CurveCovariance` of a curve geometry (small LRU)."""
+    key = (m.tobytes(), n_terms.tobytes(), float(dt), int(n_samples))
+    cov = _COV_CACHE.pop(key, None)
+    if cov is None:
+        cov = _CurveCovariance(m, n_terms, dt, n_samples)
+    _COV_CACHE[key] = cov            # most recent last
+    while len(_COV_CACHE) > _COV_CACHE_SIZE:
+        _COV_CACHE.pop(next(iter(_COV_CACHE)))
+    return cov
 
 
 # ------------------------------------------------------------------------- the GLS fit
@@ -499,7 +549,8 @@ class _Data:
                 continue
         else:
             self.chol = np.diag(np.sqrt(d))
-        self.inv = solve_triangular(self.chol, np.eye(d.size), lower=True)
+        # numpy, not scipy.linalg: numpy's BLAS is held to one thread during a fit.
+        self.inv = np.linalg.solve(self.chol, np.eye(d.size))
         self.yw = self.inv @ self.y
 
     def whiten(self, a: np.ndarray) -> np.ndarray:
@@ -746,12 +797,15 @@ class _Fitter:
         self.data = _Data(tau, avar, scale)
         self.edf = edf
         self.edf0 = np.clip(edf, 1.0, np.maximum(1.5 * n_terms / m, 1.0))
-        self.cov = _CurveCovariance(m, n_terms, dt, n_samples)
+        self.cov = _shared_covariance(m, n_terms, dt, n_samples)
         self.method = method
 
-    def sigma(self, slots, sol: _Solution) -> np.ndarray:
+    def sigma(self, slots, sol: _Solution, expected: bool = False) -> np.ndarray:
         """
         Model covariance of the curve (scaled units) at a solution.
+
+        ``expected``: average Sigma over the coefficients' GLS uncertainty at the
+        current weights (:meth:`_coef_cov`); used for the re-weighting steps.
 
         A coefficient fitted at zero sits on the edge of the parameter space, not at a
         certainty: in the covariance it keeps a floor of 10 % of the data at the tau
@@ -762,7 +816,8 @@ class _Fitter:
         a = _design(slots, self.data.tau, sol.phi)
         floor = 0.1 * np.min(self.data.y[:, None] / np.maximum(a, 1e-300), axis=0)
         coef = np.maximum(sol.coef, floor)
-        s = self.cov.sigma([x.term for x in slots], coef * self.data.scale, sol.phi)
+        cov = self._coef_cov(a) * self.data.scale ** 2 if expected else None
+        s = self.cov.sigma([x.term for x in slots], coef * self.data.scale, sol.phi, cov)
         s = s / self.data.scale ** 2 + self._sinusoid_cross(slots, sol)
         model = _design(slots, self.data.tau, sol.phi) @ sol.coef
         floor = 2.0 * (1e-3 * np.maximum(model, 1e-300)) ** 2
@@ -772,6 +827,19 @@ class _Fitter:
             want = model * np.sqrt(2.0 / self.edf)
             s = s / np.outer(sd, sd) * np.outer(want, want)
         return s + np.diag(floor)
+
+    def _coef_cov(self, a: np.ndarray) -> np.ndarray:
+        """
+        GLS covariance (A^T Sigma^-1 A)^-1 of the coefficients at the current weights.
+
+        Used for the *expected* covariance of the curve (:meth:`sigma`): the Sigma of
+        the data is Sigma(c_true), and c_hat is uncertain.  A weight matrix built from
+        c_hat alone follows its errors (a record whose long-tau points run low gets a
+        small K, hence small variances there, hence more pull from those same low
+        points); averaging Sigma over the coefficients' uncertainty breaks that loop.
+        """
+        aw = self.data.whiten(a)
+        return np.linalg.pinv(aw.T @ aw)
 
     def _sinusoid_cross(self, slots, sol: _Solution) -> np.ndarray:
         """
@@ -809,8 +877,16 @@ class _Fitter:
         The first step uses the paper's weights 2 avar^2 / edf with the EDF capped at the
         white-noise value 1.5 n_terms / m (a long-tau EDF from a misidentified noise type
         would otherwise pin the fit to one point), or ``sigma0`` when given (the
-        covariance of a related model already fitted).  Then Sigma(theta) until the
-        fitted curve moves by less than 1 % of its standard deviation at every tau.
+        covariance of a related model already fitted).  Then the *expected* Sigma
+        (Sigma(theta) averaged over the GLS uncertainty of the coefficients,
+        :meth:`_coef_cov`) until the fitted curve moves by less than 1 % of its standard
+        deviation at every tau.  The plug-in Sigma(theta) weights a record by its own
+        estimate: where the long-tau points run low, K comes out small, their variances
+        small and their pull large, so errors feed back.  On the u-blox accelerometer
+        example (3 h, 50 seeds, bench/validate_fit.py) the expected Sigma brought the
+        median error of K from 0.31 to 0.24 and of B from 0.067 to 0.052.  The returned
+        Sigma, used for term selection and the profile intervals, is the plug-in one at
+        the solution (the profile accounts for the parameters' uncertainty itself).
         """
         y = self.data.y
         self.data.set_sigma(np.diag(2.0 * y ** 2 / self.edf0) if sigma0 is None else sigma0)
@@ -818,7 +894,7 @@ class _Fitter:
         for it in range(max_iter):
             if not np.any(sol.coef > 0):
                 break
-            sigma = self.sigma(slots, sol)
+            sigma = self.sigma(slots, sol, expected=True)
             self.data.set_sigma(sigma)
             new = _fit_fixed_w(self.data, slots, sol.phi)
             before = _design(slots, self.data.tau, sol.phi) @ sol.coef
@@ -955,6 +1031,14 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
         Mismatched arrays, a bad rate, an unknown term, or fewer than 3 usable taus.
 
     """
+    # The matrices are tiny (k ~ 20-30 taus): OpenBLAS threads only add overhead and
+    # oversubscribe a busy machine (measured: 2-3x slower wall time with them).
+    with _single_thread_blas():
+        return _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method)
+
+
+def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method) -> AxisFit:
+    """Body of :func:`fit_axis` (same arguments)."""
     tau, avar, edf = _check_inputs(curve_tau_s, avar, edf, rate_hz, n_samples)
     if method not in ('overlapping', 'nonoverlapping'):
         raise InputError(f'the fit needs an Allan curve (overlapping or nonoverlapping), '
@@ -1021,13 +1105,18 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     sol = _fit_fixed_w(fitter.data, slots, sol.phi)   # J at exactly these weights
     chi2_value = float(sol.j)
     dof = int(tau.size - _n_params(slots))
-    # Sigma is the model's covariance at the estimate, not at the truth: a record whose
-    # long-tau points run low gets too small a Sigma there and fits "too well" nowhere
-    # else.  The observed dispersion J / dof (never below 1) scales the intervals, and
-    # the F quantile accounts for that dispersion being estimated (Bates & Watts 1988,
-    # profile intervals in nonlinear regression).
-    dispersion = max(1.0, chi2_value / dof) if dof > 0 else 1.0
-    threshold = (fdist.ppf(0.95, 1, dof) if dof > 0 else chi2.ppf(0.95, 1)) * dispersion
+    # Sigma is the model's own covariance of the curve (checked against Monte Carlo in
+    # test_fit.py), so the scale is known and the threshold is the chi-square quantile
+    # (likelihood-ratio interval, Bates & Watts 1988).  Where the model fits worse than
+    # that covariance allows (J / dof > 1: an effect the model lacks, or a Sigma too
+    # small because it was evaluated at an estimate whose long-tau points run low), the
+    # observed dispersion scales the threshold up, with the F quantile for a dispersion
+    # that is itself estimated.
+    dispersion = chi2_value / dof if dof > 0 else 0.0
+    if dispersion > 1.0:
+        threshold = fdist.ppf(0.95, 1, dof) * dispersion
+    else:
+        threshold = chi2.ppf(0.95, 1)
 
     optimised: dict[str, Param] = {}
     values: dict[str, dict] = {}

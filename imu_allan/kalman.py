@@ -372,6 +372,22 @@ def _reduce(values: Sequence[float], how: str) -> float:
     raise InputError(f"axis reduction must be 'max' or 'mean', got {how!r}")
 
 
+def _kinded(source, symbol: str, use_upper_bounds: bool) -> tuple[float, str]:
+    """
+    Value of N or K for one axis with its kind ('estimate', 'upper_bound', 'absent').
+
+    An AxisNoise carries estimates (0 means absent); an AxisFit its optimised parameter,
+    an upper bound only when ``use_upper_bounds`` (otherwise it counts as absent).
+    """
+    if isinstance(source, AxisNoise):
+        value = float(getattr(source, symbol))
+        return value, ('estimate' if value > 0 else 'absent')
+    value, kind = _param(source, symbol, use_upper_bounds)
+    if value is None or kind not in ('estimate', 'upper_bound') or value <= 0:
+        return 0.0, 'absent'
+    return value, kind
+
+
 def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/imu/data',
                 use_upper_bounds: bool = True) -> str:
     """
@@ -382,6 +398,13 @@ def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/
     a filter tuned from it) over-confident on that axis, while over-stating only
     down-weights it; ``'mean'`` gives the typical axis.  Per-axis values are written as
     comments.
+
+    Only axes where the term was *estimated* enter the reduction: an upper bound (a
+    term the record was too short to see on that axis) can lie far above the values
+    the other axes measure (an accelerometer K bound of 1e-4 beside estimates of 8e-6),
+    so it would dominate 'max' without being a measurement.  A bound is used only when
+    no axis of the sensor has an estimate (with ``use_upper_bounds``), and a comment in
+    the file says so.
 
     Parameters
     ----------
@@ -394,7 +417,7 @@ def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/
     rostopic : str
         Value of Kalibr's rostopic key.
     use_upper_bounds : bool
-        See :func:`axis_noise_from`.
+        Fall back to upper bounds when no axis has an estimate (True) or write 0.
 
     Returns
     -------
@@ -407,23 +430,49 @@ def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/
     """
     if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
-    noises = {a: axis_noise_from(s, use_upper_bounds)[0] for a, s in zip(AXES, _six(sources))}
     how = {'max': 'worst (largest) axis', 'mean': 'mean of the three axes'}.get(reduce)
     _reduce([0.0], reduce)  # validates ``reduce``
+    srcs = dict(zip(AXES, _six(sources)))
     lines = ['# IMU noise for Kalibr (imu_allan).  Continuous-time densities:',
              '# noise_density = N (white noise), random_walk = K (bias random walk).',
-             f'# One value per sensor: the {how} of the per-axis fit below.',
+             f'# One value per sensor: the {how} of the per-axis estimates below',
+             '# (axes where a term is only an upper bound are left out of it).',
              '# B and T_B (bias instability, Gauss-Markov) have no Kalibr key.']
-    out = {}
+    out, remarks = {}, []
     for sensor, axes, u_n, u_k in (('accelerometer', ACCEL_AXES, 'm/s^2/sqrt(Hz)',
                                     'm/s^3/sqrt(Hz)'),
                                    ('gyroscope', GYRO_AXES, 'rad/s/sqrt(Hz)',
                                     'rad/s^2/sqrt(Hz)')):
         lines.append(f'# {sensor} per axis:')
+        per = {a: {sym: _kinded(srcs[a], sym, use_upper_bounds) for sym in ('N', 'K')}
+               for a in axes}
         for a in axes:
-            lines.append(f'#   {a}: N = {noises[a].N:.6e} {u_n}, K = {noises[a].K:.6e} {u_k}')
-        out[f'{sensor}_noise_density'] = (_reduce([noises[a].N for a in axes], reduce), u_n)
-        out[f'{sensor}_random_walk'] = (_reduce([noises[a].K for a in axes], reduce), u_k)
+            text = []
+            for sym, u in (('N', u_n), ('K', u_k)):
+                value, kind = per[a][sym]
+                mark = {'estimate': '', 'upper_bound': ' (95 % upper bound)',
+                        'absent': ' (not available)'}[kind]
+                text.append(f'{sym} = {value:.6e} {u}{mark}')
+            lines.append(f'#   {a}: ' + ', '.join(text))
+        for sym, key, u in (('N', f'{sensor}_noise_density', u_n),
+                            ('K', f'{sensor}_random_walk', u_k)):
+            est = [per[a][sym][0] for a in axes if per[a][sym][1] == 'estimate']
+            bounds = [per[a][sym][0] for a in axes if per[a][sym][1] == 'upper_bound']
+            if est:
+                value = _reduce(est, reduce)
+                if len(est) < len(axes):
+                    remarks.append(f'# {key}: from the {len(est)} axes with an estimate; '
+                                   'the others only bound it')
+            elif bounds:
+                value = _reduce(bounds, reduce)
+                remarks.append(f'# {key}: no axis has an estimate; this is the '
+                               f'{reduce} of the 95 % upper bounds (the record is too '
+                               'short to measure it)')
+            else:
+                value = 0.0
+                remarks.append(f'# {key}: not available on any axis (0 written)')
+            out[key] = (value, u)
+    lines += remarks
     for key in ('accelerometer_noise_density', 'accelerometer_random_walk',
                 'gyroscope_noise_density', 'gyroscope_random_walk'):
         value, u = out[key]

@@ -406,3 +406,94 @@ def test_single_db3_file_is_read_directly(shared_dir):
         assert source.read_all().stamp_ns.size == 1565
         assert source.warnings == []
     assert {t.topic: t.n_messages for t in list_topics(db3)}['/battery'] == 1565
+
+
+# -- the direct sqlite page reader ----------------------------------------------------
+
+def _sqlite_both_ways(db3: Path, topic: str):
+    """Read a topic with the page reader (asserting it was used) and with SQL."""
+    from imu_allan import bag_reader
+
+    with open_imu(db3, topic) as source:
+        backend = source._backend
+        own = next(t for t in backend.topics() if t.name == source.topic)
+        located = bag_reader._SqlitePages(db3, backend.conn).locate(backend.ids[own.name],
+                                                                    backend.count(own))
+        assert located[1].size == backend.count(own)
+        fast = source.read_all()
+    with open_imu(db3, topic) as source:
+        source._backend.pieces = source._backend._sql_pieces
+        slow = source.read_all()
+    for field in ImuBlock._fields:
+        assert_array_equal(getattr(fast, field), getattr(slow, field))
+    return fast
+
+
+@pytest.mark.parametrize('page_size', [512, 4096, 65536])
+def test_sqlite_page_reader_matches_sql(tmp_path, page_size):
+    import sqlite3
+
+    stamps, samples = _recording(3000, seed=13)
+    db3 = tmp_path / 'mixed.db3'
+    write_imu_bag(tmp_path / 'src.db3', stamps, samples)
+    src = sqlite3.connect(tmp_path / 'src.db3')
+    conn = sqlite3.connect(db3)
+    conn.execute(f'PRAGMA page_size = {page_size}')
+    for (sql,) in src.execute('SELECT sql FROM sqlite_master WHERE sql IS NOT NULL'):
+        conn.execute(sql)
+    rows = src.execute('SELECT topic_id, timestamp, data FROM messages ORDER BY id').fetchall()
+    topics = src.execute('SELECT * FROM topics').fetchall()
+    conn.executemany(f'INSERT INTO topics VALUES ({",".join("?" * len(topics[0]))})', topics)
+    conn.execute('INSERT INTO topics (id, name, type, serialization_format, '
+                 'offered_qos_profiles, type_description_hash) VALUES '
+                 "(7, '/camera', 'sensor_msgs/msg/Image', 'cdr', '', '')")
+    rng = np.random.default_rng(14)
+    out = []
+    for k, (topic_id, stamp, data) in enumerate(rows):
+        out.append((k + 1, topic_id, stamp, data))
+        if k % 97 == 0:
+            # Large messages of another topic spill to overflow pages.
+            out.append((10**6 + k, 7, stamp + 1, rng.bytes(int(rng.integers(10, 20000)))))
+    # Rows out of time order and rowids of every varint length (1 to 9 bytes).
+    out[10], out[11] = out[11], out[10]
+    out[20] = (2**40,) + out[20][1:]
+    out[21] = (2**62,) + out[21][1:]
+    conn.executemany('INSERT INTO messages (id, topic_id, timestamp, data) VALUES (?, ?, ?, ?)',
+                     out)
+    conn.commit()
+    conn.close()
+    block = _sqlite_both_ways(db3, '/imu/data')
+    assert block.stamp_ns.size == 3000
+    assert (np.diff(block.recv_ns) >= 0).all()
+
+
+def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
+    import sqlite3
+
+    from imu_allan import bag_reader
+
+    stamps, samples = _recording(500, seed=15)
+    # Messages larger than a page: the topic itself spills to overflow pages.
+    db3 = tmp_path / 'big.db3'
+    write_imu_bag(db3, stamps, samples, frame_id='f' * 5000)
+    with open_imu(db3) as source:
+        backend = source._backend
+        pages = bag_reader._SqlitePages(db3, backend.conn)
+        with pytest.raises(bag_reader._NotPlain, match='overflow'):
+            pages.locate(list(backend.ids['/imu/data']), 500)
+        _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
+    # A write-ahead log next to the file: SQL reads it (committed rows live in the log).
+    db3 = tmp_path / 'wal.db3'
+    write_imu_bag(db3, stamps, samples)
+    conn = sqlite3.connect(db3)
+    conn.execute('PRAGMA journal_mode = WAL')
+    conn.execute('PRAGMA wal_autocheckpoint = 0')
+    conn.execute('DELETE FROM messages WHERE id > 400')
+    conn.commit()
+    try:
+        with pytest.raises(bag_reader._NotPlain, match='wal'):
+            bag_reader._SqlitePages(db3, conn)
+        with open_imu(db3) as source:
+            assert source.read_all().stamp_ns.size == 400
+    finally:
+        conn.close()

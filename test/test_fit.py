@@ -14,10 +14,11 @@ import pytest
 
 from imu_allan.accumulator import AllanAccumulator
 from imu_allan.allan import allan_curve, overlapping_avar
+from imu_allan.csv_io import read_csv
 from imu_allan.errors import InputError
 from imu_allan.fit import _CurveCovariance, fit_axis, fit_curve, nominal_fit
 from imu_allan.model import avar_model, TERMS
-from imu_allan.noise_params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.noise_params import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
 from imu_allan.simulate import simulate_axis, simulate_imu
 
 PAPER = AxisNoise(N=1e-3, B=4e-4, T_B=8.0, K=3e-5)   # the paper's model, visible in 1 h
@@ -191,7 +192,10 @@ def test_fit_curve_wrapper_units_and_method():
     fit = fit_curve(curve, 3)   # n_samples from the curve's term counts
     assert fit.optimised['N'].unit == 'm/s^2*s^0.5'
     assert fit.optimised['B'].unit == 'm/s^2'
-    assert _covers(fit.optimised['N'], 6e-3)
+    # (One interval misses its truth 5 % of the time; coverage is tested on seed sets.)
+    n_fit = fit.optimised['N']
+    assert abs(n_fit.value / 6e-3 - 1.0) < 0.02
+    assert n_fit.ci95[0] < n_fit.value < n_fit.ci95[1]
     same = fit_axis(curve.tau_s, curve.avar[:, 3], curve.edf[:, 3], 20.0,
                     samples.shape[0], unit='m/s^2')
     assert same.optimised == fit.optimised
@@ -245,3 +249,27 @@ def test_sensor_filter_bend_at_short_tau_is_left_out():
     assert c.avar[0, 0] < 0.6 * n_density ** 2 * rate
     white = fit_axis(*_curve(AxisNoise(N=n_density), rate, n, seed=6), rate, n)
     assert white.tau_s[0] == 1.0 / rate       # plain white noise keeps every tau
+
+
+def test_adis16405_gyro_against_the_datasheet(shared_dir):
+    # A real record: run 2 of the six static ADIS16405 runs (100 Hz, 2.78 h, no
+    # outliers; ../shared/realdata/README.md).  Datasheet: rate noise density
+    # 0.05 deg/s/sqrt(Hz), in-run bias stability 0.007 deg/s (quoted by Analog Devices
+    # as the Allan deviation minimum, i.e. 0.664 B in the paper's convention).
+    # Tolerance: N within 0.7-1.2 x the datasheet (a typical value, not a bound; the six
+    # runs give 0.79-0.93 on x and y), the ADEV floor 0.664 B within 0.6-2 x.  The z
+    # gyro carries an effect outside the default model (ADEV flat from 0.01 to 0.02 s,
+    # then halved at 0.04 s); the fit must say that the model does not explain it.
+    deg = math.pi / 180.0
+    data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run2.csv.gz',
+                    columns=('gyro_x', 'gyro_y', 'gyro_z'))
+    curve = allan_curve(data.samples, data.rate_hz, 'octave')
+    n = data.samples.shape[0]
+    for axis in (0, 1):
+        fit = fit_curve(curve, axis, n, unit='rad/s')
+        n_p, b_p = fit.optimised['N'], fit.optimised['B']
+        assert n_p.kind == 'estimate' and b_p.kind == 'estimate', fit.optimised
+        assert 0.7 < n_p.value / deg / 0.05 < 1.2, n_p
+        assert 0.6 < b_p.value * FLICKER_FLOOR / deg / 0.007 < 2.0, b_p
+    z = fit_curve(curve, 2, n, unit='rad/s')
+    assert any('does not explain the curve' in note for note in z.notes), z.notes

@@ -150,6 +150,34 @@ def test_kalibr_yaml_keys_units_and_worst_axis():
         kalibr_yaml(sources, rate_hz=200.0, reduce='median')
 
 
+def _fit(n, k, k_kind='estimate'):
+    def p(v, kind='estimate', unit='m/s^2'):
+        return Param(v, (0.0 if kind == 'upper_bound' else 0.9 * v, 1.1 * v), kind, unit)
+    opt = {'N': p(n), 'B': p(3e-4), 'T_B': p(60.0, unit='s'), 'K': p(k, k_kind)}
+    return AxisFit(nominal=opt, optimised=opt, model=AxisNoise(N=n, B=3e-4, T_B=60.0, K=k),
+                   terms=('white', 'bias_instability'), notes=())
+
+
+def test_kalibr_prefers_estimates_over_a_larger_bound():
+    # Accel K estimated on x and y (~8e-6) but only bounded on z (1.08e-4): 'max' must
+    # take the worst *estimate*, not the bound, and say why in a comment.
+    accels = [_fit(6e-4, 8.1e-6), _fit(6.1e-4, 7.9e-6), _fit(6.2e-4, 1.08e-4, 'upper_bound')]
+    gyros = [_fit(1.2e-4, 2e-6, 'upper_bound'), _fit(1.3e-4, 3e-6, 'upper_bound'),
+             _fit(1.1e-4, 2.5e-6, 'upper_bound')]
+    text = kalibr_yaml(gyros + accels, rate_hz=100.0)
+    doc = yaml.safe_load(text)
+    assert_allclose(doc['accelerometer_random_walk'], 8.1e-6, rtol=1e-6)
+    assert_allclose(doc['accelerometer_noise_density'], 6.2e-4, rtol=1e-6)
+    assert 'accelerometer_random_walk: from the 2 axes with an estimate' in text
+    assert '(95 % upper bound)' in text
+    # No gyro axis has a K estimate: the largest bound is used, and the file says so.
+    assert_allclose(doc['gyroscope_random_walk'], 3e-6, rtol=1e-6)
+    assert 'gyroscope_random_walk: no axis has an estimate' in text
+    lean = yaml.safe_load(kalibr_yaml(gyros + accels, rate_hz=100.0, use_upper_bounds=False))
+    assert lean['gyroscope_random_walk'] == 0.0
+    assert_allclose(lean['accelerometer_random_walk'], 8.1e-6, rtol=1e-6)
+
+
 def test_robot_localization_covariance_is_n2_rate_and_clamped():
     sources = _six()
     sources = dict(sources, accel_y=AxisNoise(N=1e-6))  # variance 1e-10 at 100 Hz

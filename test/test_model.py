@@ -12,6 +12,7 @@ import math
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
+from scipy.integrate import quad
 from scipy.optimize import minimize_scalar
 
 from imu_allan.model import (adev_model, avar_flicker, avar_gauss_markov, avar_model,
@@ -142,6 +143,33 @@ def test_generalised_covariance_reproduces_the_allan_variance(name):
         assert_allclose(second_moment / (2 * tau ** 2), term.shape(np.array([tau]),
                                                                    *nonlinear)[0],
                         rtol=1e-9)
+
+
+@pytest.mark.parametrize('name', ['white', 'flicker', 'gauss_markov', 'random_walk'])
+def test_phase_psd_reproduces_the_allan_variance(name):
+    # The phase PSDs feed the sinusoid's beat term in the fit's covariance.  With the
+    # two-sided rate PSD S_y = (2 pi f)^2 S_X, AVAR(tau) = 4 int_0^inf S_y(f)
+    # sin^4(pi f tau) / (pi f tau)^2 df (NIST SP 1065 eq. 65, one-sided there).
+    term = TERMS[name]
+    nonlinear = (7.0,) if term.nonlinear else ()
+    for tau in (0.5, 3.0, 40.0):
+        def integrand(x):
+            f = x / (math.pi * tau)
+            s_y = (2 * math.pi * f) ** 2 * term.psd_phase(f, 0.01, *nonlinear)
+            return 4.0 * s_y * math.sin(x) ** 4 / x ** 2 / (math.pi * tau)
+        edges = np.concatenate([[1e-9], np.arange(1, 1501) * math.pi])
+        total = sum(quad(integrand, a, b)[0] for a, b in zip(edges[:-1], edges[1:]))
+        # Beyond x = 1500 pi, sin^4 averages 3/8 and S_y is at most flat (white).
+        tail = 4.0 * integrand_tail_bound(term, tau, nonlinear, edges[-1])
+        assert_allclose(total + tail, term.shape(np.array([tau]), *nonlinear)[0],
+                        rtol=2e-3, err_msg=f'{name} at tau {tau}')
+
+
+def integrand_tail_bound(term, tau: float, nonlinear: tuple, x0: float) -> float:
+    """(3/8) int_x0^inf S_y(f) / x^2 dx / (pi tau) with S_y frozen at x0 (white tail)."""
+    f = x0 / (math.pi * tau)
+    s_y = (2 * math.pi * f) ** 2 * term.psd_phase(f, 0.01, *nonlinear)
+    return 0.375 * s_y / x0 / (math.pi * tau)
 
 
 def test_gauss_markov_tail_matches_direct_sum():

@@ -1,0 +1,182 @@
+"""
+End-to-end benchmark of ``imu-allan analyze`` on a long bag, MCAP and sqlite3 storage.
+
+Simulates a ``--hours`` long (default 3 h) ``--rate`` Hz (default 400 Hz) six-axis
+record from ``config/xsens_mti7.yaml`` (4.32 million sensor_msgs/Imu messages by
+default) and writes it as a rosbag2 directory in MCAP storage and in sqlite3 storage.
+The bags are cached in ``--cache`` (default ``/tmp/imu_allan_bench_bags``), so reruns
+skip the writing.  For each storage it prints, measured in the same run:
+
+* ``imu-allan analyze BAG --format json`` run as a subprocess: wall seconds end to
+  end (start-up, reading, input checks, Allan accumulation, fit, every output file and
+  the plots), messages per second, and its CPU seconds (steadier on a shared machine;
+  the load average is printed too);
+* the split of that work, measured in a fresh process: reading only
+  (``open_imu(...).blocks()``), the pipeline Session (checks plus streaming Allan
+  accumulation), the curve plus fit of the six axes (``analysis.analyze``), and the
+  output files with plots;
+* the plain rosbags loop (``rosbags.rosbag2.Reader`` plus ``deserialize_cdr`` per
+  message) over the first ``--subset`` messages, as messages per second.
+
+Target of issue 5: at most 20 s end to end per storage on a 2-core machine; reading
+goal 1 million messages/s.
+
+Usage: ``.venv/bin/python bench/bench_analyze.py [--hours H] [--rate HZ] [--subset N]
+[--cache DIR] [--storage mcap sqlite3]``
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import get_typestore, Stores
+
+from imu_allan.analysis import analyze
+from imu_allan.bag_reader import open_imu
+from imu_allan.bag_writer import write_imu_bag
+from imu_allan.noise_params import load_params
+from imu_allan.pipeline import Session, SessionConfig
+from imu_allan.report import write_outputs
+from imu_allan.simulate import simulate_imu
+
+REPO = Path(__file__).resolve().parents[1]
+T0_NS = 1_700_000_000_000_000_000
+
+
+def _bag(cache: Path, storage: str, hours: float, rate: float) -> Path:
+    """Return the cached bag of this storage and size, writing it first when missing."""
+    bag = cache / f'imu_{storage}_{hours:g}h_{rate:g}hz'
+    if (bag / 'metadata.yaml').exists():
+        return bag
+    cache.mkdir(parents=True, exist_ok=True)
+    spec = load_params(REPO / 'config' / 'xsens_mti7.yaml')
+    t0 = time.perf_counter()
+    _, samples = simulate_imu(spec, rate, hours * 3600.0, seed=0)
+    stamps_ns = T0_NS + np.round(np.arange(samples.shape[0]) * (1e9 / rate)).astype(np.int64)
+    tmp = cache / f'.{bag.name}.{os.getpid()}'
+    shutil.rmtree(tmp, ignore_errors=True)
+    write_imu_bag(tmp, stamps_ns, samples, storage=storage)
+    # The file inside keeps the temporary name; metadata.yaml names it, so it is found.
+    os.replace(tmp, bag)
+    print(f'  wrote {bag} ({samples.shape[0]:,} messages) in {time.perf_counter() - t0:.1f} s',
+          file=sys.stderr)
+    return bag
+
+
+def _end_to_end(bag: Path, out: Path) -> tuple:
+    """Run the CLI once; return (wall seconds, CPU seconds, result JSON)."""
+    cmd = [sys.executable, '-m', 'imu_allan', 'analyze', str(bag), '--out', str(out),
+           '--format', 'json']
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if proc.returncode != 0:
+        raise SystemExit(f'analyze failed ({proc.returncode}): {proc.stderr.strip()}')
+    return wall, cpu, json.loads(proc.stdout)
+
+
+def _split(bag: Path, out: Path) -> dict:
+    """Time the stages in this process: read only, read + Session, fit, outputs."""
+    times = {}
+    t0, c0 = time.perf_counter(), time.process_time()
+    with open_imu(bag) as source:
+        n = sum(b.stamp_ns.size for b in source.blocks())
+    times['read'] = time.perf_counter() - t0
+    times['read_cpu'] = time.process_time() - c0
+    session = Session(SessionConfig())
+    t0 = time.perf_counter()
+    with open_imu(bag) as source:
+        for block in source.blocks():
+            session.add(block.stamp_ns, block.samples)
+    session.flush()
+    times['session'] = time.perf_counter() - t0 - times['read']
+    t0 = time.perf_counter()
+    result = analyze(session, source=str(bag))
+    times['allan+fit'] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    session.curve()
+    times['allan curve only'] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    write_outputs(result, out, plot=True)
+    times['outputs+plots'] = time.perf_counter() - t0
+    times['messages'] = n
+    return times
+
+
+def _rosbags_loop(bag: Path, subset: int) -> tuple:
+    """Decode the first ``subset`` messages one by one with rosbags; return (n, seconds)."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    values = []
+    t0 = time.perf_counter()
+    with Reader(bag) as reader:
+        for conn, _, raw in reader.messages():
+            msg = store.deserialize_cdr(raw, conn.msgtype)
+            av, la = msg.angular_velocity, msg.linear_acceleration
+            values.append((msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                           av.x, av.y, av.z, la.x, la.y, la.z))
+            if len(values) >= subset:
+                break
+    return len(values), time.perf_counter() - t0
+
+
+def main() -> None:
+    """Write (or reuse) the bags, time everything, print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--hours', type=float, default=3.0)
+    parser.add_argument('--rate', type=float, default=400.0, help='message rate [Hz]')
+    parser.add_argument('--subset', type=int, default=100_000,
+                        help='messages decoded by the rosbags baseline')
+    parser.add_argument('--cache', type=Path, default=Path('/tmp/imu_allan_bench_bags'))
+    parser.add_argument('--storage', nargs='+', default=['mcap', 'sqlite3'],
+                        choices=['mcap', 'sqlite3'])
+    parser.add_argument('--split-only', type=Path, default=None, metavar='BAG',
+                        help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.split_only is not None:
+        # Run in a fresh process, so that no cache of an earlier run helps the fit.
+        with tempfile.TemporaryDirectory(prefix='imu_allan_bench_out_') as tmp:
+            print(json.dumps(_split(args.split_only, Path(tmp))))
+        return
+    n = int(round(args.hours * 3600 * args.rate))
+    print(f'{n:,} sensor_msgs/Imu messages ({args.hours:g} h at {args.rate:g} Hz), '
+          f'{os.cpu_count()} cores')
+    for storage in args.storage:
+        bag = _bag(args.cache, storage, args.hours, args.rate)
+        with tempfile.TemporaryDirectory(prefix='imu_allan_bench_out_') as tmp:
+            wall, cpu, doc = _end_to_end(bag, Path(tmp) / 'cli')
+            assert doc['n_samples'] == n, (doc['n_samples'], n)
+        proc = subprocess.run([sys.executable, __file__, '--split-only', str(bag)],
+                              capture_output=True, text=True, check=True)
+        split = json.loads(proc.stdout)
+        base_n, base_s = _rosbags_loop(bag, min(args.subset, n))
+        read_rate = split['messages'] / split['read']
+        print(f'[{storage}] analyze end to end: {wall:6.2f} s wall, {n / wall / 1e6:.2f} M msg/s '
+              f'({"meets" if wall <= 20 else "MISSES"} the 20 s target); {cpu:.2f} CPU s; '
+              f'load average {os.getloadavg()[0]:.1f}')
+        print(f'[{storage}]   split: read {split["read"]:.2f} s ({read_rate / 1e6:.2f} M msg/s; '
+              f'{split["read_cpu"]:.2f} CPU s = '
+              f'{split["messages"] / split["read_cpu"] / 1e6:.2f} M msg/s per CPU second), '
+              f'session checks + Allan accumulation {split["session"]:.2f} s, '
+              f'curve + fit {split["allan+fit"]:.2f} s '
+              f'(curve alone {split["allan curve only"]:.2f} s), '
+              f'outputs + plots {split["outputs+plots"]:.2f} s')
+        print(f'[{storage}]   rosbags one-at-a-time decode: {base_n:,} messages in {base_s:.2f} s '
+              f'= {base_n / base_s / 1e6:.3f} M msg/s; imu_allan reading is '
+              f'{read_rate / (base_n / base_s):.0f}x faster')
+        sys.stdout.flush()
+
+
+if __name__ == '__main__':
+    main()
