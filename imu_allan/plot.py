@@ -119,3 +119,52 @@ def plot_comparison(results: list, labels: list, base) -> list:
     panels[0, 0].legend(fontsize=7)
     fig.suptitle('Run-to-run comparison of the Allan deviation (95 % bands)', fontsize=10)
     return _save(fig, Path(base))
+
+
+def plot_diagnosis(diag, path) -> Path:
+    """
+    Paper-style figure of one axis' diagnosis (Maia et al. figures 2-5).
+
+    Measured ADEV with its 95 % band, the simulated ADEV of the base model (before) and
+    of the final model (after), and the tau bands where the base model disagrees beyond
+    95 % shaded.
+
+    Parameters
+    ----------
+    diag : imu_allan.diagnose.AxisDiagnosis
+        The axis' diagnosis.
+    path : str or Path
+        The PNG file to write.
+
+    Returns
+    -------
+    Path
+        The file written.
+
+    """
+    path = Path(path)
+    tau, adev, s = diag.tau_s, diag.adev, diag.s_ln
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    ax.fill_between(tau, adev * np.exp(-1.96 * s), adev * np.exp(1.96 * s), color='0.6',
+                    alpha=0.35, lw=0, label='measured, 95 % band')
+    ax.loglog(tau, adev, 'ko', ms=3.5, label='measured')
+    ax.loglog(tau, diag.adev_before, '--', color='tab:red', lw=1.4,
+              label=f'simulated base model (gap {diag.gap_before:.2g})')
+    if diag.missing:
+        added = ' + '.join(f.effect for f in diag.missing)
+        ax.loglog(tau, diag.adev_after, '-', color='tab:blue', lw=1.6,
+                  label=f'simulated with {added} (gap {diag.gap_after:.2g})')
+    for k, band in enumerate(diag.bands_before):
+        lo, hi = band.tau_range_s
+        ax.axvspan(lo / 1.2, hi * 1.2, color='tab:orange', alpha=0.15, lw=0,
+                   label='disagreement (|z| > 2)' if k == 0 else None)
+    ax.set_xlabel('averaging time tau [s]')
+    ax.set_ylabel(f'ADEV [{diag.unit}]')
+    ax.grid(True, which='both', alpha=0.3)
+    ax.legend(fontsize=7, loc='best')
+    title = diag.summary if len(diag.summary) < 95 else diag.summary[:92] + '...'
+    ax.set_title(title, fontsize=7)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90, bbox_inches='tight')
+    plt.close(fig)
+    return path
