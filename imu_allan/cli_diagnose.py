@@ -136,6 +136,9 @@ def run(args) -> int:
     config = SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
     result = diagnose_input(args.input, args.topic, config, base, args.replicas, args.seed,
                             quiet=args.format == 'json')
+    if all(d is None for d in result.axes.values()):
+        raise InputError(f'{args.input}: no axis could be diagnosed (frozen, constant or too '
+                         f'short: {result.n_samples} samples)')
     files = write_outputs(result, args.out, plot=not args.no_plot)
     if args.format == 'json':
         doc = result.to_json()

@@ -189,6 +189,30 @@ def test_cli_json_and_files(tmp_path):
     assert bad.stderr.count('\n') == 1 and 'Traceback' not in bad.stderr
 
 
+def test_cli_on_an_mcap_bag_and_on_frozen_axes(tmp_path):
+    """A bag goes through the same reader as analyze; an all-frozen bag is one error line."""
+    from imu_allan.bag_writer import write_imu_bag
+    from imu_allan.cli import main
+    y, axis, _ = cases.make_case('sinusoid', 3)
+    n = 40_000
+    stamps_ns = 1_700_000_000 * 10**9 + np.arange(n) * int(round(1e9 / cases.RATE_HZ))
+    write_imu_bag(tmp_path / 'sin.mcap', stamps_ns, y[:n])
+    out = tmp_path / 'out'
+    assert main(['diagnose', str(tmp_path / 'sin.mcap'), '--out', str(out), '--no-plot',
+                 '--replicas', '2']) == 0
+    doc = json.loads((out / 'diagnose.json').read_text())
+    assert [m['effect'] for m in doc['axes'][axis]['missing']][:1] == ['sinusoid']
+    frozen = np.tile([0.01, 0.02, 0.03, 0.1, 0.2, 9.8], (5000, 1))
+    write_imu_bag(tmp_path / 'frozen.mcap', stamps_ns[:5000], frozen)
+    cmd = [sys.executable, '-m', 'imu_allan', 'diagnose', str(tmp_path / 'frozen.mcap'),
+           '--out', str(tmp_path / 'out2'), '--no-plot']
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert proc.returncode == 2
+    errors = [ln for ln in proc.stderr.splitlines() if 'error' in ln]
+    assert errors == [errors[0]] and 'no axis could be diagnosed' in errors[0]
+    assert 'Traceback' not in proc.stderr
+
+
 def test_adis16405_real_record(shared_dir, tmp_path):
     """The real ADIS16405 run 1: its accelerometers carry a 0.56 Hz line."""
     path = shared_dir / 'realdata' / 'adis16405' / 'adis16405_run1.csv.gz'
