@@ -1,9 +1,9 @@
 """
 ``imu-allan demo``: the node characterising a built-in simulated IMU, over real topics.
 
-A publisher node plays a simulated six-axis record (config/xsens_mti7.yaml by default)
-as sensor_msgs/Imu with synthetic header stamps, faster than real time, to the
-imu_allan node in the same process; then the node's result is printed beside the truth.
+A publisher process plays a simulated six-axis record (config/xsens_mti7.yaml by
+default) as sensor_msgs/Imu with synthetic header stamps, faster than real time, to the
+imu_allan node in this process; then the node's result is printed beside the truth.
 """
 
 import argparse
@@ -14,7 +14,6 @@ import time
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.errors import InputError
 
 DEFAULT_PARAMS = Path(__file__).resolve().parent.parent / 'config' / 'xsens_mti7.yaml'
 START_NS = 1_700_000_000 * 10 ** 9
@@ -29,6 +28,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--rate', type=float, default=100.0, help='IMU rate [Hz]')
     p.add_argument('--duration', type=float, default=2 * 3600.0,
                    help='simulated recording length [s]')
+    p.add_argument('--speed', type=float, default=10000.0,
+                   help='messages per second sent to the node [1/s]')
     p.add_argument('--seed', type=int, default=1)
     p.add_argument('--out', type=Path, default=Path('imu_allan_demo_out'),
                    help='output directory of the node')
@@ -45,96 +46,117 @@ def _params_file(path: Path | None) -> Path:
     return Path(get_package_share_directory('imu_allan')) / 'config' / 'xsens_mti7.yaml'
 
 
-def play(payloads: np.ndarray, node, publisher_node, publisher, chunk: int = 200,
-         window: int = 1000, executor=None, timeout_s: float = 600.0) -> int:
+def publish_main(argv=None) -> int:
     """
-    Publish serialized Imu messages, keeping at most ``window`` of them in flight.
+    Play serialized Imu messages at a fixed pace (the publisher process of the demo).
 
-    The best-effort subscription would drop what its queue cannot hold, so the player
-    waits for the node to have received the earlier messages (in-process pacing).
+    Parameters
+    ----------
+    argv : list of str, optional
+        ``[payloads.npy, messages_per_second]`` (default: sys.argv[1:]).
 
     Returns
     -------
     int
-        Messages published.
+        Exit code.
 
     """
-    sent = 0
-    deadline = time.monotonic() + timeout_s
-    n = payloads.shape[0]
-    while sent < n:
-        if node.n_received >= sent - window:
-            for row in payloads[sent:sent + chunk]:
-                publisher.publish(row.tobytes())
-            sent = min(sent + chunk, n)
-        else:
-            time.sleep(0.0005)
-        if time.monotonic() > deadline:
-            raise InputError(f'demo stalled: {node.n_received} of {sent} messages received')
-    while node.n_received < n and time.monotonic() < deadline:
-        time.sleep(0.01)
-    return sent
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Imu
+
+    path, per_second = (argv or sys.argv[1:])[:2]
+    per_second = float(per_second)
+    payloads = np.load(path)
+    rclpy.init(args=[])
+    node = rclpy.create_node('simulated_imu')
+    try:
+        pub = node.create_publisher(
+            Imu, 'imu', QoSProfile(depth=2000, reliability=ReliabilityPolicy.BEST_EFFORT))
+        deadline = time.monotonic() + 30
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(1.0)   # the graph shows the reader before DDS has matched it
+        t0 = time.monotonic()
+        chunk = 100
+        for k in range(0, payloads.shape[0], chunk):
+            for row in payloads[k:k + chunk]:
+                pub.publish(row.tobytes())
+            time.sleep(max(0.0, t0 + (k + chunk) / per_second - time.monotonic()))
+        time.sleep(0.5)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
 
 
 def run(args) -> int:
     """Simulate, publish, characterise, and print the fit beside the truth."""
-    import threading
+    import subprocess
+    import tempfile
 
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.parameter import Parameter
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import Imu
 
     from imu_allan.bag_writer import serialize_imu
-    from imu_allan.node import ImuAllanNode
+    from imu_allan.node import create_executor, ImuAllanNode
     from imu_allan.noise_params import load_params
     from imu_allan.simulate import simulate_imu
     from imu_allan.units import format_quoted, sensor_of
 
     params = _params_file(args.params)
     spec = load_params(params)
-    t0 = time.monotonic()
+    t_start = t0 = time.monotonic()
     t_s, samples = simulate_imu(spec, args.rate, args.duration, seed=args.seed)
     stamps = START_NS + np.round(t_s * 1e9).astype(np.int64)
     payloads = serialize_imu(stamps, samples, frame_id='imu_link')
-    print(f'demo: simulated {spec.name}: {samples.shape[0]:,} messages '
-          f'({args.duration / 3600:.2f} h at {args.rate:g} Hz) in '
-          f'{time.monotonic() - t0:.1f} s', file=sys.stderr)
+    n = payloads.shape[0]
+    print(f'demo: simulated {spec.name}: {n:,} messages ({args.duration / 3600:.2f} h at '
+          f'{args.rate:g} Hz) in {time.monotonic() - t0:.1f} s.\n'
+          f'demo: why {args.duration / 3600:.2f} h at {args.rate:g} Hz: T_B of this model is '
+          f'30-60 s and the random walk K shows only beyond ~1000 s, so the record must '
+          f'span hours; N needs no high rate, and {args.rate:g} Hz keeps the message count '
+          f'low enough to send through real topics at {args.speed:,.0f} msg/s '
+          f'({args.speed / args.rate:.0f}x real time).', file=sys.stderr)
 
     rclpy.init(args=[])
-    try:
+    with tempfile.TemporaryDirectory(prefix='imu_allan_demo_') as tmp:
+        npy = Path(tmp) / 'payloads.npy'
+        np.save(npy, payloads)
         node = ImuAllanNode(parameter_overrides=[
             Parameter('min_duration_s', value=float(args.duration) * 0.99),
             Parameter('output_dir', value=str(args.out.resolve())),
-            Parameter('publish_period_s', value=3600.0),
-            Parameter('progress_period_s', value=5.0),
+            Parameter('publish_period_s', value=86400.0),
+            Parameter('progress_period_s', value=10.0),
             Parameter('checkpoint_period_s', value=0.0),
         ])
-        pub_node = rclpy.create_node('simulated_imu')
-        publisher = pub_node.create_publisher(
-            Imu, 'imu', QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
-        executor = MultiThreadedExecutor(num_threads=2)
+        executor = create_executor('events')
         executor.add_node(node)
-        executor.add_node(pub_node)
-        spinner = threading.Thread(target=executor.spin, daemon=True)
-        spinner.start()
-        while publisher.get_subscription_count() == 0:
-            time.sleep(0.05)
-        t0 = time.monotonic()
-        sent = play(payloads, node, pub_node, publisher)
-        seconds = time.monotonic() - t0
-        print(f'demo: published {sent:,} Imu messages over rclpy in {seconds:.1f} s '
-              f'({sent / seconds:,.0f} msg/s, {args.duration / seconds:.0f}x real time)',
-              file=sys.stderr)
-        files = node.save()
-        node.publish_now()
-        result = node.last_result
-        executor.shutdown()
-        node.destroy_node()
-        pub_node.destroy_node()
-    finally:
-        rclpy.try_shutdown()
+        player = subprocess.Popen(
+            [sys.executable, '-c', 'import sys; from imu_allan.cli_demo import publish_main; '
+             'sys.exit(publish_main())', str(npy), str(args.speed)])
+        try:
+            t0 = None
+            last_n, last_change = 0, time.monotonic()
+            while node.n_received < n:
+                executor.spin_once(timeout_sec=0.1)
+                if node.n_received and t0 is None:
+                    t0 = time.monotonic()
+                if node.n_received != last_n:
+                    last_n, last_change = node.n_received, time.monotonic()
+                elif player.poll() is not None and time.monotonic() - last_change > 2.0:
+                    break          # the player is done and nothing more arrives
+            seconds = time.monotonic() - (t0 or t_start)
+            print(f'demo: {node.n_received:,} of {n:,} Imu messages received over rclpy '
+                  f'topics in {seconds:.1f} s ({node.n_received / seconds:,.0f} msg/s, '
+                  f'{args.duration / seconds:.0f}x real time)', file=sys.stderr)
+            files = node.save()
+            result = node.last_result
+        finally:
+            player.wait(30)
+            node.destroy_node()
+            rclpy.try_shutdown()
+    print(f'demo: total {time.monotonic() - t_start:.0f} s', file=sys.stderr)
 
     print(f'\nimu_allan demo: {spec.name}')
     print(f'{result.n_samples:,} samples, {result.duration_s / 3600:.2f} h at '

@@ -1,13 +1,19 @@
 """
 imu_allan_node: live six-axis IMU noise characterisation beside a stationary robot.
 
-Thin by design: the subscription callback only appends the serialized message to a
-buffer; a timer decodes the buffer in one vectorised step and feeds the pipeline
-:class:`~imu_allan.pipeline.Session` that the offline mode uses too; other timers fit,
-publish, report progress and checkpoint.
+Thin by design, so that 1 kHz input costs little CPU: the subscription is raw (no
+deserialisation) and its callback only appends the serialized message to a buffer; a
+timer decodes the buffer in one vectorised step (:func:`~imu_allan.bag_reader.
+decode_imu_cdr`) and feeds the pipeline :class:`~imu_allan.pipeline.Session` that the
+offline mode uses too.  The fit (seconds of CPU) runs on a worker thread on a snapshot
+of the Allan curve, so the executor keeps taking messages while it runs.  Other timers
+report progress and checkpoint.  ``main`` spins the node with rclpy's EventsExecutor
+(measured in bench/bench_node.py: several times cheaper per message than the
+SingleThreadedExecutor, which it falls back to when unavailable).
 """
 
 from collections import deque
+import copy
 import math
 import os
 from pathlib import Path
@@ -20,8 +26,8 @@ import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -31,8 +37,9 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import Trigger
 
 from imu_allan import AXES
-from imu_allan.analysis import analyze
+from imu_allan.analysis import analyze, CONFIDENCE
 from imu_allan.bag_reader import decode_imu_cdr
+from imu_allan.diagnose import diagnose_session
 from imu_allan.errors import InputError
 from imu_allan.node_params import BY_NAME, PARAMS, session_config
 from imu_allan.pipeline import Session
@@ -42,6 +49,14 @@ CHECKPOINT = 'checkpoint.npz'
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
 _SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messages',
                    'output_dir', 'resume', 'publish_imu_with_covariance'}
+#: Samples a resumed session waits for before it compares their rate with the checkpoint.
+_RESUME_CHECK_SAMPLES = 50
+#: The timer hands the pipeline at least this many messages (or whatever is there after
+#: _MAX_HOLD_S): its rate-change check needs 50 stamp steps in one block.
+_MIN_BLOCK = 64
+_MAX_HOLD_S = 2.0
+_LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
+           'error': DiagnosticStatus.ERROR}
 
 
 def _descriptor(p) -> ParameterDescriptor:
@@ -66,26 +81,72 @@ def _result_qos() -> QoSProfile:
                       history=HistoryPolicy.KEEP_LAST)
 
 
+class _SessionView:
+    """
+    A frozen view of a session for :func:`~imu_allan.analysis.analyze`.
+
+    Taken under the node's lock in milliseconds (the Allan curve plus the counters),
+    so that the fit, which takes seconds, runs without holding up the input.
+    """
+
+    def __init__(self, session: Session):
+        self._curve = session.curve(confidence=CONFIDENCE)
+        self.stats = copy.deepcopy(session.stats)
+        self.rate_hz = session.rate_hz
+        self.duration_s = session.duration_s
+        self.warnings = session.warnings
+
+    def curve(self, confidence: float = CONFIDENCE):
+        """Return the Allan curve taken with the snapshot."""
+        return self._curve
+
+
 class ImuAllanNode(Node):
-    """Subscribe to sensor_msgs/Imu, characterise its noise, publish the results."""
+    """
+    Subscribe to sensor_msgs/Imu, characterise its noise, publish the results.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (e.g. ``parameter_overrides``).
+
+    Raises
+    ------
+    InputError
+        If a parameter value is invalid (the message names it and its range).
+
+    """
 
     def __init__(self, **kwargs):
         super().__init__('imu_allan', **kwargs)
         for p in PARAMS:
-            self.declare_parameter(p.name, p.default, _descriptor(p))
+            try:
+                self.declare_parameter(p.name, p.default, _descriptor(p))
+            except ParameterException as exc:
+                self.destroy_node()
+                raise InputError(f'invalid parameter {p.name}: {exc}') from None
         self.values = {p.name: self.get_parameter(p.name).value for p in PARAMS}
         for name, value in self.values.items():
             why = BY_NAME[name].check(value)
             if why:
+                self.destroy_node()
                 raise InputError(f'invalid parameter: {why}')
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.output_dir = Path(os.path.expanduser(self.values['output_dir']))
+        # _lock guards the session; _process_lock keeps blocks in stamp order when
+        # _process runs from the timer and from publish_now/save on another thread.
         self._lock = threading.Lock()
+        self._process_lock = threading.Lock()
         self._buffer: deque = deque()
         self.n_received = 0
-        self._n_buffer_dropped = 0
+        self.n_buffer_dropped = 0
+        self.n_fits = 0
         self._last_result = None
-        self._start_wall = time.monotonic()
+        self._fit_thread: threading.Thread | None = None
+        self._progress_mark = (time.monotonic(), 0.0)
+        self._last_handover = time.monotonic()
+        self._resume_hold: list | None = None
+        self._diagnose_fn = None
         self.session = self._new_session(resume=self.values['resume'])
 
         qos = QoSProfile(
@@ -94,10 +155,8 @@ class ImuAllanNode(Node):
             reliability=(ReliabilityPolicy.BEST_EFFORT
                          if self.values['qos_reliability'] == 'best_effort'
                          else ReliabilityPolicy.RELIABLE))
-        self._input_group = MutuallyExclusiveCallbackGroup()
-        self._work_group = MutuallyExclusiveCallbackGroup()
         self.subscription = self.create_subscription(
-            Imu, 'imu', self._on_imu, qos, raw=True, callback_group=self._input_group,
+            Imu, 'imu', self._on_imu, qos, raw=True,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.pub_params = self.create_publisher(DiagnosticArray, '~/noise_parameters',
                                                 _result_qos())
@@ -107,11 +166,13 @@ class ImuAllanNode(Node):
         self.pub_r = self.create_publisher(Float64MultiArray, '~/kalman/measurement_noise',
                                            _result_qos())
         self.pub_kalibr = self.create_publisher(String, '~/kalibr_imu_yaml', _result_qos())
+        self.pub_diagnosis = self.create_publisher(String, '~/diagnosis', _result_qos())
         self.pub_imu = None
         if self.values['publish_imu_with_covariance']:
             self.pub_imu = self.create_publisher(Imu, '~/imu_with_covariance', qos)
-        self.create_service(Trigger, '~/reset', self._on_reset, callback_group=self._work_group)
-        self.create_service(Trigger, '~/save', self._on_save, callback_group=self._work_group)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(Trigger, '~/save', self._on_save)
+        self.create_service(Trigger, '~/diagnose', self._on_diagnose)
         self._make_timers()
         self.get_logger().info(
             f'listening on {self.subscription.topic_name} '
@@ -122,9 +183,9 @@ class ImuAllanNode(Node):
     # ------------------------------------------------------------- set-up
     def _make_timers(self) -> None:
         self._period_timers = {
-            key: self.create_timer(max(self.values[f'{key}_period_s'], 1.0), callback,
-                                   callback_group=self._work_group)
-            for key, callback in (('process', self._process), ('publish', self._publish),
+            key: self.create_timer(max(self.values[f'{key}_period_s'], 1.0), callback)
+            for key, callback in (('process', self._on_process_timer),
+                                  ('publish', self._publish),
                                   ('progress', self._progress),
                                   ('checkpoint', self._checkpoint))}
         for key in self._period_timers:
@@ -163,101 +224,201 @@ class ImuAllanNode(Node):
         if resume and path.exists():
             try:
                 session = Session.load_state(path, config, on_warning=self._warn)
+            except InputError as exc:
+                self._set_aside(path, str(exc))
+            else:
                 self.get_logger().info(
                     f'resumed from {path}: {session.stats.n_used} samples, '
-                    f'{session.duration_s / 3600:.2f} h at {session.rate_hz:.2f} Hz')
+                    f'{session.duration_s / 3600:.3f} h at {session.rate_hz:.2f} Hz, '
+                    'split from the new samples'
+                    + ('' if config.rate_hz > 0 else
+                       '; the rate of the incoming data is checked against it'))
+                if config.rate_hz <= 0:
+                    self._resume_hold = []
+                # Samples after the last checkpoint are lost: no Allan term may span them,
+                # and the step to the first new stamp is not a step of the sensor clock.
+                session.acc.break_segment()
+                session.last_stamp_ns = None
                 return session
-            except InputError as exc:
-                kept = path.with_name(f'checkpoint.{time.strftime("%Y%m%d-%H%M%S")}.npz')
-                os.replace(path, kept)
-                self.get_logger().warning(f'not resuming: {exc}; old state kept as {kept}')
         elif resume:
             self.get_logger().info(f'resume requested but {path} does not exist: starting fresh')
         return Session(config, on_warning=self._warn)
 
+    def _set_aside(self, path: Path, why: str) -> None:
+        kept = path.with_name(f'checkpoint.{time.strftime("%Y%m%d-%H%M%S")}.npz')
+        os.replace(path, kept)
+        self.get_logger().warning(f'not resuming: {why}; starting fresh, old state kept as '
+                                  f'{kept}')
+
     # ----------------------------------------------------------- callbacks
     def _on_imu(self, raw: bytes) -> None:
+        # The only per-message Python work: count and append.
         self.n_received += 1
-        if len(self._buffer) >= self.values['max_buffer_messages']:
-            self._buffer.popleft()
-            self._n_buffer_dropped += 1
         self._buffer.append(raw)
 
-    def _process(self) -> None:
+    def _take_buffer(self) -> list:
         n = len(self._buffer)
-        if n == 0:
+        limit = self.values['max_buffer_messages']
+        if n > limit:
+            for _ in range(n - limit):
+                self._buffer.popleft()
+            self.n_buffer_dropped += n - limit
+            self.get_logger().warning(f'{n - limit} messages dropped by a full buffer '
+                                      f'(max_buffer_messages = {limit})')
+            n = limit
+        return [self._buffer.popleft() for _ in range(n)]
+
+    def _on_process_timer(self) -> None:
+        if (len(self._buffer) >= _MIN_BLOCK
+                or time.monotonic() - self._last_handover >= _MAX_HOLD_S):
+            self._process()
+
+    def _process(self) -> None:
+        self._last_handover = time.monotonic()
+        with self._process_lock:
+            self._process_locked()
+
+    def _process_locked(self) -> None:
+        raws = self._take_buffer()
+        if not raws:
             return
-        raws = [self._buffer.popleft() for _ in range(n)]
         try:
             stamp_ns, samples = decode_imu_cdr(raws)
         except InputError as exc:
             self.get_logger().error(f'undecodable Imu messages dropped: {exc}')
             return
         with self._lock:
-            self.session.add(stamp_ns, samples)
+            if self._resume_hold is not None:
+                stamp_ns, samples = self._check_resume(stamp_ns, samples)
+            if stamp_ns.size:
+                self.session.add(stamp_ns, samples)
         if self.pub_imu is not None and self._last_result is not None:
-            cov = self._last_result.imu_covariances()
-            for raw in raws:
-                msg = deserialize_message(raw, Imu)
-                msg.angular_velocity_covariance = cov['angular_velocity_covariance']
-                msg.linear_acceleration_covariance = cov['linear_acceleration_covariance']
-                self.pub_imu.publish(msg)
+            self._republish(raws)
+
+    def _check_resume(self, stamp_ns: np.ndarray, samples: np.ndarray) -> tuple:
+        """Hold the first samples after a resume; compare their rate with the checkpoint."""
+        self._resume_hold.append((stamp_ns, samples))
+        t = np.concatenate([b[0] for b in self._resume_hold])
+        if t.size < _RESUME_CHECK_SAMPLES:
+            return t[:0], samples[:0]
+        y = np.concatenate([b[1] for b in self._resume_hold])
+        self._resume_hold = None
+        span = float(t.max() - t.min())
+        rate = (t.size - 1) * 1e9 / span if span > 0 else 0.0
+        saved = self.session.rate_hz
+        tolerance = self.values['rate_tolerance']
+        if rate <= 0 or abs(rate / saved - 1) > tolerance:
+            self._set_aside(self.output_dir / CHECKPOINT,
+                            f'the checkpoint was taken at {saved:.3f} Hz but the data now '
+                            f'arrive at {rate:.3f} Hz')
+            self.session = Session(session_config(self.values), on_warning=self._warn)
+        else:
+            self.get_logger().info(f'resume confirmed: incoming rate {rate:.3f} Hz matches '
+                                   f'the checkpoint ({saved:.3f} Hz); continuing')
+        return t, y
+
+    def _republish(self, raws: list) -> None:
+        cov = self._last_result.imu_covariances()
+        for raw in raws:
+            msg = deserialize_message(raw, Imu)
+            msg.angular_velocity_covariance = cov['angular_velocity_covariance']
+            msg.linear_acceleration_covariance = cov['linear_acceleration_covariance']
+            self.pub_imu.publish(msg)
 
     @property
     def last_result(self):
         """Return the latest published AnalysisResult, or None."""
         return self._last_result
 
-    def _publish(self) -> None:
-        if self.session.duration_s >= self.values['min_duration_s']:
-            self.publish_now()
+    @property
+    def fitting(self) -> bool:
+        """Return True while a background fit runs."""
+        return self._fit_thread is not None and self._fit_thread.is_alive()
 
-    def publish_now(self) -> None:
-        """Fit the data so far and publish every result topic."""
-        self._process()
-        with self._lock:
-            result = analyze(self.session, source=self.subscription.topic_name)
-        if result is None:
+    def _publish(self) -> None:
+        if self.session.duration_s < self.values['min_duration_s'] or self.fitting:
             return
+        self._process()
+        view = self._snapshot()
+        self._fit_thread = threading.Thread(target=self._fit_and_publish, args=(view,),
+                                            name='imu_allan_fit', daemon=True)
+        self._fit_thread.start()
+
+    def _snapshot(self) -> _SessionView:
+        with self._lock:
+            return _SessionView(self.session)
+
+    def publish_now(self):
+        """
+        Fit the data so far and publish every result topic (synchronously).
+
+        Returns
+        -------
+        AnalysisResult or None
+            The result published, or None while no Allan deviation is computable.
+
+        """
+        self._process()
+        return self._fit_and_publish(self._snapshot())
+
+    def _fit_and_publish(self, view: _SessionView):
+        if view.curve() is None:
+            return None
+        result = analyze(view, source=self.subscription.topic_name)
+        if result is None:
+            return None
         self._last_result = result
-        statuses = self._statuses(result)
-        stamp = self.get_clock().now().to_msg()
-        array = DiagnosticArray(status=statuses)
-        array.header.stamp = stamp
+        self.n_fits += 1
+        array = DiagnosticArray(status=self._statuses(result) + [self._input_status(view)])
+        array.header.stamp = self.get_clock().now().to_msg()
         self.pub_params.publish(array)
         self.pub_diag.publish(array)
         self.pub_q.publish(_matrix_msg(*result.process_noise()))
         self.pub_r.publish(_matrix_msg(*result.measurement_noise()))
         self.pub_kalibr.publish(String(data=result.kalibr_yaml()))
         self.get_logger().info('published: ' + '; '.join(result.summary_lines()))
+        return result
 
     def _statuses(self, result) -> list:
         out = []
         for axis in AXES:
-            status = DiagnosticStatus(name=f'imu_allan: {axis}',
-                                      hardware_id=self.values['hardware_id'])
             level, message, values = result.axis_status(axis)
-            status.level = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
-                            'error': DiagnosticStatus.ERROR}[level]
-            status.message = message
-            status.values = [KeyValue(key=k, value=v) for k, v in values]
-            out.append(status)
+            out.append(DiagnosticStatus(
+                name=f'imu_allan: {axis}', hardware_id=self.values['hardware_id'],
+                level=_LEVELS[level], message=message,
+                values=[KeyValue(key=k, value=v) for k, v in values]))
         return out
+
+    def _input_status(self, session) -> DiagnosticStatus:
+        """One status with the input-hygiene counters and the warnings, if any."""
+        stats = session.stats
+        values = [(k, str(v) if not isinstance(v, list) else ','.join(v))
+                  for k, v in vars(stats).items()]
+        values += [('n_buffer_dropped', str(self.n_buffer_dropped)),
+                   ('warnings', ' | '.join(session.warnings))]
+        message = (' | '.join(session.warnings) if session.warnings
+                   else 'input clean: no gaps, bad stamps, bad values or motion')
+        return DiagnosticStatus(
+            name='imu_allan: input', hardware_id=self.values['hardware_id'],
+            level=DiagnosticStatus.WARN if session.warnings else DiagnosticStatus.OK,
+            message=message, values=[KeyValue(key=k, value=v) for k, v in values])
 
     def _progress(self) -> None:
         s = self.session
         target = self.values['min_duration_s']
-        pct = min(100.0, 100.0 * s.duration_s / target)
         if s.duration_s >= target:
             return
-        elapsed = time.monotonic() - self._start_wall
-        speed = s.duration_s / elapsed if elapsed > 0 else 0.0
+        pct = 100.0 * s.duration_s / target
+        now = time.monotonic()
+        wall0, dur0 = self._progress_mark
+        self._progress_mark = (now, s.duration_s)
+        speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
         eta = (target - s.duration_s) / speed if speed > 0 else math.inf
-        eta_text = f'{eta / 60:.1f} min' if math.isfinite(eta) else 'unknown (no data yet)'
+        eta_text = f'{eta / 60:.1f} min' if math.isfinite(eta) else 'unknown (no data now)'
         text = (f'collecting: {pct:.1f}% of {target:.0f} s, {s.stats.n_used} samples at '
                 f'{s.rate_hz:.2f} Hz, ETA {eta_text}')
-        if self._n_buffer_dropped:
-            text += f', {self._n_buffer_dropped} messages dropped by a full buffer'
+        if self.n_buffer_dropped:
+            text += f', {self.n_buffer_dropped} messages dropped by a full buffer'
         self.get_logger().info(text)
         values = [('percent', f'{pct:.2f}'), ('samples', str(s.stats.n_used)),
                   ('rate_hz', f'{s.rate_hz:.4f}'), ('duration_s', f'{s.duration_s:.1f}'),
@@ -266,7 +427,7 @@ class ImuAllanNode(Node):
             name='imu_allan: progress', hardware_id=self.values['hardware_id'],
             level=DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK,
             message=text, values=[KeyValue(key=k, value=v) for k, v in values])
-        array = DiagnosticArray(status=[status])
+        array = DiagnosticArray(status=[status, self._input_status(s)])
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
         self.pub_params.publish(array)
@@ -279,8 +440,10 @@ class ImuAllanNode(Node):
                 self.get_logger().error(f'checkpoint failed: {exc}')
 
     def _on_reset(self, request, response):
-        with self._lock:
+        with self._process_lock, self._lock:
+            self._take_buffer()
             self.session = self._new_session(resume=False)
+            self._resume_hold = None
             self._last_result = None
         response.success = True
         response.message = 'accumulator reset: a new characterisation starts now'
@@ -297,16 +460,71 @@ class ImuAllanNode(Node):
             response.message = 'wrote ' + ', '.join(str(p) for p in paths)
         return response
 
+    def _on_diagnose(self, request, response):
+        try:
+            text = self.diagnose()
+        except InputError as exc:
+            response.success, response.message = False, str(exc)
+        else:
+            response.success, response.message = True, text
+        return response
+
+    def diagnose(self) -> str:
+        """
+        Diagnose the data so far (imu_allan.diagnose); publish the summary on ~/diagnosis.
+
+        Runs in the caller's thread: through the ~/diagnose service the executor waits
+        for it, and the input queue (qos_depth) must hold the messages meanwhile.
+
+        Returns
+        -------
+        str
+            One line per axis: the gap between model and data and what is missing.
+
+        Raises
+        ------
+        InputError
+            If there is not enough data for any Allan deviation yet.
+
+        """
+        self._process()
+        result = diagnose_session(self._snapshot(), source=self.subscription.topic_name)
+        if result is None:
+            raise InputError('not enough data for any Allan deviation yet')
+        text = '\n'.join(result.summary_lines())
+        self.pub_diagnosis.publish(String(data=text))
+        self.get_logger().info('diagnosis:\n' + text)
+        return text
+
     def save(self) -> list:
-        """Write the result JSON, Kalibr file, Q/R and ADEV plot to output_dir."""
+        """
+        Write the result JSON, Kalibr file, Q/R and ADEV plot to output_dir.
+
+        Returns
+        -------
+        list of Path
+            The files written (the checkpoint too).
+
+        Raises
+        ------
+        InputError
+            If there is not enough data for any Allan deviation yet.
+
+        """
+        if self._fit_thread is not None:
+            self._fit_thread.join()
         self._process()
         with self._lock:
             self.session.flush()
-            result = analyze(self.session, source=self.subscription.topic_name)
-            if result is None:
-                raise InputError('not enough data for any Allan deviation yet')
-            self.session.save_state(self.output_dir / CHECKPOINT)
-        return write_outputs(result, self.output_dir)
+            view = _SessionView(self.session)
+            if view.curve() is not None:
+                self.session.save_state(self.output_dir / CHECKPOINT)
+        result = analyze(view, source=self.subscription.topic_name) \
+            if view.curve() is not None else None
+        if result is None:
+            raise InputError('not enough data for any Allan deviation yet')
+        self._last_result = result
+        return write_outputs(result, self.output_dir) + [self.output_dir / CHECKPOINT]
 
 
 def _matrix_msg(matrix: np.ndarray, labels: list) -> Float64MultiArray:
@@ -320,6 +538,61 @@ def _matrix_msg(matrix: np.ndarray, labels: list) -> Float64MultiArray:
     return msg
 
 
+def create_executor(kind: str = 'events', context=None):
+    """
+    Return the executor the node spins with.
+
+    Parameters
+    ----------
+    kind : str
+        'events' (rclpy.experimental.EventsExecutor, the default: the cheapest per
+        message), 'single' (SingleThreadedExecutor) or 'multi' (MultiThreadedExecutor
+        with two threads; kept for benchmarks).
+    context : rclpy.context.Context, optional
+        Context of the executor.
+
+    Returns
+    -------
+    Executor
+        The executor; 'events' falls back to 'single' where it is unavailable.
+
+    """
+    if kind == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError:
+            kind = 'single'
+        else:
+            return EventsExecutor(context=context)
+    if kind == 'multi':
+        from rclpy.executors import MultiThreadedExecutor
+        return MultiThreadedExecutor(num_threads=2, context=context)
+    return SingleThreadedExecutor(context=context)
+
+
+def spin_until_shutdown(executor, context=None) -> None:
+    """
+    Spin until the context shuts down (Ctrl-C, SIGTERM or rclpy.shutdown).
+
+    rclpy's EventsExecutor.spin() runs in C++ and never returns to Python, so neither
+    a Ctrl-C nor a shutdown stops it; short spin_once calls let Python see both.
+
+    Parameters
+    ----------
+    executor : Executor
+        The executor with the node added.
+    context : rclpy.context.Context, optional
+        The context to watch (the default context when None).
+
+    """
+    context = context or rclpy.get_default_context()
+    try:
+        while context.ok():
+            executor.spin_once(timeout_sec=0.25)
+    except ExternalShutdownException:
+        pass
+
+
 def main(args=None) -> int:
     """Run the node until shutdown; write the result files on the way out."""
     try:
@@ -331,9 +604,9 @@ def main(args=None) -> int:
     code = 0
     try:
         node = ImuAllanNode()
-        executor = MultiThreadedExecutor(num_threads=2)
+        executor = create_executor()
         executor.add_node(node)
-        executor.spin()
+        spin_until_shutdown(executor)
     except InputError as exc:
         print(f'imu_allan_node: error: {exc}', file=sys.stderr)
         code = 2
