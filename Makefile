@@ -28,9 +28,15 @@ test: venv
 lint: venv
 	$(PY) -m pytest -q test/test_flake8.py test/test_pep257.py
 
+# Benchmarks print ratios against baselines measured in the same run (not timed tests).
 bench: venv
-	$(PY) bench/bench_batch.py
 	$(PY) bench/bench_accumulator.py
+	$(PY) bench/bench_batch.py
+	$(PY) bench/bench_fit.py
+	$(PY) bench/bench_bag_read.py
+	$(PY) bench/bench_analyze.py
+	$(PY) bench/bench_node.py
+	$(PY) bench/validate_fit.py --seeds 50 --workers 2
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache
