@@ -66,7 +66,7 @@ _STRIP_COLS = 4096
 # with dot products good to a few 1e-16 the result keeps about 1e-10 relative.
 _CANCEL_LIMIT = 1e5
 # Octave levels done by the moving-sum pyramid; the rest by phase dot products.
-_PYRAMID_LEVELS = 6
+_PYRAMID_LEVELS = 18
 # Rows per tile (own rows plus halo) of the phase dot-product kernel, the levels it
 # fuses per pass (halo 2^levels rows) and its elements per tile.
 _GRAM_ROWS = 4096
@@ -411,7 +411,7 @@ def _pyramid_sums(col: np.ndarray, levels: int, sums: np.ndarray,
     """
     n = col.size
     halo = (1 << levels) - 1
-    tile = _TILE_ELEMS
+    tile = max(_TILE_ELEMS, 2 * halo)  # keeps the halo a minor part of each tile
     buf_a = np.empty(tile + halo)
     buf_b = np.empty(tile + halo)
     for t0 in range(0, n, tile):
