@@ -143,6 +143,7 @@ class ImuAllanNode(Node):
         self.n_fits = 0
         self._last_result = None
         self._fit_thread: threading.Thread | None = None
+        self._diagnose_thread: threading.Thread | None = None
         self._progress_mark = (time.monotonic(), 0.0)
         self._last_handover = time.monotonic()
         self._resume_hold: list | None = None
@@ -461,20 +462,46 @@ class ImuAllanNode(Node):
         return response
 
     def _on_diagnose(self, request, response):
-        try:
-            text = self.diagnose()
-        except InputError as exc:
-            response.success, response.message = False, str(exc)
-        else:
-            response.success, response.message = True, text
+        # A diagnosis takes seconds to minutes (refits and re-simulations): it runs on a
+        # worker thread so the executor keeps taking input; the summary follows on
+        # ~/diagnosis.
+        if self._diagnose_thread is not None and self._diagnose_thread.is_alive():
+            response.success = False
+            response.message = 'a diagnosis is already running; its summary will be ' \
+                'published on ~/diagnosis'
+            return response
+        self._process()
+        view = self._snapshot()
+        if view.curve() is None:
+            response.success = False
+            response.message = 'not enough data for any Allan deviation yet'
+            return response
+        self._diagnose_thread = threading.Thread(target=self._diagnose_and_log, args=(view,),
+                                                 name='imu_allan_diagnose', daemon=True)
+        self._diagnose_thread.start()
+        response.success = True
+        response.message = (f'diagnosing {view.stats.n_used:,} samples in the background; '
+                            'the summary will be published on ~/diagnosis')
         return response
 
-    def diagnose(self) -> str:
+    def _diagnose_and_log(self, view) -> None:
+        try:
+            self.diagnose(view)
+        except InputError as exc:
+            self.get_logger().warning(f'diagnosis failed: {exc}')
+
+    def diagnose(self, view=None) -> str:
         """
         Diagnose the data so far (imu_allan.diagnose); publish the summary on ~/diagnosis.
 
-        Runs in the caller's thread: through the ~/diagnose service the executor waits
-        for it, and the input queue (qos_depth) must hold the messages meanwhile.
+        Runs in the caller's thread (the ~/diagnose service runs it on a worker thread).
+        The node keeps no raw samples, so a sinusoid is named from the Allan curve
+        alone, without the periodogram check (the result's notes say so).
+
+        Parameters
+        ----------
+        view : optional
+            A snapshot of the session (default: one taken now).
 
         Returns
         -------
@@ -487,8 +514,10 @@ class ImuAllanNode(Node):
             If there is not enough data for any Allan deviation yet.
 
         """
-        self._process()
-        result = diagnose_session(self._snapshot(), source=self.subscription.topic_name)
+        if view is None:
+            self._process()
+            view = self._snapshot()
+        result = diagnose_session(view, source=self.subscription.topic_name)
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
         text = '\n'.join(result.summary_lines())
