@@ -25,6 +25,11 @@ from imu_allan.errors import InputError
 
 N_AXES = len(AXES)
 _NS = 1_000_000_000
+#: Stamp steps per judged window (jitter, regularity and rate changes).  Fixed step
+#: counts, not blocks, so that the verdicts do not depend on how the record is cut up.
+_CLOCK_WINDOW = 100
+#: Relative jitter of the stamp steps above which the stamps are irregular.
+_MAX_JITTER = 0.25
 
 #: How a session reacts to motion (the robot was bumped or driven).
 MOTION_POLICIES = ('warn', 'pause', 'restart')
@@ -39,7 +44,8 @@ class SessionConfig:
     ----------
     rate_hz : float
         Nominal sample rate [Hz]; 0 estimates it from the first ``rate_window``
-        samples (mean rate, robust to bursty arrival stamps).
+        samples (period of the regular steps with gaps counted as whole periods;
+        with irregular stamps, the mean rate, robust to bursty arrival stamps).
     rate_window : int
         Samples used to estimate the rate [samples].
     gap_factor : float
@@ -47,7 +53,8 @@ class SessionConfig:
     irregular_gap_s : float
         With irregular (jittery) stamps, only a step longer than this is a gap [s].
     rate_tolerance : float
-        Relative deviation of a block's mean rate that counts as a rate change.
+        Relative deviation of the sample period, judged over windows of 100 stamp
+        steps, that counts as a rate change.
     gyro_range_rad_s, accel_range_m_s2 : float
         Sensor full scale [rad/s], [m/s^2]; |value| >= 0.999 of it is saturated;
         0 disables the check.
@@ -116,7 +123,8 @@ class HygieneStats:
     frozen_axes, saturated_axes : list of str
         Axes seen frozen or saturated.
     jitter_rel : float
-        Standard deviation of the stamp steps over the nominal period.
+        Standard deviation of the stamp steps (gaps left out) over the period,
+        pooled over the windows judged so far.
     irregular_stamps : bool
         True when the stamps are too jittery to locate gaps step by step.
 
@@ -167,7 +175,16 @@ class Session:
         self.first_stamp_ns: int | None = None
         self.last_stamp_ns: int | None = None
         self._newest_ns: int | None = None
-        self._n_stamped = 0
+        self._nan_break = False
+        # Stamp clock: steps waiting for their window's verdict, and the count and sum
+        # of the non-gap steps (the mean rate of irregular stamps comes from these, so
+        # neither gaps nor a resume across lost samples bias it).
+        self._step_buf: list[np.ndarray] = []
+        self._clock_n = 0
+        self._clock_ns = 0
+        self._jitter_sq = 0.0
+        self._jitter_n = 0
+        self._off_period_ns: float | None = None
         # Motion reference: per-axis mean and std of the first still window.
         self._ref_mean: np.ndarray | None = None
         self._ref_std: np.ndarray | None = None
@@ -208,10 +225,14 @@ class Session:
         # A NaN sample is a missing sample: the segment breaks there.  A repeated or
         # out-of-order stamp is a re-sent message: dropping it breaks nothing.
         for t_part, y_part, broken in _split_runs(stamp_ns, samples, finite):
-            if broken and self.acc is not None:
+            if (broken or self._nan_break) and self.acc is not None:
                 self._flush_motion(break_after=True)
+            self._nan_break = False
             ok = self._monotonic_mask(t_part)
             self._ingest(t_part[ok], y_part[ok])
+        # NaN rows that end a block break the segment before the next block's rows, just
+        # as they would inside one block.
+        self._nan_break = self._nan_break or not finite[-1]
 
     def _monotonic_mask(self, stamp_ns: np.ndarray) -> np.ndarray:
         """Mask out duplicate and out-of-order stamps against the newest accepted one."""
@@ -239,74 +260,158 @@ class Session:
             self._pending_t.append(stamp_ns)
             self._pending_y.append(samples)
             if sum(t.size for t in self._pending_t) >= max(self.config.rate_window, 3):
-                t = np.concatenate(self._pending_t)
-                y = np.concatenate(self._pending_y)
-                self._pending_t, self._pending_y = [], []
-                self._estimate_rate(t)
-                self._start_accumulator()
-                self._ingest_regular(t, y, first=True)
+                self._begin()
             return
         self._ingest_regular(stamp_ns, samples)
 
-    def _estimate_rate(self, t: np.ndarray) -> None:
-        steps = np.diff(t).astype(np.float64)
-        # Mean rate over the window: arrival bursts cancel out, a sensor clock does not.
-        self.rate_hz = (t.size - 1) * _NS / float(t[-1] - t[0])
-        self._judge_jitter(steps)
+    def _begin(self) -> None:
+        """Estimate the rate on exactly the first ``rate_window`` samples, then go on."""
+        t = np.concatenate(self._pending_t)
+        y = np.concatenate(self._pending_y)
+        self._pending_t, self._pending_y = [], []
+        # Exactly rate_window samples, whatever the block sizes: same verdict either way.
+        k = min(t.size, max(self.config.rate_window, 3))
+        self._estimate_rate(t[:k])
+        self._start_accumulator()
+        self._ingest_regular(t[:k], y[:k], judged=True)
+        if k < t.size:
+            self._ingest_regular(t[k:], y[k:])
 
-    def _judge_jitter(self, steps_ns: np.ndarray) -> None:
+    def _estimate_rate(self, t: np.ndarray) -> None:
+        steps = np.diff(t)
+        verdict = _judge_steps(steps, self.config.gap_factor,
+                               self.config.irregular_gap_s * _NS)
+        if verdict is None:
+            # Too few usable steps to judge: the mean rate is all there is.
+            self.rate_hz = (t.size - 1) * _NS / float(t[-1] - t[0])
+            return
+        regular, period_ns, jitter = verdict
+        self.rate_hz = _NS / period_ns
+        self._note_jitter(jitter, steps.size)
+        if not regular:
+            self._flag_irregular(jitter)
+
+    def _note_jitter(self, jitter: float, n_steps: int) -> None:
+        self._jitter_sq += jitter ** 2 * n_steps
+        self._jitter_n += n_steps
+        self.stats.jitter_rel = math.sqrt(self._jitter_sq / self._jitter_n)
+
+    def _flag_irregular(self, jitter: float) -> None:
+        if self.stats.irregular_stamps:
+            return
+        self.stats.irregular_stamps = True
         period = _NS / self.rate_hz
-        jitter = float(np.std(steps_ns) / period) if steps_ns.size > 1 else 0.0
-        self.stats.jitter_rel = jitter
-        if jitter > 0.25 and not self.stats.irregular_stamps:
-            self.stats.irregular_stamps = True
-            self._warn('irregular', f'irregular stamps (jitter {100 * jitter:.0f}% of the '
-                       f'{period / 1e6:.2f} ms period): samples are taken as evenly spaced at '
-                       f'{self.rate_hz:.3f} Hz; only steps over {self.config.irregular_gap_s} s '
-                       'count as gaps')
+        self._warn('irregular', f'irregular stamps (jitter {100 * jitter:.0f}% of the '
+                   f'{period / 1e6:.2f} ms period): samples are taken as evenly spaced at '
+                   f'{self.rate_hz:.3f} Hz; only steps over {self.config.irregular_gap_s} s '
+                   'count as gaps')
+        self._refine_rate()
+
+    def _refine_rate(self) -> None:
+        """With irregular stamps, take the mean rate of all non-gap steps so far."""
+        if self.stats.irregular_stamps and self._clock_n > 0 and self._clock_ns > 0:
+            self.rate_hz = self._clock_n * _NS / self._clock_ns
+            if self.acc is not None:
+                self.acc.rate_hz = self.rate_hz
+
+    def _judge_clock(self, settle: Callable[[], None]) -> None:
+        """
+        Judge a full window of steps: jitter, regularity, and a change of the period.
+
+        ``settle`` passes the rows up to here on; it is called before anything that
+        the rows after the window must see (a new rate or mode, or a warning, which
+        must follow those rows' own warnings), so the order never depends on blocks.
+        """
+        steps = np.concatenate(self._step_buf)
+        self._step_buf = []
+        verdict = _judge_steps(steps, self.config.gap_factor,
+                               self.config.irregular_gap_s * _NS)
+        if verdict is None:
+            return
+        regular, period_ns, jitter = verdict
+        self._note_jitter(jitter, steps.size)
+        if not regular or self.stats.irregular_stamps:
+            settle()
+        if not regular:
+            self._flag_irregular(jitter)
+        elif not self.stats.irregular_stamps:
+            tol = self.config.rate_tolerance
+            if abs(_NS / self.rate_hz / period_ns - 1) > tol:
+                # One warning per episode: a new one only when the period moves again.
+                if self._off_period_ns is None or abs(self._off_period_ns / period_ns - 1) > tol:
+                    settle()
+                    self.stats.n_rate_changes += 1
+                    self._warn('rate', f'sample rate changed: {_NS / period_ns:.2f} Hz against '
+                               f'the nominal {self.rate_hz:.2f} Hz (gaps are located with the '
+                               'nominal rate)', once=False)
+                self._off_period_ns = period_ns
+            else:
+                self._off_period_ns = None
+        self._refine_rate()
 
     def _start_accumulator(self) -> None:
         kwargs = {'exact_max_m': self.config.exact_max_m} if self.config.exact_max_m else {}
         self.acc = AllanAccumulator(N_AXES, self.rate_hz, **kwargs)
 
     def _ingest_regular(self, stamp_ns: np.ndarray, samples: np.ndarray,
-                        first: bool = False) -> None:
-        period_ns = _NS / self.rate_hz
+                        judged: bool = False) -> None:
+        """
+        Locate gaps, then pass the gap-free runs on; feed the steps to the clock windows.
+
+        A window is judged once it is full, so its verdict applies from the next step
+        on (whatever the block boundaries); ``judged`` marks the rate-window samples,
+        already judged by :meth:`_estimate_rate`.
+        """
         prev = self.last_stamp_ns
-        steps = np.diff(stamp_ns, prepend=stamp_ns[0] if prev is None or first else prev)
-        if not first and steps.size > 8:
-            block_rate = (steps.size * _NS / float(steps.sum())) if steps.sum() > 0 else 0
-            if (not self.stats.irregular_stamps and steps.size >= 50
-                    and abs(block_rate / self.rate_hz - 1) > self.config.rate_tolerance):
-                self.stats.n_rate_changes += 1
-                self._warn('rate', f'sample rate changed: {block_rate:.2f} Hz against the '
-                           f'nominal {self.rate_hz:.2f} Hz (gaps are located with the nominal '
-                           'rate)', once=False)
-            self._judge_jitter(steps)
-        self._n_stamped += stamp_ns.size
-        if self.stats.irregular_stamps and self.first_stamp_ns is not None:
-            # Arrival bursts average out over the whole record: refine the mean rate.
-            span_ns = float(stamp_ns[-1] - self.first_stamp_ns)
-            if span_ns > 0 and self._n_stamped > 1:
-                self.rate_hz = (self._n_stamped - 1) * _NS / span_ns
-                self.acc.rate_hz = self.rate_hz
+        # No previous stamp (start, or a resume across lost samples): row 0 is no step.
+        steps = np.diff(stamp_ns, prepend=stamp_ns[0] if prev is None else prev)
+        first_step = 1 if prev is None else 0
+        n = stamp_ns.size
+        done = 0        # rows before this one are passed on
+        pos = 0         # rows before this one are in the clock windows
+
+        def settle():
+            nonlocal done
+            if pos > done:
+                self._split_gaps(stamp_ns[done:pos], samples[done:pos], steps[done:pos],
+                                 max(first_step - done, 0))
+            done = pos
+
+        while not judged and pos < n:
+            room = _CLOCK_WINDOW - sum(s.size for s in self._step_buf)
+            end = min(n, max(pos, first_step) + room)
+            self._step_buf.append(steps[max(pos, first_step):end])
+            pos = end
+            if sum(s.size for s in self._step_buf) >= _CLOCK_WINDOW:
+                self._judge_clock(settle)
+        pos = n
+        settle()
+        self.last_stamp_ns = int(stamp_ns[-1])
+
+    def _split_gaps(self, stamp_ns: np.ndarray, samples: np.ndarray, steps: np.ndarray,
+                    skip: int) -> None:
+        """Accumulate the rows between gaps; ``steps[:skip]`` are no steps."""
+        period_ns = _NS / self.rate_hz
         limit = (self.config.irregular_gap_s * _NS if self.stats.irregular_stamps
                  else self.config.gap_factor * period_ns)
-        gap_idx = np.flatnonzero(steps > limit)
+        real = steps[skip:]
+        ok = real <= limit
+        self._clock_n += int(ok.sum())
+        self._clock_ns += int(real[ok].sum())
+        gap_idx = np.flatnonzero(~ok) + skip
         start = 0
         for g in list(gap_idx) + [stamp_ns.size]:
             if g > start:
                 self._accumulate(stamp_ns[start:g], samples[start:g])
             if g < stamp_ns.size:
-                missing = int(round(steps[g] / period_ns)) - 1
+                missing = max(int(round(steps[g] / period_ns)) - 1, 1)
                 self.stats.n_gaps += 1
-                self.stats.n_missing += max(missing, 1)
-                self._warn('gap', f'gap of {steps[g] / 1e9:.3f} s (~{max(missing, 1)} samples) '
+                self.stats.n_missing += missing
+                self._warn('gap', f'gap of {steps[g] / 1e9:.3f} s (~{missing} samples) '
                            'in the stamps: the segment is split there, no term spans it',
                            once=False)
                 self._flush_motion(break_after=True)
             start = g
-        self.last_stamp_ns = int(stamp_ns[-1])
 
     def _accumulate(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
         """Gap-free run: saturation split, frozen check, then the motion stage."""
@@ -436,13 +541,11 @@ class Session:
     def flush(self) -> None:
         """Accumulate samples still held back (call at the end of a recording)."""
         if self.acc is None and self._pending_t:
-            t = np.concatenate(self._pending_t)
-            y = np.concatenate(self._pending_y)
-            self._pending_t, self._pending_y = [], []
-            if t.size >= 3:
-                self._estimate_rate(t)
-                self._start_accumulator()
-                self._ingest_regular(t, y, first=True)
+            if sum(t.size for t in self._pending_t) >= 3:
+                self._begin()
+            else:
+                self._pending_t, self._pending_y = [], []
+        self._refine_rate()
         self._flush_motion()
 
     # ----------------------------------------------------------------- output
@@ -473,6 +576,27 @@ class Session:
             self._on_warning(self._warn_text[key])
 
     # ------------------------------------------------------------- checkpoint
+    def _restore_clock(self, meta: dict, rate_hz: float) -> None:
+        """Restore the stamp-clock state; older checkpoints get a neutral equivalent."""
+        self._newest_ns = meta.get('newest_stamp_ns', meta.get('last_stamp_ns'))
+        self._nan_break = bool(meta.get('nan_break', False))
+        if 'clock_n' in meta:
+            self._clock_n = int(meta['clock_n'])
+            self._clock_ns = int(meta['clock_ns'])
+            self._jitter_sq = float(meta['jitter_sq'])
+            self._jitter_n = int(meta['jitter_n'])
+            buf = np.array(meta['step_buf'], dtype=np.int64)
+            self._step_buf = [buf] if buf.size else []
+            off = meta['off_period_ns']
+            self._off_period_ns = None if off is None else float(off)
+            return
+        # Version 1 kept no step counts: weigh the saved rate as if every used sample
+        # had been one step at it, so a later mean-rate refinement stays anchored.
+        self._clock_n = int(self.stats.n_used)
+        self._clock_ns = int(round(self._clock_n * _NS / rate_hz))
+        self._jitter_n = self._clock_n
+        self._jitter_sq = self.stats.jitter_rel ** 2 * self._clock_n
+
     def save_state(self, path) -> None:
         """
         Save the whole session atomically (accumulator state plus counters; no pickle).
@@ -488,11 +612,17 @@ class Session:
         if self.acc is None:
             return
         meta = {
-            'version': 1, 'rate_hz': self.rate_hz, 'axes': list(AXES),
+            'version': 2, 'rate_hz': self.rate_hz, 'axes': list(AXES),
             'config': asdict(self.config), 'stats': asdict(self.stats),
             'warn_text': self._warn_text, 'warn_count': self._warn_count,
             'first_stamp_ns': self.first_stamp_ns,
             'last_stamp_ns': self.last_stamp_ns,
+            # Everything the stamp checks and the rate estimate carry over (version 2).
+            'newest_stamp_ns': self._newest_ns,
+            'clock_n': self._clock_n, 'clock_ns': self._clock_ns,
+            'step_buf': [int(s) for b in self._step_buf for s in b],
+            'jitter_sq': self._jitter_sq, 'jitter_n': self._jitter_n,
+            'off_period_ns': self._off_period_ns, 'nan_break': self._nan_break,
             'ref_mean': None if self._ref_mean is None else self._ref_mean.tolist(),
             'ref_std': None if self._ref_std is None else self._ref_std.tolist(),
         }
@@ -563,10 +693,62 @@ class Session:
         session._warn_count = {k: int(v) for k, v in meta['warn_count'].items()}
         session.first_stamp_ns = meta['first_stamp_ns']
         session.last_stamp_ns = meta['last_stamp_ns']
+        session._restore_clock(meta, rate)
         if meta['ref_mean'] is not None:
             session._ref_mean = np.array(meta['ref_mean'])
             session._ref_std = np.array(meta['ref_std'])
         return session
+
+
+def _judge_steps(steps_ns: np.ndarray, gap_factor: float, max_step_ns: float):
+    """
+    Judge one window of stamp steps: regular clock (with isolated gaps) or irregular.
+
+    Parameters
+    ----------
+    steps_ns : numpy.ndarray
+        Positive stamp steps [ns].
+    gap_factor : float
+        A step longer than this many periods is a gap of a regular clock.
+    max_step_ns : float
+        Steps longer than this are gaps whatever the verdict, and left out [ns].
+
+    Returns
+    -------
+    tuple of (bool, float, float) or None
+        ``(regular, period_ns, jitter_rel)``, or None with fewer than two usable steps.
+        A regular window's period counts each gap as whole periods; an irregular
+        window's is the mean step.
+
+    """
+    s = np.asarray(steps_ns, dtype=np.float64)
+    lo, hi = (float(s.min()), float(s.max())) if s.size else (0.0, 0.0)
+    if s.size >= 2 and 0 < hi <= (1 + _MAX_JITTER) * lo and hi <= max_step_ns:
+        # The usual window (every step near the median, no gap): what the general case
+        # below gives, with the plain mean and std, in a fraction of the time.
+        mean = float(s.mean())
+        return True, mean, float(s.std() / mean)
+    s = s[s <= max_step_ns]
+    if s.size < 2:
+        return None
+    # Median and the steps near it: an isolated gap moves neither, unlike the std.
+    med = float(np.median(s))
+    near = np.abs(s - med) <= _MAX_JITTER * med
+    if med > 0 and near.any():
+        period = float(s[near].mean())
+        clock = s <= gap_factor * period
+        jitter = float(np.sqrt(np.mean((s[clock] - period) ** 2)) / period)
+        n_long = int(s.size - clock.sum())
+        # Bursty arrival stamps also show a tight cluster of short steps, but the waits
+        # between bursts are many and take most of the time; gaps of a clock are few,
+        # or (a lossy link) leave most of the time to the regular steps.
+        isolated = n_long <= max(2, 0.02 * s.size)
+        covered = float(s[clock].sum() / s.sum())
+        if jitter <= _MAX_JITTER and (isolated or covered >= 0.5):
+            # A clock's gap loses whole periods: count them, so gaps do not bias the rate.
+            return True, float(s.sum() / np.maximum(np.round(s / period), 1).sum()), jitter
+    mean = float(s.mean())
+    return False, mean, float(s.std() / mean)
 
 
 def _as_block(stamp_ns, samples) -> tuple[np.ndarray, np.ndarray]:

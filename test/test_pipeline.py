@@ -1,5 +1,8 @@
 """Input hygiene and accumulation of the one pipeline Session shared by node and bags."""
 
+import json
+import re
+
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -171,3 +174,184 @@ def test_bad_config_is_refused():
         SessionConfig(on_motion='panic')
     with pytest.raises(InputError, match='gap_factor'):
         SessionConfig(gap_factor=float('nan'))
+
+
+# -- stamp clock: gaps, rate changes, resume, block sizes ------------------------------
+
+def _bursty(t, seed: int = 3):
+    """Turn clock stamps into host arrival stamps: jitter, and a late burst every 50."""
+    rng = np.random.default_rng(seed)
+    period = int(np.median(np.diff(t)))
+    jitter = rng.uniform(-0.8 * period, 0.8 * period, t.size).astype(np.int64)
+    jitter[::50] += 30 * period
+    return np.maximum.accumulate(t + jitter) + np.arange(t.size)
+
+
+def _feed_random_blocks(session: Session, t, y, seed: int, max_block: int) -> Session:
+    rng = np.random.default_rng(seed)
+    k = 0
+    while k < t.size:
+        n = int(rng.integers(1, max_block))
+        session.add(t[k:k + n], y[k:k + n])
+        k += n
+    session.flush()
+    return session
+
+
+@pytest.mark.parametrize('lost_from', [100, 10_000])    # inside the rate window, or later
+@pytest.mark.parametrize('block', [1, 333, 40_000])
+def test_short_gap_in_regular_stamps_is_counted_not_taken_for_jitter(lost_from, block):
+    t, y = _record(40_000, rate_hz=200.0)
+    keep = np.ones(t.size, dtype=bool)
+    keep[lost_from:lost_from + 100] = False             # 0.5 s of lost messages
+    s = _feed(Session(), t[keep], y[keep], block=block)
+    assert not s.stats.irregular_stamps
+    assert s.stats.jitter_rel == 0.0
+    assert (s.stats.n_gaps, s.stats.n_missing) == (1, 100)
+    assert s.warnings == ['gap of 0.505 s (~100 samples) in the stamps: the segment is split '
+                          'there, no term spans it']
+    assert s.acc.n_segments == 2 and s.stats.n_used == keep.sum()
+    assert s.rate_hz == 200.0                          # the gap is not part of the period
+
+
+def test_short_gap_in_jittery_regular_stamps_is_counted():
+    # Stamps off by up to 10 % of a period: still a clock, so a 0.5 s gap is a gap.
+    rng = np.random.default_rng(5)
+    t, y = _record(40_000, rate_hz=200.0)
+    t = t + rng.uniform(-500_000, 500_000, t.size).astype(np.int64)
+    keep = np.ones(t.size, dtype=bool)
+    keep[20_000:20_100] = False
+    s = _feed(Session(), t[keep], y[keep], block=5_000)
+    assert not s.stats.irregular_stamps
+    assert s.stats.jitter_rel == pytest.approx(0.1 * np.sqrt(2 / 3), rel=0.05)
+    assert s.stats.n_gaps == 1 and s.stats.n_missing == 100
+    assert_allclose(s.rate_hz, 200.0, rtol=1e-3)        # from the first 200 stamps
+
+
+def test_bursty_stamps_stay_irregular_with_a_gap_of_a_few_seconds():
+    t, y = _record(30_000)
+    t = _bursty(t)
+    t[20_000:] += 3_000_000_000                          # 3 s > irregular_gap_s
+    s = _feed(Session(), t, y, block=30_000)
+    assert s.stats.irregular_stamps and s.stats.jitter_rel > 1.0
+    assert s.stats.n_gaps == 1
+    # The mean rate leaves the gap out: it would otherwise read ~91 Hz.
+    assert_allclose(s.rate_hz, RATE_HZ, rtol=0.02)
+
+
+@pytest.mark.parametrize('block', [1, 500, 7_000, 20_000])
+def test_rate_change_inside_a_block_is_reported_once(block):
+    t, y = _record(20_000, rate_hz=200.0)
+    t = t.copy()
+    # 220 Hz from sample 7_000 on: one block of 20_000 spans both rates.
+    t[7_000:] = t[7_000] + np.round(np.arange(13_000) * 1e9 / 220.0).astype(np.int64)
+    s = _feed(Session(), t, y, block=block)
+    assert s.stats.n_rate_changes == 1
+    assert len(s.warnings) == 1
+    found = re.fullmatch(r'sample rate changed: ([\d.]+) Hz against the nominal 200.00 Hz '
+                         r'\(gaps are located with the nominal rate\)', s.warnings[0])
+    assert found and float(found[1]) == pytest.approx(220.0, rel=0.01)
+    assert s.stats.n_gaps == 0 and not s.stats.irregular_stamps
+    assert s.rate_hz == 200.0
+
+
+def test_rate_back_and_forth_counts_each_episode():
+    t, y = _record(30_000, rate_hz=200.0)
+    period = np.full(t.size - 1, 5_000_000)
+    period[10_000:15_000] = 4_000_000                    # 250 Hz for 5_000 samples
+    t = t[0] + np.concatenate(([0], np.cumsum(period)))
+    s = _feed(Session(), t, y, block=30_000)
+    assert s.stats.n_rate_changes == 1
+    period[20_000:25_000] = 6_000_000                    # then 166.7 Hz
+    t = t[0] + np.concatenate(([0], np.cumsum(period)))
+    s = _feed(Session(), t, y, block=30_000)
+    assert s.stats.n_rate_changes == 2
+
+
+def _messy(kind: str):
+    """Return a record with a gap, NaN rows, a re-sent message, and a 5 % faster rate."""
+    t, y = _record(50_000, seed=7, rate_hz=200.0)
+    t = t.copy()
+    t[30_000:] = t[30_000] + np.round(np.arange(20_000) * 1e9 / 210.0).astype(np.int64)
+    if kind == 'irregular':
+        t = _bursty(t, seed=8)
+    keep = np.ones(t.size, dtype=bool)
+    keep[12_345:12_445] = False                          # 0.5 s gap
+    y[20_000:20_003, 1] = np.nan
+    t, y = t[keep], y[keep]
+    return np.insert(t, 4_000, t[3_999]), np.insert(y, 4_000, y[3_999], axis=0)
+
+
+def _clock_lines(warnings):
+    return [w for w in warnings if 'NaN/Inf' not in w and 'repeated stamp' not in w]
+
+
+@pytest.mark.parametrize('kind', ['regular', 'irregular'])
+def test_any_block_sizes_give_identical_results(kind):
+    t, y = _messy(kind)
+    whole = _feed(Session(), t, y, block=t.size)
+    assert whole.stats.irregular_stamps == (kind == 'irregular')
+    # Under 2 s, the 0.5 s gap and the step over the NaN rows are gaps of regular stamps.
+    assert whole.stats.n_gaps == (2 if kind == 'regular' else 0)
+    assert whole.stats.n_duplicate == 1 and whole.acc.n_segments == 3 - (kind == 'irregular')
+    for seed, max_block in [(1, 3), (2, 60), (3, 4_000)]:
+        s = _feed_random_blocks(Session(), t, y, seed, max_block)
+        assert s.stats == whole.stats
+        # The NaN and repeated-stamp lines quote per-block counts; all others must match.
+        assert _clock_lines(s.warnings) == _clock_lines(whole.warnings)
+        assert s.rate_hz == whole.rate_hz
+        assert_allclose(s.curve().avar, whole.curve().avar, rtol=1e-12)
+
+
+def _resume(tmp_path, t, y, cut: int, lost: int = 0, node_style: bool = False) -> Session:
+    """Feed t[:cut], checkpoint, load, drop ``lost`` samples, feed the rest."""
+    first = _feed_random_blocks(Session(), t[:cut], y[:cut], 4, 700)
+    first.save_state(tmp_path / 'state.npz')
+    resumed = Session.load_state(tmp_path / 'state.npz')
+    if node_style:
+        # What the node does after a resume: no Allan term or step spans the lost tail.
+        resumed.acc.break_segment()
+        resumed.last_stamp_ns = None
+    return _feed_random_blocks(resumed, t[cut + lost:], y[cut + lost:], 5, 700)
+
+
+@pytest.mark.parametrize('kind', ['regular', 'irregular', 'irregular_after_resume'])
+def test_resume_gives_the_rate_of_an_uninterrupted_session(tmp_path, kind):
+    t, y = _record(40_000, seed=9, rate_hz=200.0)
+    if kind == 'irregular':
+        t = _bursty(t)
+    elif kind == 'irregular_after_resume':
+        # The reported case: regular stamps, then host stamps after the restart.
+        t = np.concatenate((t[:20_000], _bursty(t[20_000:])))
+    whole = _feed_random_blocks(Session(), t, y, 6, 700)
+    assert whole.stats.irregular_stamps == (kind != 'regular')
+    resumed = _resume(tmp_path, t, y, 20_000)
+    assert resumed.stats.irregular_stamps == whole.stats.irregular_stamps
+    assert resumed.stats.n_gaps == whole.stats.n_gaps
+    assert_allclose(resumed.rate_hz, whole.rate_hz, rtol=1e-12)
+    assert resumed.stats.jitter_rel == pytest.approx(whole.stats.jitter_rel, rel=1e-12)
+    # Samples lost between checkpoint and restart do not drag the rate down either.
+    lossy = _resume(tmp_path, t, y, 20_000, lost=5_000, node_style=True)
+    assert_allclose(lossy.rate_hz, 200.0, rtol=0.02)
+
+
+def test_version_1_checkpoint_still_loads_with_its_rate(tmp_path):
+    t, y = _record(40_000, seed=10, rate_hz=200.0)
+    t = np.concatenate((t[:20_000], _bursty(t[20_000:])))
+    first = _feed(Session(), t[:20_000], y[:20_000], block=500)
+    first.save_state(tmp_path / 'state.npz')
+    with np.load(tmp_path / 'state.npz') as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays['session_meta']))
+    for key in ('newest_stamp_ns', 'clock_n', 'clock_ns', 'step_buf', 'jitter_sq',
+                'jitter_n', 'off_period_ns', 'nan_break'):
+        del meta[key]
+    meta['version'] = 1
+    arrays['session_meta'] = np.array(json.dumps(meta))
+    np.savez(tmp_path / 'old.npz', **arrays)
+    resumed = Session.load_state(tmp_path / 'old.npz')
+    assert resumed.rate_hz == 200.0
+    resumed.last_stamp_ns = None
+    _feed(resumed, t[20_000:], y[20_000:], block=500)
+    assert resumed.stats.irregular_stamps
+    assert_allclose(resumed.rate_hz, 200.0, rtol=0.02)
