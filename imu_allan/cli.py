@@ -14,7 +14,7 @@ import sys
 from imu_allan import __version__
 from imu_allan.errors import InputError
 
-SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'demo', 'diagnose')
+SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'demo')
 
 
 def build_parser() -> argparse.ArgumentParser:
