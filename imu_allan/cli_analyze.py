@@ -36,6 +36,20 @@ CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
 CSV_BLOCK = 65536
 
 
+def add_input_options(p: argparse.ArgumentParser) -> None:
+    """Add the options of reading an input into a Session (shared with ``diagnose``)."""
+    p.add_argument('--topic', help='Imu topic (needed when a bag holds several)')
+    p.add_argument('--rate', type=float, default=0.0,
+                   help='nominal rate in Hz (default: estimated from the stamps)')
+    p.add_argument('--on-motion', choices=('warn', 'pause', 'restart'), default='pause',
+                   help='what to do with samples where the IMU moved')
+
+
+def session_config(args) -> SessionConfig:
+    """Return the SessionConfig of the options added by :func:`add_input_options`."""
+    return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
+
+
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the sub-command."""
     p = subparsers.add_parser(
@@ -45,14 +59,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     'Kalibr imu.yaml, Kalman Q/R, robot_localization covariances, plots.')
     p.add_argument('inputs', nargs='+', metavar='INPUT', help='bag directory, .mcap, .db3, '
                    '.bag or .csv[.gz] (t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z)')
-    p.add_argument('--topic', help='Imu topic (needed when a bag holds several)')
+    add_input_options(p)
     p.add_argument('--out', type=Path, default=Path('imu_allan_out'),
                    help='output directory (one sub-directory per input when several)')
     p.add_argument('--format', choices=('text', 'json'), default='text')
-    p.add_argument('--rate', type=float, default=0.0,
-                   help='nominal rate in Hz (default: estimated from the stamps)')
-    p.add_argument('--on-motion', choices=('warn', 'pause', 'restart'), default='pause',
-                   help='what to do with samples where the IMU moved')
     p.add_argument('--no-plot', action='store_true', help='skip the PNG/SVG figures')
     p.add_argument('--jobs', type=int, default=0,
                    help='parallel inputs (default: the number of cores)')
@@ -290,7 +300,8 @@ def iter_blocks(path: Path, topic: Optional[str]):
 
 def stream_input(source: InputSource, config: SessionConfig,
                  on_warning: Optional[Callable[[str], None]] = None,
-                 progress: Optional[Progress] = None) -> Session:
+                 progress: Optional[Progress] = None,
+                 tap: Optional[Callable[[Session, np.ndarray], None]] = None) -> Session:
     """
     Feed every block of an input through a new pipeline Session (the node's object).
 
@@ -304,6 +315,8 @@ def stream_input(source: InputSource, config: SessionConfig,
         Gets each session warning as it happens.
     progress : Progress, optional
         Updated with the number of samples read.
+    tap : callable, optional
+        Called as tap(session, samples) after each block, samples (n, 6) as read.
 
     Returns
     -------
@@ -316,6 +329,8 @@ def stream_input(source: InputSource, config: SessionConfig,
     done = 0
     for stamp_ns, samples in _prefetch(source.blocks()):
         session.add(stamp_ns, samples)
+        if tap is not None:
+            tap(session, samples)
         done += stamp_ns.size
         if progress is not None:
             progress.update(done)
@@ -543,7 +558,7 @@ def run(args) -> int:
     paths = [Path(p) for p in args.inputs]
     for p in paths:
         _check_path(p)
-    config = SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
+    config = session_config(args)
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]

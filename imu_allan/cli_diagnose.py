@@ -15,10 +15,11 @@ from pathlib import Path
 import sys
 
 from imu_allan import AXES
-from imu_allan.cli_analyze import open_input, Progress
+from imu_allan.cli_analyze import (add_input_options, open_input, Progress, session_config,
+                                   stream_input)
 from imu_allan.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS, RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.pipeline import Session, SessionConfig
+from imu_allan.pipeline import SessionConfig
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -30,17 +31,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     ', '.join(EFFECTS) + '), add it, and repeat until consistent.')
     p.add_argument('input', metavar='INPUT', type=Path,
                    help='bag directory, .mcap, .db3, .bag or .csv[.gz]')
-    p.add_argument('--topic', help='Imu topic (needed when a bag holds several)')
+    add_input_options(p)
     p.add_argument('--base-model', default=','.join(DEFAULT_BASE),
                    help='comma-separated base-model terms (default %(default)s: the '
                         "paper's white noise, Gauss-Markov bias instability, random walk)")
     p.add_argument('--out', type=Path, default=Path('imu_allan_diagnose'),
                    help='output directory')
     p.add_argument('--format', choices=('text', 'json'), default='text')
-    p.add_argument('--rate', type=float, default=0.0,
-                   help='nominal rate in Hz (default: estimated from the stamps)')
-    p.add_argument('--on-motion', choices=('warn', 'pause', 'restart'), default='pause',
-                   help='what to do with samples where the IMU moved')
     p.add_argument('--replicas', type=int, default=N_REPLICAS,
                    help='simulated replicas per model (default %(default)s)')
     p.add_argument('--seed', type=int, default=0, help='seed of the simulation')
@@ -74,22 +71,21 @@ def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_mo
         if not quiet:
             print(f'imu-allan: warning: {path.name}: {text}', file=sys.stderr)
 
-    keeper = None
+    keepers = []
+
+    def keep_raw(session, samples):
+        # The periodogram check needs raw samples; the rate is known after a few blocks.
+        if not keepers and session.rate_hz > 0:
+            keepers.append(RawKeeper(session.rate_hz, len(AXES)))
+        if keepers:
+            keepers[0].add(samples)
+
     with open_input(path, topic) as source, Progress(path.name, source.n_messages) as progress:
-        session = Session(config, on_warning=warn)
-        done = 0
-        for stamp_ns, samples in source.blocks():
-            session.add(stamp_ns, samples)
-            if keeper is None and session.rate_hz > 0:
-                keeper = RawKeeper(session.rate_hz, len(AXES))
-            if keeper is not None:
-                keeper.add(samples)
-            done += stamp_ns.size
-            progress.update(done)
-        session.flush()
+        session = stream_input(source, config, on_warning=warn, progress=progress,
+                               tap=keep_raw)
+        keeper = keepers[0] if keepers else None
         progress.set_stage('diagnosing')
-        reader_warnings = list(source.warnings)
-        for text in reader_warnings:
+        for text in source.warnings:
             warn(text)
         if session.stats.n_received == 0:
             raise InputError(f'{path}: no Imu samples in the input')
@@ -133,7 +129,7 @@ def run(args) -> int:
         raise InputError(f'--replicas must be >= 1, got {args.replicas}')
     if not args.input.exists():
         raise InputError(f'{args.input}: no such file or directory')
-    config = SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
+    config = session_config(args)
     result = diagnose_input(args.input, args.topic, config, base, args.replicas, args.seed,
                             quiet=args.format == 'json')
     if all(d is None for d in result.axes.values()):
