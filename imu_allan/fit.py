@@ -659,15 +659,9 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
     if local and phi0 is not None:
         if len(nl_index) == 1:
             lo, hi = max(x[0] - 1.5, bounds[0, 0]), min(x[0] + 1.5, bounds[0, 1])
-            res = minimize_scalar(lambda v: objective(np.array([v])), bounds=(lo, hi),
-                                  method='bounded', options={'xatol': 1e-4})
-            if res.fun <= objective(x):
-                x = np.array([res.x])
+            x[0] = _polish_1d(objective, lo, hi, x[0], objective(x))
         else:
-            res = minimize(objective, x, method='Nelder-Mead',
-                           options={'xatol': 1e-4, 'fatol': 1e-9, 'maxiter': 400})
-            if res.fun <= objective(x):
-                x = np.clip(res.x, bounds[:, 0], bounds[:, 1])
+            x = _polish_nd(objective, x, bounds)
         phi = unpack(x)
         coef, j = solve(phi)
         return _Solution(coef, phi, j)
@@ -684,21 +678,28 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
             if len(nl_index) == 1:
                 lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
                 if hi > lo:
-                    res = minimize_scalar(lambda v: objective(np.array([v])),
-                                          bounds=(lo, hi), method='bounded',
-                                          options={'xatol': 1e-4})
-                    if res.fun <= vals[best]:
-                        x[d] = res.x
+                    x[d] = _polish_1d(objective, lo, hi, x[d], vals[best])
     if len(nl_index) > 1:
-        res = minimize(objective, x, method='Nelder-Mead',
-                       options={'xatol': 1e-4, 'fatol': 1e-9, 'maxiter': 400})
-        if res.fun <= objective(x):
-            x = np.clip(res.x, bounds[:, 0], bounds[:, 1])
+        x = _polish_nd(objective, x, bounds)
     phi = unpack(x)
     coef, j = solve(phi)
     if fix is None:
         coef, phi = _canonical(slots, coef, phi)
     return _Solution(coef, phi, j)
+
+
+def _polish_1d(objective, lo: float, hi: float, x0: float, f0: float) -> float:
+    """Bounded 1-D minimisation of objective on [lo, hi]; keep x0 unless it improves on f0."""
+    res = minimize_scalar(lambda v: objective(np.array([v])), bounds=(lo, hi),
+                          method='bounded', options={'xatol': 1e-4})
+    return float(res.x) if res.fun <= f0 else x0
+
+
+def _polish_nd(objective, x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """Nelder-Mead from x, clipped to bounds (k, 2); keep x unless it improves."""
+    res = minimize(objective, x, method='Nelder-Mead',
+                   options={'xatol': 1e-4, 'fatol': 1e-9, 'maxiter': 400})
+    return np.clip(res.x, bounds[:, 0], bounds[:, 1]) if res.fun <= objective(x) else x
 
 
 def _canonical(slots: Sequence[_Slot], coef: np.ndarray, phi: tuple) -> tuple:
