@@ -15,7 +15,7 @@ import numpy as np
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.allan import AllanCurve
 from imu_allan.errors import InputError
-from imu_allan.fit import AxisFit, fit_curve
+from imu_allan.fit import AxisFit, fit_curve, json_floats
 from imu_allan.kalman import imu_covariance, kalibr_yaml, kalman_model, KalmanModel
 from imu_allan.noise_params import AxisNoise
 from imu_allan.units import format_quoted, sensor_of
@@ -157,11 +157,11 @@ class AnalysisResult:
         for j, axis in enumerate(AXES):
             fit = self.fits.get(axis)
             entry = {'unit': AXIS_UNITS[axis],
-                     'tau_s': _floats(self.curve.tau_s),
-                     'adev': _floats(self.curve.adev[:, j]),
-                     'adev_lo': _floats(self.curve.adev_lo[:, j]),
-                     'adev_hi': _floats(self.curve.adev_hi[:, j]),
-                     'edf': _floats(self.curve.edf[:, j]),
+                     'tau_s': json_floats(self.curve.tau_s),
+                     'adev': json_floats(self.curve.adev[:, j]),
+                     'adev_lo': json_floats(self.curve.adev_lo[:, j]),
+                     'adev_hi': json_floats(self.curve.adev_hi[:, j]),
+                     'edf': json_floats(self.curve.edf[:, j]),
                      'n_terms': [int(n) for n in self.curve.n_terms]}
             if fit is None:
                 entry.update(params={}, nominal={}, terms=[],
@@ -239,7 +239,3 @@ def _trust_problems(fit: AxisFit) -> list:
 
 def _g(x: float) -> str:
     return f'{x:.6g}' if math.isfinite(x) else 'nan'
-
-
-def _floats(a) -> list:
-    return [float(v) if math.isfinite(v) else None for v in np.asarray(a, dtype=float)]

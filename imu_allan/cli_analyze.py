@@ -29,6 +29,7 @@ import numpy as np
 from imu_allan import AXES
 from imu_allan.analysis import analyze
 from imu_allan.errors import InputError
+from imu_allan.fit import json_num
 from imu_allan.pipeline import Session, SessionConfig
 
 CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
@@ -505,7 +506,7 @@ def spread_table(results: list, labels: list) -> tuple:
                 continue
             std = float(vals.std(ddof=1)) if vals.size > 1 else float('nan')
             mean = float(vals.mean())
-            entry = {'mean': mean, 'std': _num(std), 'cv': _num(std / mean),
+            entry = {'mean': mean, 'std': json_num(std), 'cv': json_num(std / mean),
                      'min': float(vals.min()), 'max': float(vals.max()), 'values': per_run,
                      'unit': unit}
             data[axis][sym] = entry
@@ -514,10 +515,6 @@ def spread_table(results: list, labels: list) -> tuple:
                       f'{entry["min"]:.4g}', f'{entry["max"]:.4g}', str(vals.size)]
             rows.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(rows) + '\n', data
-
-
-def _num(x: float):
-    return float(x) if math.isfinite(x) else None
 
 
 def _finite(obj):

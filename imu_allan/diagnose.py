@@ -52,7 +52,7 @@ from scipy.stats import chi2 as chi2_dist
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.allan import AllanCurve, edf_overlapping, overlapping_avar
 from imu_allan.errors import InputError
-from imu_allan.fit import AxisFit, fit_axis
+from imu_allan.fit import AxisFit, fit_axis, json_floats, json_num
 from imu_allan.noise_params import AxisNoise
 from imu_allan.simulate import (flicker_noise, quantization_noise, rate_ramp, simulate_state_space,
                                 sinusoid)
@@ -170,12 +170,12 @@ class Finding(NamedTuple):
 
     def to_json(self) -> dict:
         """Return the DESIGN.md entry {effect, params, tau_range_s} plus details."""
-        return {'effect': self.effect, 'params': {k: _num(v) for k, v in self.params.items()},
-                'ci95': {k: [_num(v[0]), _num(v[1])] for k, v in self.ci95.items()},
+        return {'effect': self.effect, 'params': {k: json_num(v) for k, v in self.params.items()},
+                'ci95': {k: [json_num(v[0]), json_num(v[1])] for k, v in self.ci95.items()},
                 'units': dict(self.units),
                 'tau_range_s': [float(v) for v in self.tau_range_s], 'shape': self.shape,
-                'gap_before': _num(self.gap_before), 'gap_after': _num(self.gap_after),
-                'delta_chi2': _num(self.delta_chi2), 'note': self.note}
+                'gap_before': json_num(self.gap_before), 'gap_after': json_num(self.gap_after),
+                'delta_chi2': json_num(self.delta_chi2), 'note': self.note}
 
 
 @dataclass(frozen=True)
@@ -254,16 +254,16 @@ class AxisDiagnosis:
     def to_json(self) -> dict:
         """Return the DESIGN.md axis entry (missing, gap_before, gap_after) plus details."""
         return {'missing': [f.to_json() for f in self.missing],
-                'gap_before': _num(self.gap_before), 'gap_after': _num(self.gap_after),
-                'gaps': [_num(g) for g in self.gaps], 'consistent': bool(self.consistent),
+                'gap_before': json_num(self.gap_before), 'gap_after': json_num(self.gap_after),
+                'gaps': [json_num(g) for g in self.gaps], 'consistent': bool(self.consistent),
                 'base_terms': list(self.base_terms), 'terms': list(self.terms),
-                'chi2_before': _num(self.chi2_before), 'chi2_after': _num(self.chi2_after),
+                'chi2_before': json_num(self.chi2_before), 'chi2_after': json_num(self.chi2_after),
                 'dof': int(self.dof),
                 'bands_before': [b.to_json() for b in self.bands_before],
                 'bands_after': [b.to_json() for b in self.bands_after],
-                'tau_s': _floats(self.tau_s), 'adev': _floats(self.adev),
-                's_ln': _floats(self.s_ln), 'adev_sim_before': _floats(self.adev_before),
-                'adev_sim_after': _floats(self.adev_after),
+                'tau_s': json_floats(self.tau_s), 'adev': json_floats(self.adev),
+                's_ln': json_floats(self.s_ln), 'adev_sim_before': json_floats(self.adev_before),
+                'adev_sim_after': json_floats(self.adev_after),
                 'params_after': self.fit_after.to_json()['params'] if self.fit_after else {},
                 'summary': self.summary, 'notes': list(self.notes)}
 
@@ -338,15 +338,8 @@ class DiagnoseResult:
                 'summary': self.summary_lines(), 'warnings': list(self.warnings)}
 
 
-def _num(x: float):
-    return float(x) if x is not None and math.isfinite(x) else None
-
-
-def _floats(a) -> list:
-    return [_num(v) for v in np.asarray(a, dtype=np.float64)]
-
-
 # ------------------------------------------------------------------------------ the gap
+
 
 def ln_adev_stderr(edf) -> np.ndarray:
     """

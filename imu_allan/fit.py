@@ -125,12 +125,18 @@ class Param(NamedTuple):
 
     def to_json(self) -> dict:
         """Return {'value', 'ci95', 'kind', 'unit'}; NaN and inf become None."""
-        return {'value': _json_num(self.value), 'ci95': [_json_num(v) for v in self.ci95],
+        return {'value': json_num(self.value), 'ci95': [json_num(v) for v in self.ci95],
                 'kind': self.kind, 'unit': self.unit}
 
 
-def _json_num(x: float):
-    return float(x) if math.isfinite(x) else None
+def json_num(x):
+    """Return x as a float for strict JSON, or None where it is None, NaN or infinite."""
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def json_floats(a) -> list:
+    """Return the values of an array as a list for strict JSON (None for NaN/inf)."""
+    return [json_num(v) for v in np.asarray(a, dtype=np.float64).ravel()]
 
 
 @dataclass(frozen=True)
@@ -196,7 +202,7 @@ class AxisFit:
         return {'params': {k: v.to_json() for k, v in self.optimised.items()},
                 'nominal': {k: v.to_json() for k, v in self.nominal.items()},
                 'terms': list(self.terms), 'notes': list(self.notes),
-                'gof': {'chi2': _json_num(self.chi2), 'dof': int(self.dof),
+                'gof': {'chi2': json_num(self.chi2), 'dof': int(self.dof),
                         'p_value': p_value}}
 
 
