@@ -139,10 +139,6 @@ class AnalysisResult:
             if p is None or p.kind == 'not_identified':
                 parts.append(f'{sym} n/a')
                 continue
-            if not (math.isfinite(p.value) and p.value > 0):
-                # A bound of 0 or inf says only that the record cannot constrain it.
-                parts.append(f'{sym} unconstrained')
-                continue
             text = format_quoted(sym, sensor, p.value, digits=3)
             parts.append(f'{sym} < {text}' if p.kind == 'upper_bound' else f'{sym} {text}')
         return f'{axis}: ' + ', '.join(parts)

@@ -1165,13 +1165,20 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method) -
             others, rest = list(range(len(slots))), sol
         bound = _upper_bound(fitter, [slots[i] for i in others], rest, s)
         lin_sym = s.term.symbols[0]
-        optimised[symbols[(s.label, lin_sym)]] = Param(
-            bound, (0.0, bound), 'upper_bound', _unit(s.term.units[0], unit))
+        name = symbols[(s.label, lin_sym)]
+        if math.isfinite(bound) and bound > 0:
+            optimised[name] = Param(bound, (0.0, bound), 'upper_bound',
+                                    _unit(s.term.units[0], unit))
+            notes.append(f'{name}: not supported by the data (too small or the record too '
+                         'short); 95 % upper bound')
+        else:
+            # A degenerate bound (0 or inf): the record cannot constrain the term at all.
+            optimised[name] = Param(math.nan, (math.nan, math.nan), 'not_identified',
+                                    _unit(s.term.units[0], unit))
+            notes.append(f'{name}: the record cannot constrain it (too short); no bound')
         for sym, template in zip(s.term.symbols[1:], s.term.units[1:]):
             optimised[symbols[(s.label, sym)]] = Param(
                 math.nan, (math.nan, math.nan), 'not_identified', _unit(template, unit))
-        notes.append(f'{symbols[(s.label, lin_sym)]}: not supported by the data (too small '
-                     'or the record too short); 95 % upper bound')
     for sym, base in CORE_PARAMS.items():
         if sym not in optimised:
             units = dict(zip(TERMS[base].symbols, TERMS[base].units))

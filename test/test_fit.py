@@ -273,3 +273,17 @@ def test_adis16405_gyro_against_the_datasheet(shared_dir):
         assert 0.6 < b_p.value * FLICKER_FLOOR / deg / 0.007 < 2.0, b_p
     z = fit_curve(curve, 2, n, unit='rad/s')
     assert any('does not explain the curve' in note for note in z.notes), z.notes
+
+
+def test_a_record_too_short_gives_no_degenerate_bounds():
+    """60 samples cannot constrain B or K: never a bound of 0 or inf, which Q/R would use."""
+    rng = np.random.default_rng(11)
+    y = 1e-3 * rng.standard_normal((60, 6))
+    curve = allan_curve(y, 30.0, 'octave', confidence=0.95)
+    for j in range(6):
+        fit = fit_curve(curve, j, 60, unit='rad/s')
+        for sym, p in fit.optimised.items():
+            if p.kind in ('estimate', 'upper_bound'):
+                assert math.isfinite(p.value) and p.value > 0, (j, sym, p)
+            else:
+                assert math.isnan(p.value), (j, sym, p)
