@@ -289,16 +289,6 @@ def open_input(path, topic: Optional[str] = None) -> InputSource:
                        source.n_messages, bag_blocks, source.warnings, source.close)
 
 
-def iter_blocks(path: Path, topic: Optional[str]):
-    """
-    Open an input; return (label, total or None, block generator, warnings list).
-
-    Kept for callers of the first version; new code uses :func:`open_input`.
-    """
-    source = open_input(path, topic)
-    return source.label, source.n_messages, source.blocks(), source.warnings
-
-
 def stream_input(source: InputSource, config: SessionConfig,
                  on_warning: Optional[Callable[[str], None]] = None,
                  progress: Optional[Progress] = None,

@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from imu_allan import AXES, AXIS_UNITS
+from imu_allan import AXES
 from imu_allan.accumulator import AllanAccumulator
 from imu_allan.allan import AllanCurve
 from imu_allan.errors import InputError
@@ -789,8 +789,3 @@ def _split_runs(stamp_ns: np.ndarray, samples: np.ndarray, keep: np.ndarray):
     for run in np.split(idx, cuts):
         broken = run[0] > 0 and not keep[run[0] - 1]
         yield stamp_ns[run], samples[run], bool(broken)
-
-
-def axis_unit(axis: str) -> str:
-    """Return the SI unit of an axis' samples."""
-    return AXIS_UNITS[axis]
