@@ -43,13 +43,13 @@ def simulate(rows: int, rate_hz: float, seed: int = 1) -> np.ndarray:
 
 def timed(func, *args, **kwargs):
     """
-    Return (result, best wall seconds of two calls).
+    Return (result, best wall seconds of three calls).
 
-    Best of two for every contender alike: the first call pays for touching fresh
+    Best of three for every contender alike: the first call pays for touching fresh
     memory (and other jobs on a shared machine add noise), which is not the method's.
     """
     best = float('inf')
-    for _ in range(2):
+    for _ in range(3):
         t0 = time.perf_counter()
         out = func(*args, **kwargs)
         best = min(best, time.perf_counter() - t0)

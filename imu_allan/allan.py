@@ -65,12 +65,12 @@ _STRIP_COLS = 4096
 # Largest cancellation ratio accepted from the fast octave kernels (see _octave_sums):
 # with dot products good to a few 1e-16 the result keeps about 1e-10 relative.
 _CANCEL_LIMIT = 1e5
-# Octave levels done by the moving-sum pyramid; the rest by phase dot products.
+# Octave levels done by the moving-sum pyramid; the rest by the Gram kernel.
 _PYRAMID_LEVELS = 18
-# Rows per tile (own rows plus halo) of the phase dot-product kernel, the levels it
-# fuses per pass (halo 2^levels rows) and its elements per tile.
-_GRAM_ROWS = 4096
-_GRAM_LEVELS = 10
+# Rows K of the Gram kernel below which it starts: it costs about K / 2
+# multiply-adds per sample, each halving of K one pass over memory.
+_GRAM_MAX_ROWS = 128
+# Elements per column strip of the Gram kernel's running sums.
 _GRAM_TILE = 1 << 20
 # Most worker threads (one axis each) used by allan_curve.
 _MAX_THREADS = 8
@@ -272,23 +272,36 @@ def terms_count(m: np.ndarray, n_samples: int, method: str = 'overlapping') -> n
 
 # ------------------------------------------------------------------ variance kernels
 
-def _centered_columns(y2: np.ndarray) -> np.ndarray:
+def _columns(y2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
-    Axis-major copy of the samples with each axis' mean removed, shape (n_axes, M).
+    Axis-major copy of the samples (n_axes, M) [unit] and their means (n_axes,) [unit].
 
-    The variances ignore a constant offset; removing it keeps the running sums small,
-    so an accelerometer at 9.81 m/s^2 with 1e-4 m/s^2 noise keeps its digits.  The
-    transpose goes in row blocks that fit in cache (a plain .T copy of a tall array
-    is several times slower).
+    The transpose goes in row blocks that fit in cache (a plain .T copy of a tall
+    array is several times slower), split over the worker threads; each block is
+    summed while it is still in cache.  Raises InputError on a non-finite sample.
     """
     n, n_axes = y2.shape
     cols = np.empty((n_axes, n))
     step = max(1, _TILE_ELEMS * 4 // max(1, n_axes))
-    for r0 in range(0, n, step):
-        cols[:, r0:r0 + step] = y2[r0:r0 + step].T
-    for row in cols:
-        row -= row.mean()
-    return cols
+    workers = _workers(n_axes)
+    share = -(-n // (step * workers)) * step  # rows per worker, whole blocks
+
+    def copy(w: int) -> list:
+        totals = []
+        for r0 in range(w * share, min(n, (w + 1) * share), step):
+            blk = cols[:, r0:r0 + step]
+            blk[...] = y2[r0:r0 + step].T
+            totals.append(blk.sum(axis=1))
+        return totals
+
+    # Block sums added in block order: the same means whatever the thread count.
+    blocks = [np.zeros(n_axes)] + sum(_map_threads(copy, workers, workers), [])
+    means = np.sum(blocks, axis=0) / max(n, 1)
+    if not np.isfinite(means).all():
+        # Only an inf or NaN (or sums beyond 1e308) makes a mean non-finite.
+        bad = int(np.flatnonzero(~np.isfinite(y2).all(axis=1))[0])
+        raise InputError(f'sample {bad} is not a finite number')
+    return cols, means
 
 
 def _phase_row(col: np.ndarray) -> np.ndarray:
@@ -352,77 +365,96 @@ def _diff_sumsq(x: np.ndarray, m: int, order: int) -> float:
     return total
 
 
-def _octave_sums(col: np.ndarray, x: np.ndarray,
-                 levels: int) -> tuple[np.ndarray, np.ndarray]:
+def _octave_sums(col: np.ndarray, mean: float, levels: int,
+                 blocks: Optional[list]) -> tuple[np.ndarray, np.ndarray]:
     """
     Overlapping Allan sums of squares at m = 1, 2, 4, ... 2^(levels-1), one axis.
 
-    Levels below ``_PYRAMID_LEVELS`` use :func:`_pyramid_sums`, the others
-    :func:`_gram_sums`; both are exact identities evaluated with dot products, fused
-    over several levels per pass over the data.  They trade a little cancellation for
-    speed; the returned ratio tells the caller where to recompute exactly.
+    Levels below ``_PYRAMID_LEVELS`` come from :func:`_pyramid_sums`, the others from
+    :func:`_gram_sums` on the pyramid's top moving sums, which it leaves in ``col``.
+    Both are exact identities that trade a little cancellation for speed; the returned
+    ratio tells the caller where to recompute exactly.
 
     Parameters
     ----------
     col : np.ndarray
-        Shape (M,), centred samples [unit].
-    x : np.ndarray
-        Shape (M + 1,), their running sum (phase / tau0) [unit].
+        Shape (M,), samples [unit]; overwritten.
+    mean : float
+        Reference subtracted from the samples (their mean) [unit].
     levels : int
         Number of octave levels, 2^(levels-1) <= M // 2.
+    blocks : list or None
+        If a list, receives per level j the first block sums of 2^j centred samples,
+        shape (min(_ACF_MAX_POINTS, M // 2^j),) [unit], for the noise identification.
 
     Returns
     -------
     sums : np.ndarray
-        Shape (levels,), sum of squared second differences of x [unit^2].
+        Shape (levels,), sum of squared second differences of the phase [unit^2].
     cancel : np.ndarray
         Shape (levels,), size of the cancelled terms relative to the sum.
 
     """
     sums = np.zeros(levels)
     big = np.zeros(levels)
-    n_small = min(levels, _PYRAMID_LEVELS)
-    _pyramid_sums(col, n_small, sums, big)
-    lev = n_small
-    while lev < levels:
-        m0 = 1 << lev
-        rows = x.size // m0
-        # Fuse as many levels as keep the halo (2^J rows) a fraction of the tile.
-        n_lev = levels - lev
-        if rows > _GRAM_ROWS:
-            n_lev = min(n_lev, _GRAM_LEVELS)
-        _gram_sums(x, m0, n_lev, sums[lev:lev + n_lev], big[lev:lev + n_lev])
-        lev += n_lev
+    n = col.size
+    j = min(levels, _PYRAMID_LEVELS)
+    _pyramid_sums(col, mean, j, sums, big, blocks, keep_top=levels > j)
+    # col now starts with S_(2^j); on long records double it in place until the Gram
+    # matrix has at most _GRAM_MAX_ROWS rows.
+    while j < levels and (n + 1 - (1 << j)) >> j > _GRAM_MAX_ROWS:
+        _double_in_place(col, j, sums, big, blocks)
+        j += 1
+    if j < levels:
+        m0 = 1 << j
+        top = col[:n + 1 - m0]  # S_m0, the moving sums of m0 samples
+        _gram_sums(col, top.size, m0, levels - j, sums[j:], big[j:])
+        if blocks is not None:
+            starts = top[::m0]  # block sums of m0 samples
+            for jj in range(j, levels):
+                s = 1 << (jj - j)
+                k = min(_ACF_MAX_POINTS, n >> jj)
+                blocks.append(starts[:k * s].reshape(k, s).sum(axis=1))
     with np.errstate(divide='ignore', invalid='ignore'):
         cancel = np.where(sums > 0, big / sums, math.inf)
     return sums, cancel
 
 
-def _pyramid_sums(col: np.ndarray, levels: int, sums: np.ndarray,
-                  big: np.ndarray) -> None:
+def _pyramid_sums(col: np.ndarray, mean: float, levels: int, sums: np.ndarray,
+                  big: np.ndarray, blocks: Optional[list], keep_top: bool) -> None:
     """
     Small octave levels from a pyramid of moving sums, fused in cache-sized tiles.
 
-    S_1 = y and S_2m[i] = S_m[i] + S_m[i+m]; with a = S_m[i], b = S_m[i+m] the
+    S_1 = y - mean and S_2m[i] = S_m[i] + S_m[i+m]; with a = S_m[i], b = S_m[i+m] the
     second difference of the phase is b - a, and (b - a)^2 = 2 a^2 + 2 b^2 - (a + b)^2:
     one add and one dot per level (the squares of a + b are the next level's).  For
     white rate noise nothing cancels (ratio about 2).  Adds to sums[j] and to big[j]
-    (the cancelled magnitude) for m = 2^j, j < levels.
+    (the cancelled magnitude) for m = 2^j, j < levels; with ``keep_top`` it writes
+    S_(2^levels) over the first M + 1 - 2^levels entries of col (each tile is read
+    before its own part is written, and later tiles only read beyond it).
     """
     n = col.size
     halo = (1 << levels) - 1
     tile = max(_TILE_ELEMS, 2 * halo)  # keeps the halo a minor part of each tile
-    buf_a = np.empty(tile + halo)
-    buf_b = np.empty(tile + halo)
+    bufs = (np.empty(tile + halo), np.empty(tile + halo))
+    n_top = n + 1 - (1 << levels)
+    stores = [[] for _ in range(levels)] if blocks is not None else None
     for t0 in range(0, n, tile):
-        cur = col[t0:min(n, t0 + tile + halo)]
+        src = col[t0:min(n, t0 + tile + halo)]
+        cur = np.subtract(src, mean, out=bufs[1][:src.size])
         q_next = None
         for j in range(levels):
             m = 1 << j
+            if stores is not None:
+                # Block sums S_m[k m] owned by this tile, for k < min(ACF points, M // m).
+                first = -(-t0 // m) * m
+                stop = min(t0 + tile, min(_ACF_MAX_POINTS, n // m) * m)
+                if first < stop:
+                    stores[j].append(cur[first - t0:stop - t0:m].copy())
             t = min(tile, n + 1 - 2 * m - t0)  # terms owned by this tile
             if t <= 0:
                 break
-            nxt = (buf_a if j % 2 == 0 else buf_b)[:cur.size - m]
+            nxt = bufs[j % 2][:cur.size - m]
             np.add(cur[:-m], cur[m:], out=nxt)
             qa = q_next if q_next is not None and q_next[0] == t else None
             qa = qa[1] if qa is not None else _dot(cur[:t], cur[:t])
@@ -432,81 +464,89 @@ def _pyramid_sums(col: np.ndarray, levels: int, sums: np.ndarray,
             big[j] += 2.0 * (qa + qb)
             q_next = (t, qs)
             cur = nxt
+        else:
+            own = min(tile, n_top - t0)
+            if keep_top and own > 0:
+                col[t0:t0 + own] = cur[:own]
+    if stores is not None:
+        blocks.extend(np.concatenate(s) if s else np.empty(0) for s in stores)
 
 
-def _gram_sums(x: np.ndarray, m0: int, levels: int, sums: np.ndarray,
+def _double_in_place(buf: np.ndarray, j: int, sums: np.ndarray, big: np.ndarray,
+                     blocks: Optional[list]) -> None:
+    """
+    Octave level m = 2^j from the moving sums S_m in buf, leaving S_2m there.
+
+    The identity of :func:`_pyramid_sums`, in one pass over memory in tiles no longer
+    than m.  Appends the level's block sums to ``blocks`` when it is a list.
+    """
+    m = 1 << j
+    n = buf.size
+    if blocks is not None:
+        blocks.append(buf[:min(_ACF_MAX_POINTS, n // m) * m:m].copy())
+    n_terms = n + 1 - 2 * m
+    step = min(m, _TILE_ELEMS)
+    for c0 in range(0, n_terms, step):
+        c1 = min(n_terms, c0 + step)
+        a, b = buf[c0:c1], buf[c0 + m:c1 + m]
+        sq = 2.0 * (_dot(a, a) + _dot(b, b))
+        np.add(a, b, out=a)  # b lies past every later tile's a: nothing is read twice
+        sums[j] += sq - _dot(a, a)
+        big[j] += sq
+
+
+def _gram_sums(buf: np.ndarray, n_top: int, m0: int, levels: int, sums: np.ndarray,
                big: np.ndarray) -> None:
     """
-    Octave levels m = m0 2^j, j < levels, from dot products of the phase.
+    Octave levels m = m0 2^q, q < levels, from the Gram matrix of the moving sums.
 
-    View x as a (K, m0) matrix; then m = s m0 is a shift of s rows and
-    d = X[k+2s] - 2 X[k+s] + X[k], so
-    sum d^2 = A + 4 B + C - 4 P(s, s) - 4 P(s, 0) + 2 P(2s, 0) with A, B, C the squares
-    of the rows shifted by 2s, s, 0 and P(lag, offset) the lagged products: one dot
-    per level, the rest from edge corrections.  Each column strip is walked down in
-    tiles with its own per-column reference row subtracted (second differences are
-    blind to it), so the squares stay within about 2000 times the result for white
-    noise.  The ragged last row (fewer than m0 terms per level) is done directly.
+    buf[:n_top] holds D = S_m0, the moving sums of m0 samples.  Viewed as a (K, m0)
+    matrix, the second difference of the phase at m = s m0, row k and column c is
+    d = sum_{r<s} (D[k+s+r, c] - D[k+r, c]), so with H = D D^T (one BLAS product
+    for every level) and A = [k, k+s), B = [k+s, k+2s) the sum over c of d^2 is
+    H(A, A) + H(B, B) - 2 H(A, B), each an s x s block sum of H.  The block sums
+    of every level come from those of the level below (four blocks each), and those
+    of |H| bound the rounding.  The moving sums are centred, so H holds no large
+    offset.  The fewer than m0 terms past the last full row are summed directly
+    from running sums down the rows.
     """
-    n = x.size
-    k_rows = n // m0
-    x2 = x[:k_rows * m0].reshape(k_rows, m0)
-    span = 1 << levels  # largest row shift needed: 2 s_max
-    r_own = k_rows if k_rows <= _GRAM_ROWS else _GRAM_ROWS - span
-    width = max(1, min(m0, _GRAM_TILE // min(k_rows, r_own + span)))
-    buf = np.empty(min(k_rows, r_own + span) * width)
-    for c0 in range(0, m0, width):
-        c1 = min(m0, c0 + width)
-        w = c1 - c0
-        for r0 in range(0, max(0, k_rows - 2), r_own):
-            r1 = min(k_rows, r0 + r_own + span)
-            nr = r1 - r0
-            flat = buf[:nr * w]
-            tile = flat.reshape(nr, w)
-            np.subtract(x2[r0:r1, c0:c1], x2[r0, c0:c1], out=tile)
-            if nr > 2:
-                # Second differences along the rows are blind to any affine function of
-                # the row index too: removing the tile's chord keeps a drifting phase
-                # (rate random walk) small, so less cancels in the expanded squares.
-                tile -= np.arange(nr)[:, None] * (tile[-1] / (nr - 1))
-            t_prev = -1
-            c_sq = 0.0
-            p_next = None
-            for j in range(levels):
-                s = 1 << j
-                t = min(r_own, k_rows - 2 * s - r0)
-                if t <= 0:
-                    break
-                tc, sc = t * w, s * w
-                if t != t_prev:
-                    c_sq = _dot(flat[:tc], flat[:tc])
-                    t_prev = t
-                b_sq = c_sq - _dot(flat[:sc], flat[:sc]) + _dot(
-                    flat[tc:tc + sc], flat[tc:tc + sc])
-                a_sq = c_sq - _dot(flat[:2 * sc], flat[:2 * sc]) + _dot(
-                    flat[tc:tc + 2 * sc], flat[tc:tc + 2 * sc])
-                p1 = (p_next[1] if p_next is not None and p_next[0] == t
-                      else _dot(flat[sc:sc + tc], flat[:tc]))
-                p2 = p1 - _dot(flat[sc:2 * sc], flat[:sc]) + _dot(
-                    flat[tc + sc:tc + 2 * sc], flat[tc:tc + sc])
-                p3 = _dot(flat[2 * sc:2 * sc + tc], flat[:tc])
-                sq = a_sq + 4.0 * b_sq + c_sq
-                sums[j] += sq - 4.0 * (p1 + p2) + 2.0 * p3
-                big[j] += sq
-                p_next = (t, p3)
-    rest = n - k_rows * m0
+    k_rows, rest = divmod(n_top, m0)
+    d_mat = buf[:k_rows * m0].reshape(k_rows, m0)
+    q_sum = d_mat @ d_mat.T
+    q_abs = np.abs(q_sum)
+    for q in range(levels):
+        s = 1 << q
+        if q:
+            h = s // 2
+            q_sum = q_sum[:-h, :-h] + q_sum[h:, :-h] + q_sum[:-h, h:] + q_sum[h:, h:]
+            q_abs = q_abs[:-h, :-h] + q_abs[h:, :-h] + q_abs[:-h, h:] + q_abs[h:, h:]
+        n_k = k_rows + 1 - 2 * s  # rows k whose terms lie wholly in full rows
+        if n_k > 0:
+            for q_mat, sign, acc in ((q_sum, -2.0, sums), (q_abs, 2.0, big)):
+                diag = np.diagonal(q_mat)
+                acc[q] += float(np.sum(diag[:n_k] + diag[s:s + n_k]
+                                       + sign * np.diagonal(q_mat, offset=s)))
     if rest:
-        for j in range(levels):
-            m = m0 << j
-            i0 = (k_rows - 2 * (1 << j)) * m0
-            if i0 < 0:
-                i0 = 0
-            i1 = n - 2 * m
-            if i1 > i0:
-                d = x[i0 + 2 * m:i1 + 2 * m] - 2.0 * x[i0 + m:i1 + m] + x[i0:i1]
+        # Tail terms at row k_rows + 1 - 2s, columns < rest: run[r] sums the D rows
+        # p0 .. p0 + r - 1 (buf reaches (K + 1) m0 when rest > 0), in column strips.
+        s_max = 1 << (levels - 1)
+        p0 = k_rows + 1 - 2 * s_max
+        rows = buf[p0 * m0:(k_rows + 1) * m0].reshape(2 * s_max, m0)
+        width = max(256, _GRAM_TILE // (2 * s_max + 1))
+        run = np.empty((2 * s_max + 1, min(width, rest)))
+        for c0 in range(0, rest, width):
+            c1 = min(rest, c0 + width)
+            r = run[:, :c1 - c0]
+            r[0] = 0.0
+            for i in range(2 * s_max):
+                np.add(r[i], rows[i, c0:c1], out=r[i + 1])
+            for q in range(levels):
+                s = 1 << q
+                a = 2 * (s_max - s)
+                d = r[a + 2 * s] - 2.0 * r[a + s] + r[a]
                 val = _dot(d, d)
-                sums[j] += val
-                big[j] += val
+                sums[q] += val
+                big[q] += val
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -566,41 +606,68 @@ def _is_octave(m: np.ndarray) -> bool:
     return bool(m.size) and bool(np.all((m & (m - 1)) == 0))
 
 
-def _axis_sums(col: np.ndarray, x: np.ndarray, m: np.ndarray, method: str) -> np.ndarray:
+def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarray,
+               method: str, identify: bool) -> tuple[np.ndarray, Optional[np.ndarray]]:
     """
-    Sum the squared phase differences of one axis at every cluster size, shape (k,).
+    Return the sums of squared phase differences and maybe alpha of axis a, (k,) each.
 
-    col (M,) is the centred axis (may be overwritten), x (M + 1,) its running sum.
+    col (M,) is the axis' contiguous copy and gets overwritten.  Its mean is removed
+    first: the variances ignore a constant offset, and without it the running sums of
+    an accelerometer at 9.81 m/s^2 with 1e-4 m/s^2 of noise would lose their digits.
     """
-    out = np.empty(m.size)
     order = _DIFF_ORDER[method]
+    out = np.empty(m.size)
+    cache = []
+
+    def phase() -> np.ndarray:
+        if not cache:
+            cache.append(_phase_row(y2[:, a] - mean))
+        return cache[0]
+
     if method == 'overlapping' and _is_octave(m) and m.size > 2:
-        levels = int(m.max()).bit_length()
-        sums, cancel = _octave_sums(col, x, levels)
+        # The fast octave kernels never need the running sum X (a pass and a copy the
+        # size of the record) unless they cancel too much or B1 asks for R(n).
+        blocks = [] if identify else None
+        sums, cancel = _octave_sums(col, mean, int(m.max()).bit_length(), blocks)
         pick = np.array([int(mj).bit_length() - 1 for mj in m])
         out[:] = sums[pick]
         # Where the identity cancelled more than 1e5 x the result (error ~1e-11
         # relative), recompute exactly from the running sum.
         for j in np.flatnonzero(~(cancel[pick] < _CANCEL_LIMIT)):
-            out[j] = _diff_sumsq(x, int(m[j]), order)
-        return out
-    for j, mj in enumerate(m):
-        mj = int(mj)
-        if method == 'nonoverlapping':
-            d = np.diff(x[::mj], 2)
-            out[j] = float(np.dot(d, d))
-        else:
-            out[j] = _diff_sumsq(x, mj, order)
-    return out
+            out[j] = _diff_sumsq(phase(), int(m[j]), order)
+
+        def cluster_means(j: int) -> np.ndarray:
+            return blocks[pick[j]] / float(m[j])
+    else:
+        col -= mean
+        x = _phase_row(col)
+        cache.append(x)
+        for j, mj in enumerate(m):
+            mj = int(mj)
+            if method == 'nonoverlapping':
+                d = np.diff(x[::mj], 2)
+                out[j] = float(np.dot(d, d))
+            else:
+                out[j] = _diff_sumsq(x, mj, order)
+
+        def cluster_means(j: int) -> np.ndarray:
+            mj = int(m[j])
+            return np.diff(x[:_ACF_MAX_POINTS * mj + 1:mj]) / mj
+    ids = _identify_axis(cluster_means, m, method, phase) if identify else None
+    return out, ids
 
 
-def _map_axes(func, n_axes: int) -> list:
-    """Run func(a) for every axis, on threads: numpy and BLAS release the GIL."""
-    workers = min(n_axes, os.cpu_count() or 1, _MAX_THREADS)
+def _workers(n_axes: int) -> int:
+    """Worker threads for n_axes axes: one per axis, at most one per core."""
+    return max(1, min(n_axes, os.cpu_count() or 1, _MAX_THREADS))
+
+
+def _map_threads(func, n_items: int, workers: int) -> list:
+    """Return [func(i) for i < n_items], on threads: numpy and BLAS release the GIL."""
     if workers <= 1:
-        return [func(a) for a in range(n_axes)]
+        return [func(i) for i in range(n_items)]
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(func, range(n_axes)))
+        return list(pool.map(func, range(n_items)))
 
 
 def _normalise(sums: np.ndarray, m: np.ndarray, n_terms: np.ndarray,
@@ -638,15 +705,11 @@ def _curve_core(y2: np.ndarray, m: np.ndarray, method: str,
     ``_ALPHA_UNKNOWN`` where the record has too few clusters for a data-based test.
     """
     n, n_axes = y2.shape
-    cols = _centered_columns(y2)
-
-    def work(a: int) -> tuple[np.ndarray, Optional[np.ndarray]]:
-        x = _phase_row(cols[a])
-        ids = _identify_axis(x, m, method) if identify else None
-        return _axis_sums(cols[a], x, m, method), ids
-
     with _single_thread_blas():
-        results = _map_axes(work, n_axes)
+        cols, means = _columns(y2)
+        results = _map_threads(
+            lambda a: _axis_work(y2, cols[a], a, float(means[a]), m, method, identify),
+            n_axes, _workers(n_axes))
     n_terms = terms_count(m, n, method)
     sums = np.stack([r[0] for r in results], axis=1).reshape(m.size, n_axes)
     var = _normalise(sums, m, n_terms, method)
@@ -1142,8 +1205,12 @@ def _rn_theory(m: int, alpha: int) -> float:
     return 3.0 * math.log(256.0 / 27.0) / (2.0 * (1.038 + 3.0 * math.log(math.pi * m)))
 
 
-def _b1_alpha(z: np.ndarray, x_row: np.ndarray, m: int, alpha_min: int) -> int:
-    """B1-ratio noise identification of n cluster averages z (n,), 4 <= n < 30."""
+def _b1_alpha(z: np.ndarray, phase, m: int, alpha_min: int) -> int:
+    """
+    B1-ratio noise identification of n cluster averages z (n,), 4 <= n < 30.
+
+    phase() returns the running sum X (M + 1,), needed only to split phase noises.
+    """
     n = z.size
     dz = np.diff(z)
     avar = 0.5 * float(np.dot(dz, dz)) / dz.size
@@ -1161,33 +1228,32 @@ def _b1_alpha(z: np.ndarray, x_row: np.ndarray, m: int, alpha_min: int) -> int:
     if mu > -2:
         return -mu - 1
     # Phase noise: white and flicker PM share mu = -2; the R(n) ratio separates them.
-    rn = _mvar_ratio(x_row, m)
+    rn = _mvar_ratio(phase(), m)
     if not math.isfinite(rn) or rn <= 0:
         return 1
     r_white, r_flicker = _rn_theory(m, 2), _rn_theory(m, 1)
     return 2 if abs(math.log(rn / r_white)) < abs(math.log(rn / r_flicker)) else 1
 
 
-def _identify_axis(x: np.ndarray, m: np.ndarray, method: str) -> np.ndarray:
+def _identify_axis(cluster_means, m: np.ndarray, method: str, phase) -> np.ndarray:
     """
-    Alpha per cluster size for one axis from its phase row x (M + 1,), shape (k,).
+    Alpha per cluster size for one axis, shape (k,).
 
-    ``_ALPHA_UNKNOWN`` where fewer than ``MIN_B1_POINTS`` clusters exist.
+    cluster_means(j) returns the first min(_ACF_MAX_POINTS, M // m[j]) non-overlapping
+    cluster averages [unit] and phase() the running sum X (M + 1,) of the axis.  The
+    lag-1 test uses at most _ACF_MAX_POINTS averages: r1 then has a standard error of
+    0.004, well inside the decision margins, and the test stays cheap at m = 1 on long
+    records.  ``_ALPHA_UNKNOWN`` where fewer than ``MIN_B1_POINTS`` clusters exist.
     """
     alpha_min = _ALPHA_MIN[method]
     d_max = _DIFF_ORDER[method]
     out = np.full(m.size, _ALPHA_UNKNOWN, dtype=np.int64)
     for j, mj in enumerate(m):
-        mj = int(mj)
-        # Non-overlapping cluster averages, from the phase at cluster boundaries.  The
-        # lag-1 test uses at most the first _ACF_MAX_POINTS of them: r1 then has a
-        # standard error of 0.004, well inside the decision margins, and the test
-        # stays cheap at m = 1 on long records.
-        z = np.diff(x[:_ACF_MAX_POINTS * mj + 1:mj]) / mj
+        z = cluster_means(j)
         if z.size >= MIN_ACF_POINTS:
             out[j] = max(alpha_min, min(2, _lag1_alpha(z, d_max)))
         elif z.size >= MIN_B1_POINTS:
-            out[j] = max(alpha_min, min(2, _b1_alpha(z, x, mj, alpha_min)))
+            out[j] = max(alpha_min, min(2, _b1_alpha(z, phase, int(mj), alpha_min)))
     return out
 
 
@@ -1277,9 +1343,6 @@ def allan_curve(y: np.ndarray, rate_hz: float,
         raise InputError(f'confidence must lie strictly between 0 and 1, got {confidence}')
     y2, _ = _as_2d(y)
     n, n_axes = y2.shape
-    if not np.isfinite(y2).all():
-        bad = int(np.flatnonzero(~np.isfinite(y2).all(axis=1))[0])
-        raise InputError(f'sample {bad} is not a finite number')
     m_max = max_cluster_size(n, method)
     if m_max < 1:
         need = 3 if method == 'hadamard' else 2

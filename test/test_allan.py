@@ -147,6 +147,40 @@ def test_overlapping_matches_extended_precision(kind):
     assert_allclose(allan.overlapping_avar(y, m_odd)[0], ref_odd, rtol=1e-9)
 
 
+@pytest.mark.parametrize('n', [2 ** 16, 2 ** 16 + 1, 99_999])
+@pytest.mark.parametrize('kind', ['white_accel', 'random_walk', 'drift'])
+@pytest.mark.parametrize('pyramid_levels, gram_rows', [(8, 512), (3, 4)])
+def test_octave_gram_levels_match_extended_precision(monkeypatch, n, kind, pyramid_levels,
+                                                     gram_rows):
+    # Forces the Gram-matrix kernel onto most levels (it normally starts at m = 2^18),
+    # with and without a ragged last row (2^16 + 1 has one term past the full rows at
+    # the longest tau), then past its row limit, where the exact kernel takes over.
+    monkeypatch.setattr(allan, '_PYRAMID_LEVELS', pyramid_levels)
+    monkeypatch.setattr(allan, '_GRAM_MAX_ROWS', gram_rows)
+    rng = np.random.default_rng(12)
+    w = rng.standard_normal(n) * 1e-4
+    y = {'white_accel': 9.81 + w, 'random_walk': np.cumsum(w) + w,
+         'drift': w + np.linspace(0.0, 1e-2, n)}[kind]
+    m = allan.tau_grid(n, 'octave')
+    ref = exact_sums(y, m) / (2.0 * m * m * (n + 1 - 2 * m))
+    assert_allclose(allan.overlapping_avar(y, m)[0], ref, rtol=1e-9)
+
+
+def test_octave_fast_path_identifies_like_the_exact_path(monkeypatch):
+    # The octave kernels hand the noise identification block sums of the samples; one
+    # cluster size at a time goes through the running sum instead.  Same alpha.
+    rng = np.random.default_rng(13)
+    n = 200_000
+    y = np.column_stack([rng.standard_normal(n), np.cumsum(rng.standard_normal(n)) * 1e-2,
+                         np.repeat(rng.standard_normal(n // 100), 100)])
+    m = allan.tau_grid(n, 'octave')
+    m = m[n // m >= allan.MIN_B1_POINTS]  # beyond, alpha comes from the curve's slope
+    single = np.stack([allan.identify_alpha(y, m[j:j + 1])[0] for j in range(m.size)])
+    assert_array_equal(allan.identify_alpha(y, m), single)
+    monkeypatch.setattr(allan, '_PYRAMID_LEVELS', 6)
+    assert_array_equal(allan.identify_alpha(y, m), single)
+
+
 def test_all_methods_match_allantools():
     allantools = pytest.importorskip('allantools')
     rng = np.random.default_rng(5)
