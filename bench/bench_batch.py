@@ -43,13 +43,14 @@ def simulate(rows: int, rate_hz: float, seed: int = 1) -> np.ndarray:
 
 def timed(func, *args, **kwargs):
     """
-    Return (result, best wall seconds of three calls).
+    Return (result, best wall seconds of five calls).
 
-    Best of three for every contender alike: the first call pays for touching fresh
-    memory (and other jobs on a shared machine add noise), which is not the method's.
+    Best of five for every contender alike: the first call pays for touching fresh
+    memory, and other jobs on this shared machine take a core now and then (which
+    slows the two-thread runs, not allantools' one thread); neither is the method's.
     """
     best = float('inf')
-    for _ in range(3):
+    for _ in range(5):
         t0 = time.perf_counter()
         out = func(*args, **kwargs)
         best = min(best, time.perf_counter() - t0)
