@@ -304,8 +304,11 @@ class ImuAllanNode(Node):
             return t[:0], samples[:0]
         y = np.concatenate([b[1] for b in self._resume_hold])
         self._resume_hold = None
-        span = float(t.max() - t.min())
-        rate = (t.size - 1) * 1e9 / span if span > 0 else 0.0
+        # The median interval, not count / span: a reader that has just started often
+        # misses messages, and a gap must not pass for another rate.
+        steps = np.diff(np.sort(t))
+        steps = steps[steps > 0]
+        rate = 1e9 / float(np.median(steps)) if steps.size else 0.0
         saved = self.session.rate_hz
         tolerance = self.values['rate_tolerance']
         if rate <= 0 or abs(rate / saved - 1) > tolerance:

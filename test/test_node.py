@@ -466,6 +466,28 @@ def test_save_and_reset_services(rig, tmp_path):
     assert r.node.session.stats.n_used == 0 and r.node.last_result is None
 
 
+def test_resume_is_confirmed_across_a_gap_in_the_first_samples(context, tmp_path):
+    # A reader that has just started often misses messages: a gap among the samples
+    # that check the rate must not pass for another rate and set the checkpoint aside.
+    t, y = _record(200.0, 20.0)
+    first = Rig(context, tmp_path)
+    try:
+        first.feed(t[:2000], y[:2000])
+        assert _call(first, 'save').success
+    finally:
+        first.close()
+    second = Rig(context, tmp_path, resume=True)
+    try:
+        keep = np.r_[2000:2010, 2300:4000]  # 1.45 s lost after the first 10 samples
+        second.feed(t[keep], y[keep])
+        # A fresh session (the checkpoint refused) would count only the new samples.
+        wait(lambda: second.node.session.stats.n_received == 2000 + keep.size, 20,
+             'the checkpoint plus the new samples')
+        assert not list(tmp_path.glob('checkpoint.*.npz'))  # nothing set aside
+    finally:
+        second.close()
+
+
 def test_diagnose_service_runs_in_the_background_and_publishes_the_summary(rig):
     r = rig()
     sub = r.subscribe(f'{NODE}/diagnosis', String)
