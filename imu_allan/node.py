@@ -238,7 +238,7 @@ class ImuAllanNode(Node):
                     self._resume_hold = []
                 # Samples after the last checkpoint are lost: no Allan term may span them,
                 # and the step to the first new stamp is not a step of the sensor clock.
-                session.acc.break_segment()
+                session.break_segment()
                 session.last_stamp_ns = None
                 return session
         elif resume:

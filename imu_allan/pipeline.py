@@ -538,6 +538,15 @@ class Session:
         self._ref_mean = 0.99 * self._ref_mean + 0.01 * mean
         return False
 
+    def break_segment(self) -> None:
+        """
+        End the contiguous segment here (e.g. after a restart that lost samples).
+
+        The samples held for the motion check count as still, as at a gap, and no
+        Allan term spans the break.
+        """
+        self._flush_motion(break_after=True)
+
     def flush(self) -> None:
         """Accumulate samples still held back (call at the end of a recording)."""
         if self.acc is None and self._pending_t:
@@ -612,7 +621,7 @@ class Session:
         if self.acc is None:
             return
         meta = {
-            'version': 2, 'rate_hz': self.rate_hz, 'axes': list(AXES),
+            'version': 3, 'rate_hz': self.rate_hz, 'axes': list(AXES),
             'config': asdict(self.config), 'stats': asdict(self.stats),
             'warn_text': self._warn_text, 'warn_count': self._warn_count,
             'first_stamp_ns': self.first_stamp_ns,
@@ -625,6 +634,9 @@ class Session:
             'off_period_ns': self._off_period_ns, 'nan_break': self._nan_break,
             'ref_mean': None if self._ref_mean is None else self._ref_mean.tolist(),
             'ref_std': None if self._ref_std is None else self._ref_std.tolist(),
+            # The motion and frozen-axis checks in progress (version 3).
+            'moving': self._moving, 'in_motion': self._in_motion,
+            'still_since_ns': self._still_since_ns, 'repeat': self._repeat.tolist(),
         }
         fd, tmp_acc = tempfile.mkstemp(dir=path.parent, suffix='.acc.npz')
         os.close(fd)
@@ -633,6 +645,10 @@ class Session:
             with np.load(tmp_acc, allow_pickle=False) as z:
                 arrays = {f'acc__{k}': z[k] for k in z.files}
             arrays['session_meta'] = np.array(json.dumps(meta))
+            # Samples held for the motion check of a window not yet complete (version 3).
+            arrays['held_stamp_ns'] = np.concatenate(self._win_t or [np.empty(0, np.int64)])
+            arrays['held_samples'] = np.concatenate(self._win_y or [np.empty((0, N_AXES))])
+            arrays['last_value'] = self._last_value
             fd, tmp = tempfile.mkstemp(dir=path.parent, suffix='.npz')
             with os.fdopen(fd, 'wb') as f:
                 np.savez(f, **arrays)
@@ -669,6 +685,8 @@ class Session:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z['session_meta']))
                 acc_arrays = {k[5:]: z[k] for k in z.files if k.startswith('acc__')}
+                held = {k: z[k] for k in ('held_stamp_ns', 'held_samples', 'last_value')
+                        if k in z.files}
         except (OSError, ValueError, KeyError) as exc:
             raise InputError(f'cannot read checkpoint {path}: {exc}') from None
         if meta.get('axes') != list(AXES):
@@ -697,6 +715,15 @@ class Session:
         if meta['ref_mean'] is not None:
             session._ref_mean = np.array(meta['ref_mean'])
             session._ref_std = np.array(meta['ref_std'])
+        if 'held_samples' in held:  # version 3; older checkpoints lost these
+            if held['held_stamp_ns'].size:
+                session._win_t = [held['held_stamp_ns'].astype(np.int64)]
+                session._win_y = [held['held_samples'].astype(np.float64)]
+            session._last_value = held['last_value'].astype(np.float64)
+            session._repeat = np.array(meta['repeat'], dtype=np.int64)
+            session._moving = bool(meta['moving'])
+            session._in_motion = bool(meta['in_motion'])
+            session._still_since_ns = meta['still_since_ns']
         return session
 
 

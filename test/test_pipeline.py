@@ -134,18 +134,23 @@ def test_motion_policies(policy):
         assert s.stats.n_used == pytest.approx(40_000 - 16_500, abs=200)
 
 
-def test_checkpoint_round_trip_continues_identically(tmp_path):
+@pytest.mark.parametrize('cut', [20_000, 20_050])
+def test_checkpoint_round_trip_continues_identically(tmp_path, cut):
+    # 20_050 stops inside a motion window (100 samples at 100 Hz): the 50 samples held
+    # for its check, and a frozen run across the cut, must survive the checkpoint.
     t, y = _record(40_000)
+    y[cut - 150:cut + 100, 0] = y[cut - 150, 0]  # 250 identical values (limit 200)
     whole = _feed(Session(), t, y)
     first = Session()
-    for k in range(0, 20_000, 500):
-        first.add(t[k:k + 500], y[k:k + 500])
+    for k in range(0, cut, 500):
+        first.add(t[k:min(k + 500, cut)], y[k:min(k + 500, cut)])
     first.save_state(tmp_path / 'state.npz')
     resumed = Session.load_state(tmp_path / 'state.npz')
     assert resumed.stats.n_used == first.stats.n_used
-    for k in range(20_000, 40_000, 500):
+    for k in range(cut, 40_000, 500):
         resumed.add(t[k:k + 500], y[k:k + 500])
     resumed.flush()
+    assert resumed.stats == whole.stats and whole.stats.frozen_axes == ['gyro_x']
     assert_allclose(resumed.curve().avar, whole.curve().avar, rtol=1e-12)
 
 
@@ -310,7 +315,7 @@ def _resume(tmp_path, t, y, cut: int, lost: int = 0, node_style: bool = False) -
     resumed = Session.load_state(tmp_path / 'state.npz')
     if node_style:
         # What the node does after a resume: no Allan term or step spans the lost tail.
-        resumed.acc.break_segment()
+        resumed.break_segment()
         resumed.last_stamp_ns = None
     return _feed_random_blocks(resumed, t[cut + lost:], y[cut + lost:], 5, 700)
 
