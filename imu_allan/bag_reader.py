@@ -213,6 +213,41 @@ def _fallback_decode(payload: bytes, ros1: bool) -> Optional[Tuple[int, list]]:
         return None
 
 
+def _imu_layout(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
+                ros1: bool) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Where the doubles of each serialised Imu message start, and in which byte order.
+
+    Returns (n,) int64 offset of orientation.x from the payload start [bytes], (n,)
+    bool big-endian, and (n,) bool "this plain layout fits the payload".
+    """
+    n = starts.size
+    has_head = (lengths >= 16) & (starts + 16 <= u8.size)
+    if has_head.all():
+        head = _records(u8, starts, _HEAD)
+    elif has_head.any():
+        # Short payloads read a stand-in head; they are never marked as fitting below.
+        head = _records(u8, np.where(has_head, starts, starts[has_head][0]), _HEAD)
+    else:
+        head = np.zeros(n, _HEAD)
+    frame_len = head['frame_len_le'].astype(np.int64)
+    if ros1:
+        big = np.zeros(n, bool)
+        known = has_head
+        doubles_offset = 16 + frame_len
+    else:
+        # Encapsulation 0x0000 = CDR big-endian, 0x0001 = CDR little-endian.
+        big = head['enc1'] == 0
+        known = has_head & (head['enc0'] == 0) & (head['enc1'] <= 1)
+        if big.any():
+            frame_len = np.where(big, head['frame_len_be'], frame_len)
+        known &= frame_len >= 1   # a CDR string always carries its NUL
+        # The doubles are 8-aligned relative to the end of the 4-byte encapsulation header.
+        doubles_offset = 4 + (12 + frame_len + 7) // 8 * 8
+    fits = known & (frame_len < lengths) & (doubles_offset + _N_DOUBLES_BYTES <= lengths)
+    return doubles_offset, big, fits
+
+
 def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
                         encoding: str = 'cdr') -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
@@ -249,29 +284,7 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     ok = np.zeros(n, bool)
     if n == 0:
         return stamp_ns, samples, ok
-    has_head = (lengths >= 16) & (starts + 16 <= u8.size)
-    if has_head.all():
-        head = _records(u8, starts, _HEAD)
-    elif has_head.any():
-        # Short payloads read a stand-in head; they are never marked as fitting below.
-        head = _records(u8, np.where(has_head, starts, starts[has_head][0]), _HEAD)
-    else:
-        head = np.zeros(n, _HEAD)
-    frame_len = head['frame_len_le'].astype(np.int64)
-    if ros1:
-        big = np.zeros(n, bool)
-        known = has_head
-        doubles_offset = 16 + frame_len
-    else:
-        # Encapsulation 0x0000 = CDR big-endian, 0x0001 = CDR little-endian.
-        big = head['enc1'] == 0
-        known = has_head & (head['enc0'] == 0) & (head['enc1'] <= 1)
-        if big.any():
-            frame_len = np.where(big, head['frame_len_be'], frame_len)
-        known &= frame_len >= 1   # a CDR string always carries its NUL
-        # The doubles are 8-aligned relative to the end of the 4-byte encapsulation header.
-        doubles_offset = 4 + (12 + frame_len + 7) // 8 * 8
-    fits = known & (frame_len < lengths) & (doubles_offset + _N_DOUBLES_BYTES <= lengths)
+    doubles_offset, big, fits = _imu_layout(u8, starts, lengths, ros1)
     # One group per layout (doubles offset, byte order); nearly always a single group.
     key = np.where(fits, doubles_offset * 2 + big, -1)
     everything = bool(fits.all() and (key == key[0]).all())
@@ -350,6 +363,50 @@ def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns
     if n_bad:
         return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad)
     return _Piece(recv_ns, stamp_ns, samples, 0)
+
+
+def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
+                            linear_acceleration_covariance) -> List[Optional[bytes]]:
+    """
+    Copy serialised ROS 2 sensor_msgs/msg/Imu messages (CDR) with new covariances.
+
+    The two 3x3 covariances are written straight into the bytes, so republishing
+    costs no Python message per sample.
+
+    Parameters
+    ----------
+    payloads : sequence of bytes
+        n serialised messages, e.g. from an rclpy raw subscription.
+    angular_velocity_covariance : array_like
+        (9,) row-major 3x3 covariance [(rad/s)^2].
+    linear_acceleration_covariance : array_like
+        (9,) row-major 3x3 covariance [(m/s^2)^2].
+
+    Returns
+    -------
+    list
+        n patched payloads (bytes); None where the payload is not in the plain CDR
+        layout (the caller deserialises those).
+
+    """
+    if not len(payloads):
+        return []
+    u8, starts, lengths = _join(payloads)
+    u8 = u8.copy()  # writable
+    offset, big, fits = _imu_layout(u8, starts, lengths, False)
+    # The covariances follow orientation (4 doubles), its covariance (9) and
+    # angular_velocity (3), then linear_acceleration (3): byte 128 and 224 of the doubles.
+    for field_at, cov in ((128, angular_velocity_covariance),
+                          (224, linear_acceleration_covariance)):
+        for is_big in (False, True):
+            sel = np.flatnonzero(fits & (big == is_big))
+            if sel.size:
+                data = np.frombuffer(np.asarray(cov, '>f8' if is_big else '<f8').tobytes(),
+                                     np.uint8)
+                u8[(starts[sel] + offset[sel] + field_at)[:, None] + np.arange(72)] = data
+    joined = u8.tobytes()
+    return [joined[a:a + n] if ok else None
+            for a, n, ok in zip(starts.tolist(), lengths.tolist(), fits.tolist())]
 
 
 def _join(payloads) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -38,7 +38,7 @@ from std_srvs.srv import Trigger
 
 from imu_allan import AXES
 from imu_allan.analysis import analyze, CONFIDENCE
-from imu_allan.bag_reader import decode_imu_cdr
+from imu_allan.bag_reader import decode_imu_cdr, set_imu_covariances_cdr
 from imu_allan.diagnose import diagnose_session
 from imu_allan.errors import InputError
 from imu_allan.node_params import BY_NAME, PARAMS, session_config
@@ -323,11 +323,15 @@ class ImuAllanNode(Node):
 
     def _republish(self, raws: list) -> None:
         cov = self._last_result.imu_covariances()
-        for raw in raws:
-            msg = deserialize_message(raw, Imu)
-            msg.angular_velocity_covariance = cov['angular_velocity_covariance']
-            msg.linear_acceleration_covariance = cov['linear_acceleration_covariance']
-            self.pub_imu.publish(msg)
+        gyro = cov['angular_velocity_covariance']
+        accel = cov['linear_acceleration_covariance']
+        for raw, patched in zip(raws, set_imu_covariances_cdr(raws, gyro, accel)):
+            if patched is None:  # an unusual layout: through a Python message
+                msg = deserialize_message(raw, Imu)
+                msg.angular_velocity_covariance = gyro
+                msg.linear_acceleration_covariance = accel
+                patched = msg
+            self.pub_imu.publish(patched)
 
     @property
     def last_result(self):

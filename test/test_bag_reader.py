@@ -20,7 +20,8 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 
 from imu_allan.bag_reader import (decode_imu_cdr, decode_imu_payloads, ImuBlock,
-                                  list_imu_topics, list_topics, open_imu)
+                                  list_imu_topics, list_topics, open_imu,
+                                  set_imu_covariances_cdr)
 from imu_allan.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
 from imu_allan.errors import InputError
 
@@ -219,6 +220,26 @@ def test_decoder_handles_big_endian_odd_lengths_and_garbage():
     assert_array_equal(decode_imu_cdr(payloads[:6])[1], samples)
     with pytest.raises(InputError, match='1 of 7 payloads'):
         decode_imu_cdr(payloads)
+
+
+def test_covariances_are_written_into_the_cdr_bytes():
+    stamps, samples = _recording(6, seed=8)
+    msgs = [_imu_msg(ROS2, stamps[i], samples[i], 'f' * i) for i in range(6)]
+    payloads = [bytes(ROS2.serialize_cdr(m, IMU, little_endian=i % 2 == 0))
+                for i, m in enumerate(msgs)]
+    payloads.append(b'\x00\x01\x00\x00' + b'\x07' * 10)   # too short to be an Imu
+    gyro, accel = np.arange(9) * 1e-6, np.arange(9, 18) * 1e-3
+    patched = set_imu_covariances_cdr(payloads, gyro, accel)
+    assert patched[-1] is None and set_imu_covariances_cdr([], gyro, accel) == []
+    for raw, msg in zip(patched[:-1], msgs):
+        got = ROS2.deserialize_cdr(raw, IMU)
+        assert_array_equal(got.angular_velocity_covariance, gyro)
+        assert_array_equal(got.linear_acceleration_covariance, accel)
+        # Everything else is the original message, byte for byte.
+        got.angular_velocity_covariance = msg.angular_velocity_covariance
+        got.linear_acceleration_covariance = msg.linear_acceleration_covariance
+        assert bytes(ROS2.serialize_cdr(got, IMU, little_endian=raw[1] == 1)) == \
+            bytes(ROS2.serialize_cdr(msg, IMU, little_endian=raw[1] == 1))
 
 
 # -- bad inputs ---------------------------------------------------------------------
