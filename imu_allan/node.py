@@ -39,7 +39,7 @@ from std_srvs.srv import Trigger
 from imu_allan import AXES
 from imu_allan.analysis import analyze, CONFIDENCE
 from imu_allan.bag_reader import decode_imu_cdr, set_imu_covariances_cdr
-from imu_allan.diagnose import diagnose_session
+from imu_allan.diagnose import diagnose_session, RawKeeper
 from imu_allan.errors import InputError
 from imu_allan.node_params import BY_NAME, PARAMS, session_config
 from imu_allan.pipeline import Session
@@ -48,7 +48,8 @@ from imu_allan.report import write_outputs
 CHECKPOINT = 'checkpoint.npz'
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
 _SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messages',
-                   'output_dir', 'resume', 'publish_imu_with_covariance'}
+                   'output_dir', 'resume', 'publish_imu_with_covariance',
+                   'diagnose_raw_samples'}
 #: Samples a resumed session waits for before it compares their rate with the checkpoint.
 _RESUME_CHECK_SAMPLES = 50
 #: The timer hands the pipeline at least this many messages (or whatever is there after
@@ -148,6 +149,9 @@ class ImuAllanNode(Node):
         self._last_handover = time.monotonic()
         self._resume_hold: list | None = None
         self._diagnose_fn = None
+        # Block-averaged copy of the samples for the ~/diagnose periodogram check, and
+        # the session it belongs to (a new session starts a new copy).
+        self._raw: tuple[Session, RawKeeper] | None = None
         self.session = self._new_session(resume=self.values['resume'])
 
         qos = QoSProfile(
@@ -293,8 +297,17 @@ class ImuAllanNode(Node):
                 stamp_ns, samples = self._check_resume(stamp_ns, samples)
             if stamp_ns.size:
                 self.session.add(stamp_ns, samples)
+                self._keep_raw(samples)
         if self.pub_imu is not None and self._last_result is not None:
             self._republish(raws)
+
+    def _keep_raw(self, samples: np.ndarray) -> None:
+        rows = self.values['diagnose_raw_samples']
+        if rows < 2 or self.session.rate_hz <= 0:  # the rate is known after a few blocks
+            return
+        if self._raw is None or self._raw[0] is not self.session:
+            self._raw = (self.session, RawKeeper(self.session.rate_hz, len(AXES), rows))
+        self._raw[1].add(samples[np.isfinite(samples).all(axis=1)])
 
     def _check_resume(self, stamp_ns: np.ndarray, samples: np.ndarray) -> tuple:
         """Hold the first samples after a resume; compare their rate with the checkpoint."""
@@ -478,37 +491,48 @@ class ImuAllanNode(Node):
                 'published on ~/diagnosis'
             return response
         self._process()
-        view = self._snapshot()
+        view, raw = self._diagnose_snapshot()
         if view.curve() is None:
             response.success = False
             response.message = 'not enough data for any Allan deviation yet'
             return response
-        self._diagnose_thread = threading.Thread(target=self._diagnose_and_log, args=(view,),
-                                                 name='imu_allan_diagnose', daemon=True)
+        self._diagnose_thread = threading.Thread(target=self._diagnose_and_log,
+                                                 args=(view, raw), name='imu_allan_diagnose',
+                                                 daemon=True)
         self._diagnose_thread.start()
         response.success = True
         response.message = (f'diagnosing {view.stats.n_used:,} samples in the background; '
                             'the summary will be published on ~/diagnosis')
         return response
 
-    def _diagnose_and_log(self, view) -> None:
+    def _diagnose_snapshot(self) -> tuple:
+        """Return (session view, copy of its kept samples or None), taken together."""
+        with self._lock:
+            raw = None
+            if self._raw is not None and self._raw[0] is self.session:
+                raw = copy.deepcopy(self._raw[1])
+            return _SessionView(self.session), raw
+
+    def _diagnose_and_log(self, view, raw) -> None:
         try:
-            self.diagnose(view)
+            self.diagnose(view, raw)
         except InputError as exc:
             self.get_logger().warning(f'diagnosis failed: {exc}')
 
-    def diagnose(self, view=None) -> str:
+    def diagnose(self, view=None, raw: RawKeeper | None = None) -> str:
         """
         Diagnose the data so far (imu_allan.diagnose); publish the summary on ~/diagnosis.
 
         Runs in the caller's thread (the ~/diagnose service runs it on a worker thread).
-        The node keeps no raw samples, so a sinusoid is named from the Allan curve
-        alone, without the periodogram check (the result's notes say so).
+        A sinusoid is checked in the periodogram of the block-averaged samples the node
+        keeps (``diagnose_raw_samples`` rows; with 0, from the Allan curve alone).
 
         Parameters
         ----------
         view : optional
-            A snapshot of the session (default: one taken now).
+            A snapshot of the session (default: one taken now, with the raw samples).
+        raw : RawKeeper, optional
+            A snapshot of the kept samples, taken with ``view``.
 
         Returns
         -------
@@ -523,8 +547,8 @@ class ImuAllanNode(Node):
         """
         if view is None:
             self._process()
-            view = self._snapshot()
-        result = diagnose_session(view, source=self.subscription.topic_name)
+            view, raw = self._diagnose_snapshot()
+        result = diagnose_session(view, raw, source=self.subscription.topic_name)
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
         text = '\n'.join(result.summary_lines())

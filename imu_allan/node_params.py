@@ -84,6 +84,9 @@ PARAMS: tuple[Param, ...] = (
           'Continue from the checkpoint in output_dir when rate and axes match'),
     Param('publish_imu_with_covariance', bool, False, '', (),
           'Republish the Imu messages on ~/imu_with_covariance with fitted covariances'),
+    Param('diagnose_raw_samples', int, 262144, 'samples', (0, 16777216),
+          'Rows kept for the ~/diagnose periodogram (pairs averaged as the record grows;'
+          ' 48 bytes each); 0 keeps none'),
     Param('gyro_range_rad_s', float, _S.gyro_range_rad_s, 'rad/s', (0.0, 1.0e4),
           'Gyro full scale for the saturation check; 0 disables it'),
     Param('accel_range_m_s2', float, _S.accel_range_m_s2, 'm/s^2', (0.0, 1.0e5),

@@ -22,6 +22,7 @@ import time
 os.environ['ROS_DOMAIN_ID'] = str(random.Random().randint(1, 100))
 
 import numpy as np  # noqa: E402
+from numpy.testing import assert_allclose  # noqa: E402
 import pytest  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
@@ -501,6 +502,30 @@ def test_diagnose_service_runs_in_the_background_and_publishes_the_summary(rig):
     assert [ln.split(':')[0] for ln in lines] == list(AXES)
     assert all('gap' in ln for ln in lines)
     r.peer.destroy_subscription(sub)
+
+
+def test_the_node_keeps_raw_samples_for_the_diagnosis_periodogram(rig):
+    t, y = _record(200.0, 20.0)
+    r = rig()
+    r.feed(t, y)
+    r.node._process()
+    view, raw = r.node._diagnose_snapshot()
+    # All 4000 samples fit in the default 262144 rows: kept as they came.
+    assert raw.kept_rate_hz == 200.0 and view.stats.n_used == t.size
+    assert_allclose(raw.samples, y, rtol=0, atol=0)
+    small = rig(diagnose_raw_samples=1000)
+    small.feed(t, y)
+    small.node._process()
+    raw = small.node._diagnose_snapshot()[1]
+    # Full three times, so pairs were averaged three times: the means of eight samples.
+    assert raw.kept_rate_hz == 25.0 and raw.samples.shape == (500, 6)
+    assert_allclose(raw.samples, y.reshape(-1, 8, 6).mean(axis=1), rtol=1e-12)
+    assert _call(small, 'reset').success
+    assert small.node._diagnose_snapshot()[1] is None          # a new session, a new copy
+    none = rig(diagnose_raw_samples=0)
+    none.feed(t[:1000], y[:1000])
+    none.node._process()
+    assert none.node._diagnose_snapshot()[1] is None
 
 
 # ------------------------------------------------------ the executable itself
