@@ -689,6 +689,19 @@ class Session:
                         if k in z.files}
         except (OSError, ValueError, KeyError) as exc:
             raise InputError(f'cannot read checkpoint {path}: {exc}') from None
+        try:
+            return cls._restore(path, meta, acc_arrays, held, config, on_warning)
+        except InputError:
+            raise
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise InputError(f'checkpoint {path} is damaged: {exc!r}') from None
+
+    @classmethod
+    def _restore(cls, path, meta: dict, acc_arrays: dict, held: dict,
+                 config: SessionConfig | None,
+                 on_warning: Callable[[str], None] | None) -> 'Session':
+        if not isinstance(meta, dict):
+            raise TypeError('its metadata is not a JSON object')
         if meta.get('axes') != list(AXES):
             raise InputError(f'checkpoint {path} has axes {meta.get("axes")}, not {list(AXES)}')
         saved_cfg = SessionConfig(**meta['config'])
@@ -716,7 +729,11 @@ class Session:
             session._ref_mean = np.array(meta['ref_mean'])
             session._ref_std = np.array(meta['ref_std'])
         if 'held_samples' in held:  # version 3; older checkpoints lost these
-            if held['held_stamp_ns'].size:
+            rows = held['held_stamp_ns'].shape
+            if (held['held_samples'].shape != rows + (N_AXES,)
+                    or held['last_value'].shape != (N_AXES,) or len(meta['repeat']) != N_AXES):
+                raise ValueError('the held samples or axis counters have the wrong shape')
+            if rows[0]:
                 session._win_t = [held['held_stamp_ns'].astype(np.int64)]
                 session._win_y = [held['held_samples'].astype(np.float64)]
             session._last_value = held['last_value'].astype(np.float64)

@@ -164,6 +164,24 @@ def test_checkpoint_refuses_another_rate(tmp_path):
         Session.load_state(tmp_path / 'bad.npz')
 
 
+@pytest.mark.parametrize('damage', ['no_stats', 'held_rows', 'meta_list'])
+def test_a_damaged_checkpoint_is_one_clear_error(tmp_path, damage):
+    t, y = _record(5_050)
+    _feed(Session(), t, y).save_state(tmp_path / 'state.npz')
+    with np.load(tmp_path / 'state.npz') as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays['session_meta']))
+    if damage == 'no_stats':
+        del meta['stats']
+    elif damage == 'held_rows':
+        arrays['held_stamp_ns'] = np.arange(3, dtype=np.int64)
+        arrays['held_samples'] = np.zeros((3, 2))
+    arrays['session_meta'] = np.array(json.dumps([] if damage == 'meta_list' else meta))
+    np.savez(tmp_path / 'damaged.npz', **arrays)
+    with pytest.raises(InputError, match='is damaged'):
+        Session.load_state(tmp_path / 'damaged.npz')
+
+
 @pytest.mark.parametrize('stamps, samples, match', [
     (np.zeros(3, dtype=np.int64), np.zeros((3, 5)), r'samples \(n, 6\)'),
     (np.array(['a', 'b']), np.zeros((2, 6)), 'integer nanoseconds'),
