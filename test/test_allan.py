@@ -166,6 +166,24 @@ def test_octave_gram_levels_match_extended_precision(monkeypatch, n, kind, pyram
     assert_allclose(allan.overlapping_avar(y, m)[0], ref, rtol=1e-9)
 
 
+def test_octave_kernels_on_random_lengths_subsets_and_splits(monkeypatch):
+    # Seeded fuzz: record lengths, subsets of the octave taus, and where the pyramid,
+    # the in-place doubling and the Gram kernel take over (tiles down to 16 samples).
+    rng = np.random.default_rng(99)
+    for case in range(60):
+        n = int(rng.integers(8, 3000))
+        octaves = 2 ** np.arange(int(allan.max_cluster_size(n)).bit_length())
+        m = np.sort(rng.choice(octaves, size=int(rng.integers(3, octaves.size + 1)),
+                               replace=False))
+        monkeypatch.setattr(allan, '_PYRAMID_LEVELS', int(rng.integers(1, 8)))
+        monkeypatch.setattr(allan, '_GRAM_MAX_ROWS', int(rng.integers(1, 40)))
+        monkeypatch.setattr(allan, '_TILE_ELEMS', int(rng.choice([16, 64, 65536])))
+        w = rng.standard_normal(n)
+        y = (w + 9.81, np.cumsum(w) * 0.01 + w, w + np.linspace(0, 3, n))[case % 3]
+        ref = exact_sums(y, m) / (2.0 * m * m * (n + 1 - 2 * m))
+        assert_allclose(allan.overlapping_avar(y, m)[0], ref, rtol=1e-9, err_msg=f'n={n}')
+
+
 def test_octave_fast_path_identifies_like_the_exact_path(monkeypatch):
     # The octave kernels hand the noise identification block sums of the samples; one
     # cluster size at a time goes through the running sum instead.  Same alpha.
