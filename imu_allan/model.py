@@ -129,13 +129,23 @@ def _gm_shape(x: np.ndarray) -> np.ndarray:
     """
     x = np.asarray(x, dtype=np.float64)
     small = x < 0.05
+    if small.all():  # long T: the series alone (a fit calls this very often)
+        return _gm_series(x)
     xl = np.where(small, 1.0, x)
     e = np.exp(-xl)
     out = (xl - 1.5 + 2.0 * e - 0.5 * e * e) / (xl * xl)
     if small.any():
-        xs = x[small]
-        out[small] = np.polyval(_GM_SERIES, xs) * xs
+        out[small] = _gm_series(x[small])
     return out
+
+
+def _gm_series(x: np.ndarray) -> np.ndarray:
+    """Return h(x) / x^2 from its Taylor series (Horner, in place), x small."""
+    acc = np.full(x.shape, _GM_SERIES[0])
+    for c in _GM_SERIES[1:]:
+        acc *= x
+        acc += c
+    return acc * x
 
 
 def avar_gauss_markov(tau_s, q: float, T: float) -> np.ndarray:
