@@ -232,6 +232,11 @@ class ImuAllanNode(Node):
             except InputError as exc:
                 self._set_aside(path, str(exc))
             else:
+                # Samples after the last checkpoint are lost: no Allan term may span them,
+                # and the step to the first new stamp is not a step of the sensor clock.
+                # The samples the checkpoint held for the motion check count from here.
+                session.break_segment()
+                session.last_stamp_ns = None
                 self.get_logger().info(
                     f'resumed from {path}: {session.stats.n_used} samples, '
                     f'{session.duration_s / 3600:.3f} h at {session.rate_hz:.2f} Hz, '
@@ -240,10 +245,6 @@ class ImuAllanNode(Node):
                        '; the rate of the incoming data is checked against it'))
                 if config.rate_hz <= 0:
                     self._resume_hold = []
-                # Samples after the last checkpoint are lost: no Allan term may span them,
-                # and the step to the first new stamp is not a step of the sensor clock.
-                session.break_segment()
-                session.last_stamp_ns = None
                 return session
         elif resume:
             self.get_logger().info(f'resume requested but {path} does not exist: starting fresh')
