@@ -318,11 +318,9 @@ class ImuAllanNode(Node):
             return t[:0], samples[:0]
         y = np.concatenate([b[1] for b in self._resume_hold])
         self._resume_hold = None
-        # The median interval, not count / span: a reader that has just started often
+        # Judged as the session judges stamps: a reader that has just started often
         # misses messages, and a gap must not pass for another rate.
-        steps = np.diff(np.sort(t))
-        steps = steps[steps > 0]
-        rate = 1e9 / float(np.median(steps)) if steps.size else 0.0
+        rate = self.session.stamp_rate_hz(t)
         saved = self.session.rate_hz
         tolerance = self.values['rate_tolerance']
         if rate <= 0 or abs(rate / saved - 1) > tolerance:

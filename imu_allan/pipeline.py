@@ -291,6 +291,28 @@ class Session:
         if not regular:
             self._flag_irregular(jitter)
 
+    def stamp_rate_hz(self, stamp_ns: np.ndarray) -> float:
+        """
+        Rate of a run of stamps judged as this session judges its own [Hz].
+
+        Gaps of a regular clock count as whole periods (lost messages do not lower
+        it); irregular (bursty) stamps give their mean rate.  0 when undecidable.
+
+        Parameters
+        ----------
+        stamp_ns : numpy.ndarray
+            Shape (n,), stamps [ns], in any order.
+
+        """
+        t = np.sort(np.asarray(stamp_ns, dtype=np.int64))
+        steps = np.diff(t)
+        verdict = _judge_steps(steps[steps > 0], self.config.gap_factor,
+                               self.config.irregular_gap_s * _NS)
+        if verdict is None:
+            span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+            return (t.size - 1) * _NS / span if span > 0 else 0.0
+        return _NS / verdict[1]
+
     def _note_jitter(self, jitter: float, n_steps: int) -> None:
         self._jitter_sq += jitter ** 2 * n_steps
         self._jitter_n += n_steps

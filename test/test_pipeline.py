@@ -210,6 +210,19 @@ def _bursty(t, seed: int = 3):
     return np.maximum.accumulate(t + jitter) + np.arange(t.size)
 
 
+def test_stamp_rate_ignores_lost_messages_and_averages_bursts():
+    # What a resume checks its first samples with: 300 lost messages among 50 must not
+    # read as another rate, and bursty host stamps give their mean rate, not the
+    # short steps inside a burst.
+    t, _ = _record(400, rate_hz=200.0)
+    s = Session()
+    assert_allclose(s.stamp_rate_hz(np.r_[t[:10], t[310:350]]), 200.0, rtol=1e-9)
+    assert_allclose(s.stamp_rate_hz(t[::-1][:50]), 200.0, rtol=1e-9)
+    bursty = _bursty(t)
+    assert_allclose(s.stamp_rate_hz(bursty), 399 * 1e9 / (bursty[-1] - bursty[0]), rtol=1e-9)
+    assert s.stamp_rate_hz(t[:1]) == 0.0
+
+
 def _feed_random_blocks(session: Session, t, y, seed: int, max_block: int) -> Session:
     rng = np.random.default_rng(seed)
     k = 0
