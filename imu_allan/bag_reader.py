@@ -431,9 +431,11 @@ class _Backend:
 
     storage = ''
 
-    def __init__(self, path: Path, warnings: List[str]) -> None:
+    def __init__(self, path: Path, warnings: List[str],
+                 decompress: Optional[Callable[[bytes], bytes]] = None) -> None:
         self.path = path
         self.warnings = warnings
+        self.decompress = decompress  # per-message decompression of rosbag2, or None
 
     def topics(self) -> List[_Topic]:
         """Return every topic with its type, count (or None) and encoding."""
@@ -470,8 +472,7 @@ class _SqliteBackend(_Backend):
 
     def __init__(self, path: Path, warnings: List[str],
                  decompress: Optional[Callable[[bytes], bytes]] = None) -> None:
-        super().__init__(path, warnings)
-        self.decompress = decompress
+        super().__init__(path, warnings, decompress)
         try:
             self.conn = _connect_sqlite(path)
             tables = {row[0] for row in self.conn.execute(
@@ -827,8 +828,7 @@ class _McapBackend(_Backend):
 
     def __init__(self, path: Path, warnings: List[str],
                  decompress: Optional[Callable[[bytes], bytes]] = None) -> None:
-        super().__init__(path, warnings)
-        self.decompress = decompress
+        super().__init__(path, warnings, decompress)
         self.zstd = zstandard.ZstdDecompressor()
         self.file = open(path, 'rb')
         self.mm = mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ)
