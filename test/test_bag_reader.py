@@ -205,12 +205,18 @@ def test_mcap_library_files_lz4_chunks_without_index_and_unchunked(tmp_path):
         _assert_topic(source.read_all(), stamps[:99], stamps[:99], samples[:99])
 
 
-def test_decoder_handles_big_endian_odd_lengths_and_garbage():
-    stamps, samples = _recording(6, seed=7)
+def _mixed_cdr(seed: int):
+    """Six Imu messages, both byte orders, frame ids of 0-5 characters, then garbage."""
+    stamps, samples = _recording(6, seed=seed)
     msgs = [_imu_msg(ROS2, stamps[i], samples[i], 'f' * i) for i in range(6)]
     payloads = [bytes(ROS2.serialize_cdr(m, IMU, little_endian=i % 2 == 0))
                 for i, m in enumerate(msgs)]
     payloads.append(b'\x00\x01\x00\x00' + b'\x07' * 10)   # too short to be an Imu
+    return stamps, samples, msgs, payloads
+
+
+def test_decoder_handles_big_endian_odd_lengths_and_garbage():
+    stamps, samples, _, payloads = _mixed_cdr(seed=7)
     stamp_ns, values, ok = decode_imu_payloads(
         np.frombuffer(b''.join(payloads), np.uint8),
         np.cumsum([0] + [len(p) for p in payloads[:-1]]), [len(p) for p in payloads])
@@ -223,11 +229,7 @@ def test_decoder_handles_big_endian_odd_lengths_and_garbage():
 
 
 def test_covariances_are_written_into_the_cdr_bytes():
-    stamps, samples = _recording(6, seed=8)
-    msgs = [_imu_msg(ROS2, stamps[i], samples[i], 'f' * i) for i in range(6)]
-    payloads = [bytes(ROS2.serialize_cdr(m, IMU, little_endian=i % 2 == 0))
-                for i, m in enumerate(msgs)]
-    payloads.append(b'\x00\x01\x00\x00' + b'\x07' * 10)   # too short to be an Imu
+    _, _, msgs, payloads = _mixed_cdr(seed=8)
     gyro, accel = np.arange(9) * 1e-6, np.arange(9, 18) * 1e-3
     patched = set_imu_covariances_cdr(payloads, gyro, accel)
     assert patched[-1] is None and set_imu_covariances_cdr([], gyro, accel) == []
