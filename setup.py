@@ -24,7 +24,7 @@ setup(
     entry_points={
         'console_scripts': [
             'imu-allan = imu_allan.cli:main',
-            'imu_allan_node = imu_allan.node:main',
+            'imu_allan_node = imu_allan.ros.node:main',
         ],
     },
 )

@@ -1,12 +1,12 @@
 """
-Benchmark of the streaming Allan accumulator (imu_allan.accumulator).
+Benchmark of the streaming Allan accumulator (imu_allan.core.accumulator).
 
 Feeds ``--rows`` six-axis rows (default 10 million) in blocks of 1000 rows (as the
 ROS node does) and in blocks of 1 million rows (as a bag reader does), and prints
 rows per second next to two baselines measured in the same run on the same data, so
 the ratios stay meaningful on a shared machine:
 
-* batch: :func:`imu_allan.allan.overlapping_avar` on 1 million rows, for the taus the
+* batch: :func:`imu_allan.core.allan.overlapping_avar` on 1 million rows, for the taus the
   accumulator computes exactly (the streaming result equals it there);
 * pass: one ``np.cumsum`` over the rows, the cheapest thing any estimator must do.
 
@@ -28,8 +28,8 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from imu_allan.accumulator import AllanAccumulator  # noqa: E402
-from imu_allan.allan import overlapping_avar  # noqa: E402
+from imu_allan.core.accumulator import AllanAccumulator  # noqa: E402
+from imu_allan.core.allan import overlapping_avar  # noqa: E402
 
 N_AXES = 6
 BASE_ROWS = 1_000_000

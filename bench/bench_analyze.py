@@ -40,13 +40,13 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
-from imu_allan.analysis import analyze
-from imu_allan.bag_reader import open_imu
-from imu_allan.bag_writer import write_imu_bag
-from imu_allan.noise_params import load_params
-from imu_allan.pipeline import Session, SessionConfig
-from imu_allan.report import write_outputs
-from imu_allan.simulate import simulate_imu
+from imu_allan.core.noise_params import load_params
+from imu_allan.core.simulate import simulate_imu
+from imu_allan.io.bag_reader import open_imu
+from imu_allan.io.bag_writer import write_imu_bag
+from imu_allan.io.report import write_outputs
+from imu_allan.pipeline.analysis import analyze
+from imu_allan.pipeline.session import Session, SessionConfig
 
 REPO = Path(__file__).resolve().parents[1]
 T0_NS = 1_700_000_000_000_000_000

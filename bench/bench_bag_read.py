@@ -1,5 +1,5 @@
 """
-Benchmark of imu_allan.bag_reader against the plain rosbags decode loop.
+Benchmark of imu_allan.io.bag_reader against the plain rosbags decode loop.
 
 Writes a ``--hours`` long (default 3 h) ``--rate`` Hz (default 400 Hz) sensor_msgs/Imu
 recording, 4.32 million messages by default, as a rosbag2 directory in MCAP storage
@@ -12,7 +12,7 @@ afterwards.  For each it prints, measured in the same run:
   (default 200,000), reported as messages/s;
 
 and the speed-up ratio.  Wall and CPU seconds are both shown: the CPU figure is the
-steadier one on a shared machine.  The write times of imu_allan.bag_writer are shown too.
+steadier one on a shared machine.  The write times of imu_allan.io.bag_writer are shown too.
 
 Usage: ``.venv/bin/python bench/bench_bag_read.py [--hours H] [--rate HZ] [--subset N]``
 """
@@ -26,8 +26,8 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
-from imu_allan.bag_reader import open_imu
-from imu_allan.bag_writer import write_imu_bag
+from imu_allan.io.bag_reader import open_imu
+from imu_allan.io.bag_writer import write_imu_bag
 
 T0_NS = 1_700_000_000_000_000_000
 

@@ -7,8 +7,8 @@ walk; accel z sits at 9.80665 m/s^2) at 100 Hz, octave taus (m = 1 .. 2^22).
 allantools.oadev is run on ``--allantools-axes`` axes (default 1) and its time scaled
 to six axes (it handles one axis per call).  Everything is measured in this one run:
 
-* ``avar``: :func:`imu_allan.allan.overlapping_avar`, the variances only;
-* ``curve``: :func:`imu_allan.allan.allan_curve`, with noise identification, EDF and
+* ``avar``: :func:`imu_allan.core.allan.overlapping_avar`, the variances only;
+* ``curve``: :func:`imu_allan.core.allan.allan_curve`, with noise identification, EDF and
   confidence bounds, i.e. more work than allantools does;
 * each with the default per-axis threads and with one thread.
 
@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from imu_allan import allan  # noqa: E402
+from imu_allan.core import allan  # noqa: E402
 
 
 def simulate(rows: int, rate_hz: float, seed: int = 1) -> np.ndarray:

@@ -1,5 +1,5 @@
 """
-Benchmark of imu_allan.fit: fit_curve on the six axes of a simulated record.
+Benchmark of imu_allan.core.fit: fit_curve on the six axes of a simulated record.
 
 A record of config/xsens_mti7.yaml (default 3 h at 100 Hz, six axes) is simulated once;
 its Allan curve is computed two ways, the streaming accumulator's dense curve (what the
@@ -18,11 +18,11 @@ import time
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.accumulator import AllanAccumulator
-from imu_allan.allan import allan_curve
-from imu_allan.fit import fit_curve
-from imu_allan.noise_params import load_params
-from imu_allan.simulate import simulate_imu
+from imu_allan.core.accumulator import AllanAccumulator
+from imu_allan.core.allan import allan_curve
+from imu_allan.core.fit import fit_curve
+from imu_allan.core.noise_params import load_params
+from imu_allan.core.simulate import simulate_imu
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'xsens_mti7.yaml'
 

@@ -1,5 +1,5 @@
 """
-Benchmark of the live node (imu_allan.node) with real rclpy topics.
+Benchmark of the live node (imu_allan.ros.node) with real rclpy topics.
 
 Three measurements, each in fresh processes (a benchmark, not a test):
 
@@ -65,9 +65,9 @@ def role_publisher(args) -> int:
     """
     import rclpy
     from sensor_msgs.msg import Imu
-    from imu_allan.bag_writer import serialize_imu
-    from imu_allan.noise_params import load_params
-    from imu_allan.simulate import simulate_imu
+    from imu_allan.core.noise_params import load_params
+    from imu_allan.core.simulate import simulate_imu
+    from imu_allan.io.bag_writer import serialize_imu
     _, block = simulate_imu(load_params(PARAMS), 1000.0, 60.0, seed=1)
     rclpy.init(args=[])
     node = rclpy.create_node('bench_imu_publisher')
@@ -106,7 +106,7 @@ def role_node(args) -> int:
     """Run the node with one executor until the stream ends; print a JSON line."""
     import rclpy
     from rclpy.parameter import Parameter
-    from imu_allan.node import create_executor, ImuAllanNode
+    from imu_allan.ros.node import create_executor, ImuAllanNode
     rclpy.init(args=[])
     out = tempfile.mkdtemp(prefix='bench_node_')
     fit_every = args.fit_every
@@ -157,7 +157,7 @@ def role_node(args) -> int:
             if now - marks['first'] >= args.seconds + 2.0:
                 done.set_result(True)
     node.create_timer(0.1, watch)
-    from imu_allan.node import spin_until_shutdown
+    from imu_allan.ros.node import spin_until_shutdown
     node.create_timer(0.5, lambda: done.done() and rclpy.shutdown())
     spin_until_shutdown(executor)
     w0, c0, n0, f0 = marks['warm']
@@ -181,10 +181,10 @@ def role_node(args) -> int:
 
 def role_pipeline(args) -> int:
     """Feed the Session the samples of ``--pipeline-hours`` at 1 kHz; RSS per hour."""
-    from imu_allan.node_params import BY_NAME, session_config
-    from imu_allan.noise_params import load_params
-    from imu_allan.pipeline import Session
-    from imu_allan.simulate import simulate_imu
+    from imu_allan.core.noise_params import load_params
+    from imu_allan.core.simulate import simulate_imu
+    from imu_allan.pipeline.session import Session
+    from imu_allan.ros.params import BY_NAME, session_config
     values = {name: p.default for name, p in BY_NAME.items()}
     values['rate_hz'] = 1000.0
     session = Session(session_config(values))

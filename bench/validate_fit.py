@@ -2,9 +2,9 @@
 Validate the noise fit on simulated records of the two example IMUs.
 
 For each of config/xsens_mti7.yaml and config/ublox_c102_f9r.yaml, one gyro axis and one
-accelerometer axis are simulated (imu_allan.simulate.simulate_axis) for ``--hours`` at
+accelerometer axis are simulated (imu_allan.core.simulate.simulate_axis) for ``--hours`` at
 ``--rate`` over ``--seeds`` seeds, their overlapping Allan curves computed at octave taus
-(imu_allan.allan.allan_curve) and fitted (imu_allan.fit.fit_axis).  Printed: a markdown
+(imu_allan.core.allan.allan_curve) and fitted (imu_allan.core.fit.fit_axis).  Printed: a markdown
 table with the median relative error of N, B, K and T_B for the nominal IEEE Std 952
 read-off and for the optimised fit, and how often each method's 95 % interval covers
 the true value, plus a verdict line.
@@ -17,12 +17,12 @@ Run:  .venv/bin/python bench/validate_fit.py [--seeds 50] [--workers 2]
       .venv/bin/python bench/validate_fit.py --adis ../shared/realdata/adis16405
 
 With ``--adis DIR`` it instead fits the gyro axes of the six static ADIS16405 runs in DIR
-(CSV, 100 Hz, 2.78 h each; imu_allan.csv_io.read_csv, the streaming accumulator's dense
-curve as the node and the offline reader build it, imu_allan.fit.fit_curve) and prints N
+(CSV, 100 Hz, 2.78 h each; imu_allan.io.csv_io.read_csv, the streaming accumulator's dense
+curve as the node and the offline reader build it, imu_allan.core.fit.fit_curve) and prints N
 and B against the datasheet: rate noise density 0.05 deg/s/sqrt(Hz) and in-run bias
 stability 0.007 deg/s.  Analog Devices quote the bias stability as the Allan deviation
 minimum itself, so the table gives the fitted ADEV floor 0.664 B (paper convention, see
-imu_allan.noise_params) beside B.
+imu_allan.core.noise_params) beside B.
 Exit code 1 when the optimised fit does not beat the nominal read-off on every median
 error, when an optimised coverage of one axis falls below 85 %, or when a parameter's
 coverage pooled over the four axes lies outside 85-99 %.  (One axis' 50/50 is not a
@@ -38,12 +38,12 @@ import time
 
 import numpy as np
 
-from imu_allan.accumulator import AllanAccumulator
-from imu_allan.allan import allan_curve
-from imu_allan.csv_io import read_csv
-from imu_allan.fit import fit_axis, fit_curve
-from imu_allan.noise_params import FLICKER_FLOOR, load_params
-from imu_allan.simulate import simulate_axis
+from imu_allan.core.accumulator import AllanAccumulator
+from imu_allan.core.allan import allan_curve
+from imu_allan.core.fit import fit_axis, fit_curve
+from imu_allan.core.noise_params import FLICKER_FLOOR, load_params
+from imu_allan.core.simulate import simulate_axis
+from imu_allan.io.csv_io import read_csv
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = ('xsens_mti7', 'ublox_c102_f9r')
@@ -100,7 +100,7 @@ def fit_adis_run(path: Path) -> list:
 
     Returns
     -------
-    list of imu_allan.fit.AxisFit
+    list of imu_allan.core.fit.AxisFit
         gyro_x, gyro_y, gyro_z.
 
     """

@@ -6,7 +6,7 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
-from imu_allan import allan
+from imu_allan.core import allan
 from imu_allan.errors import InputError
 
 S32 = 'refdata/stable32_ocxo'
@@ -118,7 +118,7 @@ def test_noise_id_agrees_with_stable32(shared_dir, ocxo):
 def test_adis16405_matches_published_maximal_overlap_adev(shared_dir):
     # Real data: run 1 of the ADIS16405 against the avar R package's published
     # maximal-overlap ADEV (8 digits, original units deg/s and g).
-    from imu_allan.csv_io import read_csv
+    from imu_allan.io.csv_io import read_csv
     base = shared_dir / 'realdata/adis16405'
     data = read_csv(base / 'adis16405_run1.csv.gz')
     ref = np.loadtxt(base / 'reference_adev_run1_smac_avar.csv', delimiter=',', skiprows=1)

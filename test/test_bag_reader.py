@@ -1,5 +1,5 @@
 """
-Tests of imu_allan.bag_reader: every storage, odd layouts, bad inputs, real bags.
+Tests of imu_allan.io.bag_reader: every storage, odd layouts, bad inputs, real bags.
 
 Reference values come from rosbags' own per-message (de)serialisers, from the
 mcap package's writer, or from the data that was written (exact round trips:
@@ -19,11 +19,11 @@ from rosbags.rosbag2 import StoragePlugin, Writer as Ros2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 
-from imu_allan.bag_reader import (decode_imu_cdr, decode_imu_payloads, ImuBlock,
-                                  list_imu_topics, list_topics, open_imu,
-                                  set_imu_covariances_cdr)
-from imu_allan.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
 from imu_allan.errors import InputError
+from imu_allan.io.bag_reader import (decode_imu_cdr, decode_imu_payloads, ImuBlock,
+                                     list_imu_topics, list_topics, open_imu,
+                                     set_imu_covariances_cdr)
+from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
@@ -435,7 +435,7 @@ def test_single_db3_file_is_read_directly(shared_dir):
 
 def _sqlite_both_ways(db3: Path, topic: str):
     """Read a topic with the page reader (asserting it was used) and with SQL."""
-    from imu_allan import bag_reader
+    from imu_allan.io import bag_reader
 
     with open_imu(db3, topic) as source:
         backend = source._backend
@@ -493,7 +493,7 @@ def test_sqlite_page_reader_matches_sql(tmp_path, page_size):
 def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
     import sqlite3
 
-    from imu_allan import bag_reader
+    from imu_allan.io import bag_reader
 
     stamps, samples = _recording(500, seed=15)
     # Messages larger than a page: the topic itself spills to overflow pages.

@@ -1,5 +1,5 @@
 """
-Tests of imu_allan.bag_writer, checked with independent readers.
+Tests of imu_allan.io.bag_writer, checked with independent readers.
 
 The vectorised serialiser must produce the very bytes of rosbags' per-message
 serialisers; written bags must read back through rosbags' AnyReader and the mcap
@@ -18,9 +18,9 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
-from imu_allan.bag_reader import open_imu
-from imu_allan.bag_writer import csv_to_bag, serialize_imu, write_imu_bag
 from imu_allan.errors import InputError
+from imu_allan.io.bag_reader import open_imu
+from imu_allan.io.bag_writer import csv_to_bag, serialize_imu, write_imu_bag
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
@@ -145,7 +145,7 @@ def test_bad_requests_raise_and_leave_nothing(tmp_path):
 
 
 def test_csv_to_bag_round_trip(tmp_path):
-    pytest.importorskip('imu_allan.csv_io')
+    pytest.importorskip('imu_allan.io.csv_io')
     stamps, samples = _recording(200, seed=5)
     t_s = np.arange(200) * 0.01   # relative seconds, exactly representable steps
     csv = tmp_path / 'log.csv'

@@ -9,9 +9,9 @@ from numpy.testing import assert_allclose
 import pytest
 
 from imu_allan import AXES
-from imu_allan.allan import allan_curve
 from imu_allan.cli import main
-from imu_allan.csv_io import write_csv
+from imu_allan.core.allan import allan_curve
+from imu_allan.io.csv_io import write_csv
 
 KEYS = {'column', 'method', 'confidence', 'tau_s', 'adev', 'adev_lo', 'adev_hi', 'n'}
 

@@ -25,14 +25,14 @@ from rosbags.typesys import get_typestore, Stores
 import yaml
 
 from imu_allan import AXES
-from imu_allan import cli_analyze
-from imu_allan.bag_writer import serialize_imu, write_imu_bag
+from imu_allan.cli import analyze as cli_analyze
 from imu_allan.cli import main
-from imu_allan.cli_analyze import open_input, stream_input
-from imu_allan.csv_io import write_csv
-from imu_allan.noise_params import load_params
-from imu_allan.pipeline import SessionConfig
-from imu_allan.simulate import simulate_imu
+from imu_allan.cli.analyze import open_input, stream_input
+from imu_allan.core.noise_params import load_params
+from imu_allan.core.simulate import simulate_imu
+from imu_allan.io.bag_writer import serialize_imu, write_imu_bag
+from imu_allan.io.csv_io import write_csv
+from imu_allan.pipeline.session import SessionConfig
 
 REPO = Path(__file__).resolve().parents[1]
 IMU = 'sensor_msgs/msg/Imu'
@@ -419,16 +419,16 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
     """
     The node's path, emulated at the Session level, against ``imu-allan analyze``.
 
-    The node (imu_allan/node.py) receives raw CDR payloads, decodes what accumulated
+    The node (imu_allan/ros/node.py) receives raw CDR payloads, decodes what accumulated
     at each timer tick with ``bag_reader.decode_imu_cdr`` and calls ``Session.add``;
     here the bag's raw payloads (read by rosbags, as a raw subscription delivers them)
     take that path in irregular tick-sized blocks.
     """
     from rosbags.rosbag2 import Reader
 
-    from imu_allan.analysis import analyze
-    from imu_allan.bag_reader import decode_imu_cdr
-    from imu_allan.pipeline import Session
+    from imu_allan.io.bag_reader import decode_imu_cdr
+    from imu_allan.pipeline.analysis import analyze
+    from imu_allan.pipeline.session import Session
 
     stamps, samples = rec
     bag = tmp_path / 'rec'

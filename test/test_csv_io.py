@@ -7,8 +7,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
 from imu_allan import AXES
-from imu_allan.csv_io import read_csv, write_csv
 from imu_allan.errors import InputError
+from imu_allan.io.csv_io import read_csv, write_csv
 
 
 def _record(n=500, rate=100.0, seed=0):

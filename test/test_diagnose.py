@@ -1,5 +1,5 @@
 """
-Tests of the diagnosis workflow (imu_allan.diagnose, imu-allan diagnose).
+Tests of the diagnosis workflow (imu_allan.core.diagnose, imu-allan diagnose).
 
 The effect cases come from bench/diagnose_cases.py (seeded six-axis records, 50 Hz,
 2000 s, one axis with a hidden effect); the bench runs many more seeds.
@@ -16,9 +16,9 @@ from numpy.testing import assert_allclose
 import pytest
 
 from conftest import REPO
-from imu_allan.allan import allan_curve
-from imu_allan.diagnose import (diagnose_curve, diagnose_session, EFFECTS, find_bands, gap,
-                                ln_adev_stderr, periodogram_peak, RawKeeper)
+from imu_allan.core.allan import allan_curve
+from imu_allan.core.diagnose import (diagnose_curve, diagnose_session, EFFECTS, find_bands, gap,
+                                     ln_adev_stderr, periodogram_peak, RawKeeper)
 from imu_allan.errors import InputError
 
 _SPEC = importlib.util.spec_from_file_location('diagnose_cases',
@@ -191,8 +191,8 @@ def test_cli_json_and_files(tmp_path):
 
 def test_cli_on_an_mcap_bag_and_on_frozen_axes(tmp_path):
     """A bag goes through the same reader as analyze; an all-frozen bag is one error line."""
-    from imu_allan.bag_writer import write_imu_bag
     from imu_allan.cli import main
+    from imu_allan.io.bag_writer import write_imu_bag
     y, axis, _ = cases.make_case('sinusoid', 3)
     n = 40_000
     stamps_ns = 1_700_000_000 * 10**9 + np.arange(n) * int(round(1e9 / cases.RATE_HZ))

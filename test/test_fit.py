@@ -1,5 +1,5 @@
 """
-Tests of imu_allan.fit: covariance model, exact recovery, round trips, coverage, bounds.
+Tests of imu_allan.core.fit: covariance model, exact recovery, round trips, coverage, bounds.
 
 Records are short (minutes to an hour at 10-20 Hz) so the file stays fast; the 3-hour,
 50-seed validation is bench/validate_fit.py.
@@ -12,14 +12,14 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from imu_allan.accumulator import AllanAccumulator
-from imu_allan.allan import allan_curve, overlapping_avar
-from imu_allan.csv_io import read_csv
+from imu_allan.core.accumulator import AllanAccumulator
+from imu_allan.core.allan import allan_curve, overlapping_avar
+from imu_allan.core.fit import _CurveCovariance, fit_axis, fit_curve, nominal_fit
+from imu_allan.core.model import avar_model, TERMS
+from imu_allan.core.noise_params import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.simulate import simulate_axis, simulate_imu
 from imu_allan.errors import InputError
-from imu_allan.fit import _CurveCovariance, fit_axis, fit_curve, nominal_fit
-from imu_allan.model import avar_model, TERMS
-from imu_allan.noise_params import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
-from imu_allan.simulate import simulate_axis, simulate_imu
+from imu_allan.io.csv_io import read_csv
 
 PAPER = AxisNoise(N=1e-3, B=4e-4, T_B=8.0, K=3e-5)   # the paper's model, visible in 1 h
 

@@ -36,7 +36,7 @@ def test_launch_file_names_the_installed_executable_and_package():
     setup = ast.parse((REPO / 'setup.py').read_text())
     scripts = [ast.literal_eval(n) for n in ast.walk(setup)
                if isinstance(n, ast.Constant) and isinstance(n.value, str) and ' = ' in n.value]
-    assert f'{executable} = imu_allan.node:main' in scripts
+    assert f'{executable} = imu_allan.ros.node:main' in scripts
     assert ast.literal_eval(_kw(call, 'name')) == 'imu_allan'
 
 
@@ -48,7 +48,7 @@ def test_launch_file_uses_the_installed_config_and_remaps_the_node_input():
     remaps = _kw(_node_call(), 'remappings')
     (pair,) = remaps.elts
     assert ast.literal_eval(pair.elts[0]) == 'imu'          # the node subscribes to 'imu'
-    node_src = (REPO / 'imu_allan' / 'node.py').read_text()
+    node_src = (REPO / 'imu_allan' / 'ros' / 'node.py').read_text()
     assert "Imu, 'imu', self._on_imu" in node_src
     declared = {ast.literal_eval(n.args[0]) for n in ast.walk(ast.parse(text))
                 if isinstance(n, ast.Call) and getattr(n.func, 'id', None) ==

@@ -1,22 +1,38 @@
 """
-The core knows nothing of ROS: it imports with rclpy and the bag libraries unavailable.
+Layers by package: adapters (io, ros, cli) -> pipeline -> core, never the other way.
 
-Runs in a subprocess whose import machinery refuses every ROS, bag and plotting module,
-so a stray import anywhere in the core (even a lazy one at module level) fails here.
+Two checks:
+- every module of ``imu_allan.core`` and ``imu_allan.pipeline`` (and the node's ROS-free
+  parameter table) imports in a subprocess whose import machinery refuses every ROS, bag
+  and plotting module, so a stray import anywhere in them fails here;
+- every ``import`` statement in the package, lazy ones inside functions included, points
+  only at layers its own layer may use.
 """
 
+import ast
+from pathlib import Path
 import subprocess
 import sys
 
 from conftest import REPO
 
-CORE = ('allan', 'analysis', 'accumulator', 'model', 'fit', 'simulate', 'kalman', 'diagnose',
-        'noise_params', 'units', 'csv_io', 'pipeline', 'errors', 'node_params')
+PKG = Path(REPO) / 'imu_allan'
+#: Which of the package's layers each layer may import (the package root and errors are
+#: shared by all).
+ALLOWED = {
+    'core': {'core'},
+    'pipeline': {'core', 'pipeline'},
+    'io': {'core', 'pipeline', 'io'},
+    'ros': {'core', 'pipeline', 'io', 'ros'},
+    'cli': {'core', 'pipeline', 'io', 'ros', 'cli'},
+}
+ROS_FREE = ('imu_allan.ros.params',)
 FORBIDDEN = ('rclpy', 'rosbags', 'mcap', 'sensor_msgs', 'std_msgs', 'std_srvs',
-             'diagnostic_msgs', 'builtin_interfaces', 'matplotlib', 'launch')
+             'diagnostic_msgs', 'builtin_interfaces', 'matplotlib', 'launch', 'lz4',
+             'zstandard', 'dask', 'distributed')
 
 SCRIPT = f"""
-import importlib, importlib.util, sys
+import importlib, pkgutil, sys
 FORBIDDEN = {FORBIDDEN!r}
 
 class Refuse:
@@ -26,23 +42,72 @@ class Refuse:
         return None
 
 sys.meta_path.insert(0, Refuse())
-for mod in {CORE!r}:
-    if importlib.util.find_spec('imu_allan.' + mod) is not None:
-        importlib.import_module('imu_allan.' + mod)
-print('ok')
+import imu_allan.core, imu_allan.pipeline
+names = list({ROS_FREE!r})
+for pkg in (imu_allan.core, imu_allan.pipeline):
+    names += [m.name for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + '.')]
+for name in names:
+    importlib.import_module(name)
+print('ok', len(names))
 """
 
 
-def test_core_imports_without_ros():
+def _layer(module: str) -> str | None:
+    parts = module.split('.')
+    return parts[1] if len(parts) > 1 and parts[0] == 'imu_allan' and parts[1] in ALLOWED \
+        else None
+
+
+def _module(path: Path) -> str:
+    return '.'.join(path.relative_to(PKG.parent).with_suffix('').parts)
+
+
+def _imports(path: Path, module: str):
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            yield from (alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split('.')[:-node.level]
+                yield '.'.join(base + ([node.module] if node.module else []))
+            else:
+                yield node.module
+
+
+def test_core_and_pipeline_import_without_ros():
     out = subprocess.run([sys.executable, '-c', SCRIPT], cwd=REPO, capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == 'ok'
+    assert out.stdout.startswith('ok'), out.stdout
+    assert int(out.stdout.split()[1]) >= 12
 
 
 def test_refusal_really_works():
     # The guard itself must be able to fail: importing rclpy under it is refused.
-    script = SCRIPT.replace("print('ok')", 'import rclpy')
+    script = SCRIPT.replace("print('ok', len(names))", 'import rclpy')
     out = subprocess.run([sys.executable, '-c', script], cwd=REPO, capture_output=True,
                          text=True, timeout=120)
     assert out.returncode != 0 and 'core imported rclpy' in out.stderr
+
+
+def test_imports_point_down_the_layers():
+    bad = []
+    for path in sorted(PKG.rglob('*.py')):
+        own = _layer(_module(path))
+        if own is None:
+            continue
+        for target in _imports(path, _module(path)):
+            layer = _layer(target or '')
+            if layer is not None and layer not in ALLOWED[own]:
+                bad.append(f'{path.relative_to(PKG.parent)} imports {target}')
+    assert not bad, '\n'.join(bad)
+
+
+def test_layer_check_can_fail(tmp_path):
+    # The scan sees lazy imports inside functions, relative ones included.
+    src = tmp_path / 'x.py'
+    src.write_text('def f():\n    from imu_allan.ros.node import main\n'
+                   '    from ..io import plot\n')
+    targets = list(_imports(src, 'imu_allan.core.x'))
+    assert targets == ['imu_allan.ros.node', 'imu_allan.io']
+    assert all(_layer(t) not in ALLOWED['core'] for t in targets)

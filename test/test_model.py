@@ -1,5 +1,5 @@
 """
-Tests of imu_allan.model: closed-form Allan variances against independent hand values.
+Tests of imu_allan.core.model: closed-form Allan variances against independent hand values.
 
 The simulated-data check of every closed form lives in test_simulate.py (each generator
 against its own copy of the formula); here each formula is pinned to numbers worked
@@ -15,11 +15,11 @@ import pytest
 from scipy.integrate import quad
 from scipy.optimize import minimize_scalar
 
-from imu_allan.model import (adev_model, avar_flicker, avar_gauss_markov, avar_model,
-                             avar_quantization, avar_random_walk, avar_rate_ramp,
-                             avar_sinusoid, avar_terms, avar_white, base_name,
-                             noise_from_terms, TERMS)
-from imu_allan.noise_params import AxisNoise, GaussMarkov, Sinusoid
+from imu_allan.core.model import (adev_model, avar_flicker, avar_gauss_markov, avar_model,
+                                  avar_quantization, avar_random_walk, avar_rate_ramp,
+                                  avar_sinusoid, avar_terms, avar_white, base_name,
+                                  noise_from_terms, TERMS)
+from imu_allan.core.noise_params import AxisNoise, GaussMarkov, Sinusoid
 
 E = math.e
 

@@ -35,13 +35,13 @@ from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from imu_allan import AXES  # noqa: E402, I100
-from imu_allan.analysis import analyze  # noqa: E402
-from imu_allan.bag_writer import serialize_imu  # noqa: E402
+from imu_allan.core.noise_params import parse_params  # noqa: E402
+from imu_allan.core.simulate import simulate_imu  # noqa: E402
 from imu_allan.errors import InputError  # noqa: E402
-from imu_allan.node import create_executor, ImuAllanNode  # noqa: E402
-from imu_allan.noise_params import parse_params  # noqa: E402
-from imu_allan.pipeline import Session, SessionConfig  # noqa: E402
-from imu_allan.simulate import simulate_imu  # noqa: E402
+from imu_allan.io.bag_writer import serialize_imu  # noqa: E402
+from imu_allan.pipeline.analysis import analyze  # noqa: E402
+from imu_allan.pipeline.session import Session, SessionConfig  # noqa: E402
+from imu_allan.ros.node import create_executor, ImuAllanNode  # noqa: E402
 
 T0_NS = 1_700_000_000 * 10 ** 9
 WINDOW = 1000
@@ -533,7 +533,7 @@ def _start(out: Path, *params: str) -> subprocess.Popen:
     exe = Path(sys.executable).parent / 'imu_allan_node'
     cmd = [str(exe) if exe.exists() else sys.executable]
     if not exe.exists():
-        cmd += ['-m', 'imu_allan.node']
+        cmd += ['-m', 'imu_allan.ros.node']
     cmd += ['--ros-args', '-p', f'output_dir:={out}', '-p', 'process_period_s:=0.05',
             '-p', 'checkpoint_period_s:=0.3', '-p', 'min_duration_s:=1.0',
             '-p', 'progress_period_s:=1.0']

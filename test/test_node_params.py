@@ -3,12 +3,12 @@
 import yaml
 
 from conftest import REPO
-from imu_allan.node_params import BY_NAME, config_yaml, markdown_table, PARAMS, session_config
+from imu_allan.ros.params import BY_NAME, config_yaml, markdown_table, PARAMS, session_config
 
 
 def test_config_file_is_generated_from_the_table():
     text = (REPO / 'config' / 'imu_allan.yaml').read_text()
-    assert text == config_yaml(), 'regenerate: python -m imu_allan.node_params yaml'
+    assert text == config_yaml(), 'regenerate: python -m imu_allan.ros.params yaml'
     values = yaml.safe_load(text)['/**']['ros__parameters']
     assert set(values) == set(BY_NAME)
     for p in PARAMS:
@@ -18,7 +18,7 @@ def test_config_file_is_generated_from_the_table():
 
 def test_readme_table_is_generated_from_the_table():
     assert markdown_table() in (REPO / 'README.md').read_text(), \
-        'regenerate: python -m imu_allan.node_params markdown'
+        'regenerate: python -m imu_allan.ros.params markdown'
 
 
 def test_checks_refuse_bad_values_with_a_reason():

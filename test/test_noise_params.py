@@ -1,4 +1,4 @@
-"""Tests of imu_allan.units and the parameter files of imu_allan.noise_params."""
+"""Tests of imu_allan.core.units and the parameter files of imu_allan.core.noise_params."""
 
 import math
 from pathlib import Path
@@ -8,10 +8,10 @@ import pytest
 import yaml
 
 from imu_allan import AXES
+from imu_allan.core.noise_params import (AxisNoise, dump_params, GaussMarkov, load_params,
+                                         NoiseSpec, parse_params, save_params, Sinusoid)
+from imu_allan.core.units import format_quoted, parse_unit, quoted, to_si
 from imu_allan.errors import InputError
-from imu_allan.noise_params import (AxisNoise, dump_params, GaussMarkov, load_params,
-                                    NoiseSpec, parse_params, save_params, Sinusoid)
-from imu_allan.units import format_quoted, parse_unit, quoted, to_si
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 DEG = math.pi / 180.0

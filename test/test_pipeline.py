@@ -7,9 +7,9 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from imu_allan.allan import overlapping_avar
+from imu_allan.core.allan import overlapping_avar
 from imu_allan.errors import InputError
-from imu_allan.pipeline import Session, SessionConfig
+from imu_allan.pipeline.session import Session, SessionConfig
 
 RATE_HZ = 100.0
 T0_NS = 1_700_000_000_000_000_000

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from imu_allan.cli import main
-from imu_allan.cli_analyze import open_input, stream_input
-from imu_allan.pipeline import SessionConfig
+from imu_allan.cli.analyze import open_input, stream_input
+from imu_allan.pipeline.session import SessionConfig
 
 
 def _cli(argv, capsys):

@@ -98,11 +98,11 @@ def run(args) -> int:
     import rclpy
     from rclpy.parameter import Parameter
 
-    from imu_allan.bag_writer import serialize_imu
-    from imu_allan.node import create_executor, ImuAllanNode
-    from imu_allan.noise_params import load_params
-    from imu_allan.simulate import simulate_imu
-    from imu_allan.units import format_quoted, sensor_of
+    from imu_allan.core.noise_params import load_params
+    from imu_allan.core.simulate import simulate_imu
+    from imu_allan.core.units import format_quoted, sensor_of
+    from imu_allan.io.bag_writer import serialize_imu
+    from imu_allan.ros.node import create_executor, ImuAllanNode
 
     params = _params_file(args.params)
     spec = load_params(params)
@@ -133,7 +133,7 @@ def run(args) -> int:
         executor = create_executor('events')
         executor.add_node(node)
         player = subprocess.Popen(
-            [sys.executable, '-c', 'import sys; from imu_allan.cli_demo import publish_main; '
+            [sys.executable, '-c', 'import sys; from imu_allan.cli.demo import publish_main; '
              'sys.exit(publish_main())', str(npy), str(args.speed)])
         try:
             t0 = None

@@ -2,15 +2,15 @@
 ``imu-allan simulate``: write a simulated six-axis IMU record from a params YAML.
 
 Output by file name: ``.csv`` or ``.csv.gz`` -> CSV with header
-``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z`` (imu_allan.csv_io);
+``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z`` (imu_allan.io.csv_io);
 ``.mcap``, ``.db3``, ``.bag`` (ROS 1) or a directory (a name without suffix) -> bag of
-sensor_msgs/Imu (imu_allan.bag_writer), whose covariance fields carry the white-noise
+sensor_msgs/Imu (imu_allan.io.bag_writer), whose covariance fields carry the white-noise
 variance N^2 * rate of each axis.  A one-line summary goes to stderr.  Bag stamps
 start at the current time (whole seconds) unless ``--start`` is given, so that
 ``header.stamp`` looks like a real recording's.
 
 Also registers ``imu-allan csv-to-bag CSV BAG``: legacy CSV logs (the CSV contract of
-DESIGN.md) to the same bags, through :func:`imu_allan.bag_writer.csv_to_bag`.
+DESIGN.md) to the same bags, through :func:`imu_allan.io.bag_writer.csv_to_bag`.
 """
 
 import argparse
@@ -22,9 +22,9 @@ import time
 import numpy as np
 
 from imu_allan import AXES
+from imu_allan.core.noise_params import load_params
+from imu_allan.core.simulate import simulate_imu
 from imu_allan.errors import InputError
-from imu_allan.noise_params import load_params
-from imu_allan.simulate import simulate_imu
 
 BAG_SUFFIXES = ('.mcap', '.db3', '.bag')
 
@@ -78,7 +78,7 @@ def _add_csv_to_bag_parser(subparsers) -> argparse.ArgumentParser:
 
 def run_csv_to_bag(args) -> int:
     """Convert the CSV; a one-line summary goes to stderr."""
-    from imu_allan.bag_writer import csv_to_bag
+    from imu_allan.io.bag_writer import csv_to_bag
 
     if not math.isfinite(args.start):
         raise InputError(f'--start must be finite, got {args.start:g}')
@@ -123,15 +123,15 @@ def run(args) -> int:
                          f'{t_s.size} sample(s); need at least 2')
     if kind == 'csv':
         try:
-            from imu_allan.csv_io import write_csv
+            from imu_allan.io.csv_io import write_csv
         except ImportError:
-            raise InputError('CSV output needs imu_allan.csv_io') from None
+            raise InputError('CSV output needs imu_allan.io.csv_io') from None
         write_csv(out, t_s + args.start, samples, AXES)
     else:
         try:
-            from imu_allan.bag_writer import write_imu_bag
+            from imu_allan.io.bag_writer import write_imu_bag
         except ImportError:
-            raise InputError('bag output needs imu_allan.bag_writer') from None
+            raise InputError('bag output needs imu_allan.io.bag_writer') from None
         # Integer nanoseconds from the sample index, so the stamps carry no float drift.
         # (int64 arithmetic: float64 holds an epoch in ns only to 256 ns.)
         stamps_ns = (int(round(args.start * 1e9))

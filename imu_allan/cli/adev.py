@@ -3,7 +3,7 @@
 
 Reads a CSV (contract header ``t,gyro_x,...,accel_z``, any header with ``--column``, or a
 headerless numeric file with ``--rate``), computes the curve with
-:func:`imu_allan.allan.allan_curve` and prints a table, or with ``--format json``
+:func:`imu_allan.core.allan.allan_curve` and prints a table, or with ``--format json``
 exactly one JSON document on stdout: one object per column, or a list of them when
 there are several.  Warnings go to stderr.
 """
@@ -16,9 +16,9 @@ import sys
 import numpy as np
 
 from imu_allan import AXIS_UNITS
-from imu_allan.allan import allan_curve, METHODS, tau_grid, TAU_KINDS
-from imu_allan.csv_io import read_csv
+from imu_allan.core.allan import allan_curve, METHODS, tau_grid, TAU_KINDS
 from imu_allan.errors import InputError
+from imu_allan.io.csv_io import read_csv
 
 # Time steps further than this from the median step count as irregular.
 _IRREGULAR_REL = 0.01

@@ -4,17 +4,17 @@ Simulate IMU rate samples from a stochastic error model.
 Two generators are provided:
 
 * :func:`simulate_axis` sums independent generators, one per term of an
-  :class:`~imu_allan.noise_params.AxisNoise` (white, Gauss-Markov, flicker, random
+  :class:`~imu_allan.core.noise_params.AxisNoise` (white, Gauss-Markov, flicker, random
   walk, quantization, rate ramp, sinusoids, constant bias).  Each generator's Allan
   variance matches the closed form of its term (IEEE Std 952 annex C); the tests check
-  every one against ``imu_allan.allan.overlapping_avar``.
+  every one against ``imu_allan.core.allan.overlapping_avar``.
 * :func:`simulate_state_space` runs the discrete state-space model of the paper
   (Maia, Silva, De Lima, Meneses, eqs. 14-23, after Farrell): states
   [Gauss-Markov bias, random-walk bias], measurement = states + white noise.  It is the
   model a Kalman filter sees, and it is vectorised over Monte-Carlo replicas.
 
 :func:`simulate_imu` draws a six-axis record from a
-:class:`~imu_allan.noise_params.NoiseSpec`.  Everything is reproducible from a seed:
+:class:`~imu_allan.core.noise_params.NoiseSpec`.  Everything is reproducible from a seed:
 each axis gets its own child generator (``numpy.random.SeedSequence.spawn``), so
 changing one axis' model leaves the other axes' samples unchanged.
 
@@ -63,8 +63,8 @@ import scipy.fft
 from scipy.signal import lfilter
 
 from imu_allan import AXES
+from imu_allan.core.noise_params import AxisNoise, GaussMarkov, NoiseSpec
 from imu_allan.errors import InputError
-from imu_allan.noise_params import AxisNoise, GaussMarkov, NoiseSpec
 
 
 def _check_grid(rate_hz: float, n_samples: int) -> float:

@@ -13,12 +13,12 @@ import math
 import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
-from imu_allan.allan import AllanCurve
+from imu_allan.core.allan import AllanCurve
+from imu_allan.core.fit import AxisFit, fit_curve, json_floats
+from imu_allan.core.kalman import imu_covariance, kalibr_yaml, kalman_model, KalmanModel
+from imu_allan.core.noise_params import AxisNoise
+from imu_allan.core.units import format_quoted, sensor_of
 from imu_allan.errors import InputError
-from imu_allan.fit import AxisFit, fit_curve, json_floats
-from imu_allan.kalman import imu_covariance, kalibr_yaml, kalman_model, KalmanModel
-from imu_allan.noise_params import AxisNoise
-from imu_allan.units import format_quoted, sensor_of
 
 #: Confidence of the reported Allan bands and parameter intervals.
 CONFIDENCE = 0.95

@@ -7,9 +7,9 @@ the simulated Allan deviation with the measured one.  This module closes that lo
 for one axis at a time:
 
 1. fit the base model (default: white noise, the paper's Gauss-Markov bias
-   instability, random walk) with :func:`imu_allan.fit.fit_axis`;
+   instability, random walk) with :func:`imu_allan.core.fit.fit_axis`;
 2. simulate the fitted model (``n_replicas`` replicas: the state-space model of
-   :func:`imu_allan.simulate.simulate_state_space` plus the generators of the terms it
+   :func:`imu_allan.core.simulate.simulate_state_space` plus the generators of the terms it
    has no state for) and take the replica-mean Allan variance as the model's curve;
 3. measure the **gap** (defined once, used everywhere)::
 
@@ -50,12 +50,12 @@ from scipy.special import polygamma
 from scipy.stats import chi2 as chi2_dist
 
 from imu_allan import AXES, AXIS_UNITS
-from imu_allan.allan import AllanCurve, edf_overlapping, overlapping_avar
+from imu_allan.core.allan import AllanCurve, edf_overlapping, overlapping_avar
+from imu_allan.core.fit import AxisFit, fit_axis, json_floats, json_num
+from imu_allan.core.noise_params import AxisNoise
+from imu_allan.core.simulate import (flicker_noise, quantization_noise, rate_ramp,
+                                     simulate_state_space, sinusoid)
 from imu_allan.errors import InputError
-from imu_allan.fit import AxisFit, fit_axis, json_floats, json_num
-from imu_allan.noise_params import AxisNoise
-from imu_allan.simulate import (flicker_noise, quantization_noise, rate_ramp, simulate_state_space,
-                                sinusoid)
 
 #: Effect names the diagnosis can report (DESIGN.md), in the order they are tried.
 EFFECTS = ('quantization', 'white', 'bias_instability', 'gauss_markov', 'random_walk',
@@ -677,7 +677,7 @@ def simulate_model_avar(model: _Model, rate_hz: float, n_samples: int, m: np.nda
     Simulate a model and return its replica-mean overlapping AVAR at cluster sizes ``m``.
 
     The white, Gauss-Markov and random-walk part runs through the paper's state-space
-    model (:func:`imu_allan.simulate.simulate_state_space`, eqs. 14-23); flicker,
+    model (:func:`imu_allan.core.simulate.simulate_state_space`, eqs. 14-23); flicker,
     quantization, ramp and sinusoids are added with their generators.  Replicas are
     simulated two at a time to bound memory.
 
@@ -781,7 +781,7 @@ def _visible_range(tau: np.ndarray, avar_term: np.ndarray, avar_rest: np.ndarray
 
 
 def _term_avar(tau: np.ndarray, fit: AxisFit, effect: str, params: dict) -> np.ndarray:
-    from imu_allan.model import TERMS
+    from imu_allan.core.model import TERMS
     term = TERMS[_EFFECT_TERM[effect]]
     nonlinear = [params[s] for s in term.nonlinear]
     coef = term.to_coef(params[term.symbols[0]], *nonlinear)

@@ -27,10 +27,10 @@ from typing import Callable, Iterator, Optional
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.analysis import analyze
+from imu_allan.core.fit import json_num
 from imu_allan.errors import InputError
-from imu_allan.fit import json_num
-from imu_allan.pipeline import Session, SessionConfig
+from imu_allan.pipeline.analysis import analyze
+from imu_allan.pipeline.session import Session, SessionConfig
 
 CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
 #: Samples handed to the Session at a time for CSV input.
@@ -267,7 +267,7 @@ def open_input(path, topic: Optional[str] = None) -> InputSource:
     path = Path(path)
     _check_path(path)
     if is_csv(path):
-        from imu_allan.csv_io import read_csv
+        from imu_allan.io.csv_io import read_csv
         if path.is_dir():
             raise InputError(f'{path}: is a directory, not a CSV file')
         data = read_csv(path, columns=list(AXES))
@@ -279,7 +279,7 @@ def open_input(path, topic: Optional[str] = None) -> InputSource:
             for k in range(0, stamp_ns.size, CSV_BLOCK):
                 yield stamp_ns[k:k + CSV_BLOCK], data.samples[k:k + CSV_BLOCK]
         return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
-    from imu_allan.bag_reader import open_imu
+    from imu_allan.io.bag_reader import open_imu
     source = open_imu(path, topic)
 
     def bag_blocks():
@@ -445,7 +445,7 @@ def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
     path, topic, config, out, plot = args
-    from imu_allan.report import write_outputs
+    from imu_allan.io.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True)
         files = write_outputs(result, out, plot=plot)
@@ -554,7 +554,7 @@ def run(args) -> int:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
     else:
-        from imu_allan.report import write_outputs
+        from imu_allan.io.report import write_outputs
         result, seconds = analyze_input(paths[0], args.topic, config)
         with Progress(paths[0].name) as bar:
             bar.set_stage('writing the report of')
@@ -608,7 +608,7 @@ def _compare(good: list, out: Path, plot: bool) -> dict:
     (out / 'comparison.md').write_text(text)
     files = [str(out / 'comparison.md')]
     if plot:
-        from imu_allan.plot import plot_comparison
+        from imu_allan.io.plot import plot_comparison
         files += [str(f) for f in plot_comparison(results, labels, out / 'comparison')]
     return {'labels': labels, 'spread': data, 'files': files}
 

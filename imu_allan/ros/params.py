@@ -2,14 +2,14 @@
 The node's parameters: one table for declaration, validation, config YAML and README.
 
 No ROS import here: the node turns each row into a declared parameter with a
-descriptor and range; ``python -m imu_allan.node_params yaml|markdown`` prints the
+descriptor and range; ``python -m imu_allan.ros.params yaml|markdown`` prints the
 config file and the README table from the same rows (a test checks both are in sync).
 """
 
 from dataclasses import dataclass
 import sys
 
-from imu_allan.pipeline import MOTION_POLICIES, SessionConfig
+from imu_allan.pipeline.session import MOTION_POLICIES, SessionConfig
 
 
 @dataclass(frozen=True)
@@ -132,8 +132,8 @@ def _yaml_value(value) -> str:
 
 def config_yaml() -> str:
     """Return config/imu_allan.yaml: every parameter with its unit, range and meaning."""
-    lines = ['# imu_allan_node parameters (generated from imu_allan/node_params.py:',
-             '# python -m imu_allan.node_params yaml > config/imu_allan.yaml)',
+    lines = ['# imu_allan_node parameters (generated from imu_allan/ros/params.py:',
+             '# python -m imu_allan.ros.params yaml > config/imu_allan.yaml)',
              '/**:', '  ros__parameters:']
     for p in PARAMS:
         if p.value_type in (int, float) and p.limits:

@@ -16,7 +16,7 @@ give bit-identical sums.
 Estimator
 ---------
 * Exact part (level 0), m <= ``exact_max_m``: every term i of the batch overlapping
-  estimator is summed; the curve equals :func:`imu_allan.allan.overlapping_avar` on
+  estimator is summed; the curve equals :func:`imu_allan.core.allan.overlapping_avar` on
   the same samples to rounding (about 1e-12 relative).  Memory: the last
   ``2 * exact_max_m`` samples, since a term needs X up to 2m samples back.
 * Decimated part (levels L = 1, 2, ...), m > ``exact_max_m``: level L keeps cluster
@@ -56,11 +56,11 @@ import tempfile
 
 import numpy as np
 
-from imu_allan.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
+from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
 from imu_allan.errors import InputError
 
 #: Format tag and version written into every state file.
-STATE_FORMAT = 'imu_allan.accumulator'
+STATE_FORMAT = 'imu_allan.core.accumulator'
 STATE_VERSION = 1
 
 #: Decimated levels serve m = m' D_L with _M_LO < m' <= 2 * _M_LO.
@@ -371,11 +371,11 @@ class AllanAccumulator:
             Two-sided confidence level of adev_lo/adev_hi, e.g. 0.683 or 0.95.
         alpha : float or np.ndarray, optional
             Power-law exponent(s) for the EDF, broadcastable to (k, n_axes); by default
-            estimated from the local slope (:func:`imu_allan.allan.alpha_from_slope`).
+            estimated from the local slope (:func:`imu_allan.core.allan.alpha_from_slope`).
         min_terms : int
             Taus with fewer pooled second differences are left out.  The default 1
             keeps every tau with data, m <= M // 2 for one segment of M samples, as
-            :func:`imu_allan.allan.tau_grid` does; the EDF says how little the last
+            :func:`imu_allan.core.allan.tau_grid` does; the EDF says how little the last
             taus are worth.
 
         Returns

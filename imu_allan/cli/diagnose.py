@@ -2,9 +2,9 @@
 ``imu-allan diagnose INPUT [--topic T] [--base-model LIST] [--out DIR] [--format json]``.
 
 Streams the input through the same :class:`~imu_allan.pipeline.Session` as
-``analyze`` (the input-opening code of :mod:`imu_allan.cli_analyze` is reused), keeps a
+``analyze`` (the input-opening code of :mod:`imu_allan.cli.analyze` is reused), keeps a
 bounded block-averaged copy of the samples for the periodogram check, and runs
-:func:`imu_allan.diagnose.diagnose_session`.  Writes ``diagnose.json``,
+:func:`imu_allan.core.diagnose.diagnose_session`.  Writes ``diagnose.json``,
 ``diagnose_table.md`` (the paper's table 3: gap before and after) and one figure per
 axis (``diagnose_<axis>.png``) to ``--out``.
 """
@@ -15,11 +15,11 @@ from pathlib import Path
 import sys
 
 from imu_allan import AXES
-from imu_allan.cli_analyze import (add_input_options, open_input, Progress, session_config,
+from imu_allan.cli.analyze import (add_input_options, open_input, Progress, session_config,
                                    stream_input)
-from imu_allan.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS, RawKeeper
+from imu_allan.core.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS, RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.pipeline import SessionConfig
+from imu_allan.pipeline.session import SessionConfig
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -63,7 +63,7 @@ def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_mo
 
     Returns
     -------
-    imu_allan.diagnose.DiagnoseResult
+    imu_allan.core.diagnose.DiagnoseResult
         The diagnosis.
 
     """
@@ -115,7 +115,7 @@ def write_outputs(result, out: Path, plot: bool = True) -> list:
                     + '\n'.join(result.summary_lines()) + '\n')
     files.append(path)
     if plot:
-        from imu_allan.plot import plot_diagnosis
+        from imu_allan.io.plot import plot_diagnosis
         for axis, d in result.axes.items():
             if d is not None:
                 files.append(plot_diagnosis(d, out / f'diagnose_{axis}.png'))

@@ -33,8 +33,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
+from imu_allan.core.noise_params import AxisNoise, GaussMarkov
 from imu_allan.errors import InputError
-from imu_allan.noise_params import AxisNoise, GaussMarkov
 
 #: robot_localization ignores (clamps) variances below this [unit^2].
 ROBOT_LOCALIZATION_MIN_VARIANCE = 1e-9
@@ -215,7 +215,7 @@ def axis_noise_from(source, use_upper_bounds: bool = True) -> tuple[AxisNoise, t
 
     Parameters
     ----------
-    source : AxisNoise or imu_allan.fit.AxisFit
+    source : AxisNoise or imu_allan.core.fit.AxisFit
         A model, or a fit (its optimised parameters are used).
     use_upper_bounds : bool
         With a fit: use a parameter reported as an upper bound at its bound (True,

@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES  # noqa: E402
-from imu_allan.model import avar_model, avar_terms  # noqa: E402
+from imu_allan.core.model import avar_model, avar_terms  # noqa: E402
 
 _COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
 _PANELS = ((GYRO_AXES, 'gyro ADEV [rad/s]'), (ACCEL_AXES, 'accel ADEV [m/s$^2$]'))
@@ -35,7 +35,7 @@ def plot_result(result, base) -> list:
 
     Parameters
     ----------
-    result : imu_allan.analysis.AnalysisResult
+    result : imu_allan.pipeline.analysis.AnalysisResult
         The analysis to draw.
     base : str or Path
         Output path without suffix; ``.png`` and ``.svg`` are written.
@@ -131,7 +131,7 @@ def plot_diagnosis(diag, path) -> Path:
 
     Parameters
     ----------
-    diag : imu_allan.diagnose.AxisDiagnosis
+    diag : imu_allan.core.diagnose.AxisDiagnosis
         The axis' diagnosis.
     path : str or Path
         The PNG file to write.

@@ -14,7 +14,7 @@ they are shown for comparison, not trusted.
 Optimised (generalised least squares on the Allan variance, GMWM-style):
 
 * Model: AVAR(tau) = sum_j c_j s_j(tau; phi_j), one term per entry of
-  :data:`imu_allan.model.TERMS`; linear in the coefficients c_j (S_N = N^2, S_B,
+  :data:`imu_allan.core.model.TERMS`; linear in the coefficients c_j (S_N = N^2, S_B,
   S_K = K^2, ...) for fixed nonlinear parameters phi (T_B, sinusoid frequency), as in
   the paper's section 3.2 (Maia, Silva, De Lima, Meneses).  The c_j are solved by
   non-negative least squares, phi by a grid and a bounded 1-D (or Nelder-Mead)
@@ -25,7 +25,7 @@ Optimised (generalised least squares on the Allan variance, GMWM-style):
   quadratic form in the phase, so Cov(avar_p, avar_q) = 2 sum_{k,l} gamma_pq(l-k)^2 /
   (4 tau_p^2 tau_q^2 n_p n_q), with gamma the covariance between second differences at
   cluster sizes m_p and m_q, built from each term's generalised covariance
-  (:class:`imu_allan.model.Term`).  The lag sum is exact near the kinks and
+  (:class:`imu_allan.core.model.Term`).  The lag sum is exact near the kinks and
   Gauss-Legendre far from them; test_fit.py checks Sigma against Monte Carlo.  It
   carries the chi-square spread of each point (its EDF, for the noise mix at that tau)
   and the correlation of neighbouring tau (about 0.5 at octave spacing).  A sinusoid
@@ -68,10 +68,11 @@ from scipy.special import ndtr
 from scipy.stats import chi2
 from scipy.stats import f as fdist
 
-from imu_allan.allan import _single_thread_blas, AllanCurve
+from imu_allan.core.allan import _single_thread_blas, AllanCurve
+from imu_allan.core.model import (base_name, FLICKER_AVAR, GM_PEAK_TAU, noise_from_terms, Term,
+                                  TERMS)
+from imu_allan.core.noise_params import AxisNoise
 from imu_allan.errors import InputError
-from imu_allan.model import base_name, FLICKER_AVAR, GM_PEAK_TAU, noise_from_terms, Term, TERMS
-from imu_allan.noise_params import AxisNoise
 
 #: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
 DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
@@ -1017,7 +1018,7 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     n_samples : int
         Number of samples the curve was computed from.
     terms : sequence of str, optional
-        Candidate terms (names of :data:`imu_allan.model.TERMS`, numbered for repeats:
+        Candidate terms (names of :data:`imu_allan.core.model.TERMS`, numbered for repeats:
         'gauss_markov', 'gauss_markov_2', 'sinusoid' ...).  Default
         :data:`DEFAULT_TERMS`.  The fit keeps the subset the data support.
     unit : str
@@ -1279,7 +1280,7 @@ def _one_sided_bound(c_obs: float, v0: float, v1: float, v2: float) -> float:
 def fit_curve(curve: AllanCurve, axis_index: int, n_samples: int | None = None, *,
               terms: Sequence[str] | None = None, unit: str | None = None) -> AxisFit:
     """
-    Fit one axis of an :class:`~imu_allan.allan.AllanCurve` (batch or streaming).
+    Fit one axis of an :class:`~imu_allan.core.allan.AllanCurve` (batch or streaming).
 
     Parameters
     ----------

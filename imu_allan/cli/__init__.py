@@ -25,7 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for name in SUBCOMMANDS:
-        module = importlib.import_module(f'imu_allan.cli_{name}')
+        module = importlib.import_module(f'imu_allan.cli.{name}')
         module.add_parser(sub)
     return parser
 

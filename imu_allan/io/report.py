@@ -14,8 +14,8 @@ import tempfile
 
 import yaml
 
-from imu_allan.analysis import AnalysisResult, B_CONVENTION
-from imu_allan.noise_params import dump_params, NoiseSpec
+from imu_allan.core.noise_params import dump_params, NoiseSpec
+from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
 
 #: File names inside the output directory (stable: other tools read them).
 FILES = {
@@ -100,6 +100,6 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True) -> list:
         _atomic_write(out / FILES['summary'], summary_text(result)),
     ]
     if plot:
-        from imu_allan.plot import plot_result
+        from imu_allan.io.plot import plot_result
         written += plot_result(result, out / 'adev')
     return written

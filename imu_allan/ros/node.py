@@ -3,7 +3,7 @@ imu_allan_node: live six-axis IMU noise characterisation beside a stationary rob
 
 Thin by design, so that 1 kHz input costs little CPU: the subscription is raw (no
 deserialisation) and its callback only appends the serialized message to a buffer; a
-timer decodes the buffer in one vectorised step (:func:`~imu_allan.bag_reader.
+timer decodes the buffer in one vectorised step (:func:`~imu_allan.io.bag_reader.
 decode_imu_cdr`) and feeds the pipeline :class:`~imu_allan.pipeline.Session` that the
 offline mode uses too.  The fit (seconds of CPU) runs on a worker thread on a snapshot
 of the Allan curve, so the executor keeps taking messages while it runs.  Other timers
@@ -37,13 +37,13 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import Trigger
 
 from imu_allan import AXES
-from imu_allan.analysis import analyze, CONFIDENCE
-from imu_allan.bag_reader import decode_imu_cdr, set_imu_covariances_cdr
-from imu_allan.diagnose import diagnose_session, RawKeeper
+from imu_allan.core.diagnose import diagnose_session, RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.node_params import BY_NAME, PARAMS, session_config
-from imu_allan.pipeline import Session
-from imu_allan.report import write_outputs
+from imu_allan.io.bag_reader import decode_imu_cdr, set_imu_covariances_cdr
+from imu_allan.io.report import write_outputs
+from imu_allan.pipeline.analysis import analyze, CONFIDENCE
+from imu_allan.pipeline.session import Session
+from imu_allan.ros.params import BY_NAME, PARAMS, session_config
 
 CHECKPOINT = 'checkpoint.npz'
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
@@ -84,7 +84,7 @@ def _result_qos() -> QoSProfile:
 
 class _SessionView:
     """
-    A frozen view of a session for :func:`~imu_allan.analysis.analyze`.
+    A frozen view of a session for :func:`~imu_allan.pipeline.analysis.analyze`.
 
     Taken under the node's lock in milliseconds (the Allan curve plus the counters),
     so that the fit, which takes seconds, runs without holding up the input.
@@ -520,7 +520,7 @@ class ImuAllanNode(Node):
 
     def diagnose(self, view=None, raw: RawKeeper | None = None) -> str:
         """
-        Diagnose the data so far (imu_allan.diagnose); publish the summary on ~/diagnosis.
+        Diagnose the data so far (imu_allan.core.diagnose); publish the summary on ~/diagnosis.
 
         Runs in the caller's thread (the ~/diagnose service runs it on a worker thread).
         A sinusoid is checked in the periodogram of the block-averaged samples the node

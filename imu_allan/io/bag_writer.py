@@ -562,7 +562,7 @@ def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
     ----------
     csv_path : str or os.PathLike
         CSV file (``t,gyro_x,...,accel_z``, optional ``.gz``), read by
-        :func:`imu_allan.csv_io.read_csv`.
+        :func:`imu_allan.io.csv_io.read_csv`.
     out_path : str or os.PathLike
         Output bag; storage from the path as in :func:`write_imu_bag`.
     topic, frame_id, storage, covariances
@@ -580,7 +580,7 @@ def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
         Number of messages written.
 
     """
-    from imu_allan.csv_io import read_csv
+    from imu_allan.io.csv_io import read_csv
 
     # Explicit columns: six arbitrary ones taken in file order would be a silent mix-up.
     data = read_csv(csv_path, columns=list(columns) if columns else list(AXES),

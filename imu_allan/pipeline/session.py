@@ -4,7 +4,7 @@ The one analysis session that both the live node and the offline readers feed.
 A :class:`Session` takes blocks of ``(stamp_ns (n,), samples (n, 6))`` in AXES order,
 checks them (rate, gaps, duplicate or out-of-order stamps, NaN/Inf, saturation, frozen
 axes, motion), streams the clean samples through one
-:class:`~imu_allan.accumulator.AllanAccumulator`, and fits the noise model on demand.
+:class:`~imu_allan.core.accumulator.AllanAccumulator`, and fits the noise model on demand.
 Because every mode goes through this object, the numbers cannot differ between them.
 """
 
@@ -19,8 +19,8 @@ from typing import Callable
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.accumulator import AllanAccumulator
-from imu_allan.allan import AllanCurve
+from imu_allan.core.accumulator import AllanAccumulator
+from imu_allan.core.allan import AllanCurve
 from imu_allan.errors import InputError
 
 N_AXES = len(AXES)

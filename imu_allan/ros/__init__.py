@@ -1,0 +1,5 @@
+"""
+The ROS 2 adapter.
+
+The live node and its parameter table.
+"""
