@@ -16,6 +16,7 @@ from imu_allan import AXES
 from imu_allan.core.fit import AxisFit, Param
 from imu_allan.core.kalman import (axis_densities, axis_noise_from, AxisDensities, discretise,
                                    imu_covariance, kalibr_yaml, kalman_model, NOTES)
+from imu_allan.core.model import avar_flicker, avar_gauss_markov, GM_PEAK_TAU
 from imu_allan.core.noise_params import AxisNoise, GaussMarkov
 from imu_allan.core.simulate import state_space_matrices
 from imu_allan.errors import InputError
@@ -95,6 +96,29 @@ def test_flicker_b_gets_a_frozen_state_and_a_note():
     km = kalman_model(_six(gyro=AxisNoise(N=1e-4, B=5e-5, K=1e-6)), rate_hz=50.0)
     assert km.Phi[0, 0] == 1.0 and km.Qd[0, 0] == 0.0 and km.F[0, 0] == 0.0
     assert any('gyro_x' in n and 'frozen' in n for n in km.notes)
+
+
+def test_flicker_b_from_a_fit_becomes_a_gauss_markov_state():
+    # A fitted flicker B (no T_B) is a Gauss-Markov state of the same peak ADEV
+    # (0.664 B) centred on the fitted taus, not a frozen state.
+    tau = np.geomspace(0.1, 1000.0, 9)
+    nan = Param(math.nan, (math.nan, math.nan), 'not_identified', 's')
+    fit = AxisFit(nominal={}, optimised={
+        'N': Param(1e-4, (0.9e-4, 1.1e-4), 'estimate', 'rad/s*s^0.5'),
+        'B': Param(5e-5, (4e-5, 6e-5), 'estimate', 'rad/s'), 'T_B': nan,
+        'K': Param(1e-6, (0.5e-6, 2e-6), 'estimate', 'rad/s/s^0.5')},
+        model=AxisNoise(), terms=('white', 'flicker', 'random_walk'), notes=(), tau_s=tau)
+    noise, notes = axis_noise_from(fit)
+    t_b = math.sqrt(0.1 * 1000.0) / GM_PEAK_TAU
+    assert noise.T_B == pytest.approx(t_b, rel=1e-12) and 'flicker' in notes[0]
+    km = kalman_model(_six(gyro=fit, accel=AxisNoise(N=1e-3)), rate_hz=50.0)
+    assert km.Phi[0, 0] == pytest.approx(math.exp(-1.0 / (50.0 * t_b)), rel=1e-12)
+    assert km.Qd[0, 0] > 0
+    # Its ADEV peak equals the flicker floor at the middle of the taus.
+    gm = GaussMarkov(5e-5, t_b)
+    mid = np.array([math.sqrt(0.1 * 1000.0)])
+    assert_allclose(np.sqrt(avar_gauss_markov(mid, gm.q, t_b)),
+                    np.sqrt(avar_flicker(mid, 5e-5)), rtol=2e-3)
 
 
 def test_kalman_inputs_validated():

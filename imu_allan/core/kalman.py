@@ -22,8 +22,9 @@ rad/s (gyro) or m/s^2 (accel).
 An upper-bound parameter (a term the record was too short to see) is used at its bound
 by default: a filter that under-states a bias's wander becomes over-confident, one that
 over-states it only converges a little slower.  A B without T_B (flicker, or T_B not
-identified) has no finite-dimensional state: its b_GM state is kept frozen (Phi = 1,
-Qd = 0) and a note says so.
+identified) has no finite-dimensional state: from a fit it becomes a Gauss-Markov state
+of the same peak ADEV centred on the fitted taus (:func:`flicker_time_s`); a bare model
+without taus keeps its b_GM state frozen (Phi = 1, Qd = 0) and a note says so.
 """
 
 from dataclasses import dataclass
@@ -33,6 +34,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
+from imu_allan.core.model import GM_PEAK_TAU
 from imu_allan.core.noise_params import AxisNoise, GaussMarkov
 from imu_allan.errors import InputError
 
@@ -240,9 +242,40 @@ def axis_noise_from(source, use_upper_bounds: bool = True) -> tuple[AxisNoise, t
         values[sym] = value
         if kind == 'upper_bound' and use_upper_bounds:
             notes.append(f'{sym} used at its 95 % upper bound')
-    noise = AxisNoise(N=values['N'] or 0.0, B=values['B'] or 0.0,
-                      T_B=values['T_B'] if values['T_B'] else None, K=values['K'] or 0.0)
+    t_b = values['T_B'] if values['T_B'] else None
+    if values['B'] and t_b is None and getattr(source, 'tau_s', None) is not None:
+        t_b = flicker_time_s(source.tau_s)
+        notes.append(f'B is flicker (no T_B): modelled as a Gauss-Markov state of the same '
+                     f'peak ADEV with T_B = {t_b:.3g} s (peak at the middle of the fitted '
+                     'taus)')
+    noise = AxisNoise(N=values['N'] or 0.0, B=values['B'] or 0.0, T_B=t_b, K=values['K'] or 0.0)
     return noise, tuple(notes)
+
+
+def flicker_time_s(tau_s) -> float:
+    """
+    Correlation time of the Gauss-Markov state that stands in for flicker noise.
+
+    Flicker noise (ADEV 0.664 B at every tau) has no finite-dimensional state.  A
+    Gauss-Markov process with the same B (paper eq. 8: its ADEV peaks at 0.664 B, at
+    tau = 1.89 T) matches it at the geometric middle of the fitted taus, and falls
+    below it by 1.8 dB (ADEV) half a decade above, 5.9 dB a decade above
+    (closed forms of IEEE Std 952 C.1): the filter's bias state then wanders like the
+    sensor over the averaging times the record could see.
+
+    Parameters
+    ----------
+    tau_s : array_like
+        Shape (k,), the fitted averaging times [s].
+
+    Returns
+    -------
+    float
+        T_B [s].
+
+    """
+    tau = np.asarray(tau_s, dtype=np.float64)
+    return float(math.sqrt(tau.min() * tau.max()) / GM_PEAK_TAU)
 
 
 def axis_densities(noise: AxisNoise, axis: str = '') -> AxisDensities:
