@@ -426,6 +426,7 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
     """
     from rosbags.rosbag2 import Reader
 
+    from imu_allan.core.evidence import RawKeeper
     from imu_allan.io.bag_reader import decode_imu_cdr
     from imu_allan.pipeline.analysis import analyze
     from imu_allan.pipeline.session import Session
@@ -436,14 +437,17 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
     with Reader(bag) as reader:
         raws = [raw for _, _, raw in reader.messages()]
     session = Session(SessionConfig())
+    keeper = RawKeeper(None, len(AXES))     # the node's raw copy for the effect search
     rng = np.random.default_rng(1)
     k = 0
     while k < len(raws):
         tick = int(rng.integers(1, 60))   # messages gathered between two timer ticks
-        session.add(*decode_imu_cdr(raws[k:k + tick]))
+        stamp_ns, values = decode_imu_cdr(raws[k:k + tick])
+        session.add(stamp_ns, values)
+        keeper.add(values[np.isfinite(values).all(axis=1)])
         k += tick
     session.flush()
-    node_doc = analyze(session, source='node').to_json()
+    node_doc = analyze(session, source='node', raw=keeper).to_json()
     code, out, err = _cli(['analyze', bag, '--out', tmp_path / 'out', '--format', 'json',
                            '--no-plot'], capsys)
     assert code == 0, err

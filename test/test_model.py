@@ -114,7 +114,7 @@ def test_registry_shape_matches_closed_form(name):
     term = TERMS[name]
     tau = np.geomspace(0.02, 500.0, 9)
     level = 3e-4
-    nl = {'T': (20.0,), 'T_B': (20.0,), 'f0_hz': (0.03,)}
+    nl = {'T': (20.0,), 'T_B': (20.0,), 'f0_hz': (0.03,), 'T_f': (0.05,)}
     nonlinear = nl[term.nonlinear[0]] if term.nonlinear else ()
     c = term.to_coef(level, *nonlinear)
     params = term.to_params(c, *nonlinear)
@@ -126,7 +126,11 @@ def test_registry_shape_matches_closed_form(name):
              'bias_instability': lambda: avar_model(tau, AxisNoise(B=level, T_B=20.0)),
              'random_walk': lambda: avar_random_walk(tau, level),
              'rate_ramp': lambda: avar_rate_ramp(tau, level),
-             'sinusoid': lambda: avar_sinusoid(tau, level, 0.03)}[name]()
+             'sinusoid': lambda: avar_sinusoid(tau, level, 0.03),
+             # White noise through a first-order filter of 0.05 s (IEEE Std 952 C.1 with
+             # q T = N): N^2 / tau (1 - T / (2 tau) (3 - 4 e^(-tau/T) + e^(-2 tau/T))).
+             'filtered_white': lambda: level ** 2 / tau * (1.0 - 0.05 / (2.0 * tau) * (
+                 3.0 - 4.0 * np.exp(-tau / 0.05) + np.exp(-2.0 * tau / 0.05)))}[name]()
     assert_allclose(c * term.shape(tau, *nonlinear), value, rtol=1e-12)
 
 

@@ -19,6 +19,7 @@ import os
 from pathlib import Path
 import queue
 import stat
+import statistics
 import sys
 import threading
 import time
@@ -371,6 +372,26 @@ def _prefetch(blocks: Iterator, depth: int = 2) -> Iterator:
         worker.join()
 
 
+def raw_tap() -> tuple:
+    """
+    Make a ``stream_input`` tap that keeps a bounded raw copy for the effect search.
+
+    Returns
+    -------
+    tuple
+        (tap, keeper): the RawKeeper's rate is taken from the session when the analysis
+        needs it.
+
+    """
+    from imu_allan.core.evidence import RawKeeper
+    # Every sample from the first on; the rate comes from the session at analysis time.
+    keeper = RawKeeper(None, len(AXES))
+
+    def tap(session, samples) -> None:
+        keeper.add(samples[np.isfinite(samples).all(axis=1)])
+    return tap, keeper
+
+
 def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
                   quiet: bool = False, progress: Optional[bool] = None):
     """
@@ -403,10 +424,11 @@ def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
             print(f'imu-allan: warning: {path.name}: {text}', file=sys.stderr)
 
     show = (not quiet) if progress is None else progress
+    tap, keeper = raw_tap()
     with open_input(path, topic) as source:
         bar = Progress(path.name, source.n_messages) if show else None
         try:
-            session = stream_input(source, config, on_warning=warn, progress=bar)
+            session = stream_input(source, config, on_warning=warn, progress=bar, tap=tap)
             reader_warnings = list(source.warnings)
             for text in reader_warnings:
                 warn(text)
@@ -414,7 +436,8 @@ def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
                 raise InputError(f'{path}: no Imu samples in the input')
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
-            result = analyze(session, source=source.label)
+            result = analyze(session, source=source.label,
+                             raw=keeper)
         finally:
             if bar is not None:
                 bar.close()
@@ -494,7 +517,9 @@ def spread_table(results: list, labels: list) -> tuple:
             vals = np.array([v for v in per_run if v is not None])
             if not vals.size:
                 continue
-            std = float(vals.std(ddof=1)) if vals.size > 1 else float('nan')
+            # statistics.stdev is exact for equal values (numpy's mean of n equal
+            # floats need not equal them, leaving a 1e-20 'spread').
+            std = float(statistics.stdev(vals.tolist())) if vals.size > 1 else float('nan')
             mean = float(vals.mean())
             entry = {'mean': mean, 'std': json_num(std), 'cv': json_num(std / mean),
                      'min': float(vals.min()), 'max': float(vals.max()), 'values': per_run,

@@ -14,10 +14,9 @@ import json
 from pathlib import Path
 import sys
 
-from imu_allan import AXES
-from imu_allan.cli.analyze import (add_input_options, open_input, Progress, session_config,
-                                   stream_input)
-from imu_allan.core.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS, RawKeeper
+from imu_allan.cli.analyze import (add_input_options, open_input, Progress, raw_tap,
+                                   session_config, stream_input)
+from imu_allan.core.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS
 from imu_allan.errors import InputError
 from imu_allan.pipeline.session import SessionConfig
 
@@ -71,19 +70,11 @@ def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_mo
         if not quiet:
             print(f'imu-allan: warning: {path.name}: {text}', file=sys.stderr)
 
-    keepers = []
-
-    def keep_raw(session, samples):
-        # The periodogram check needs raw samples; the rate is known after a few blocks.
-        if not keepers and session.rate_hz > 0:
-            keepers.append(RawKeeper(session.rate_hz, len(AXES)))
-        if keepers:
-            keepers[0].add(samples)
+    keep_raw, keeper = raw_tap()
 
     with open_input(path, topic) as source, Progress(path.name, source.n_messages) as progress:
         session = stream_input(source, config, on_warning=warn, progress=progress,
                                tap=keep_raw)
-        keeper = keepers[0] if keepers else None
         progress.set_stage('diagnosing')
         for text in source.warnings:
             warn(text)

@@ -46,13 +46,15 @@ import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
+from scipy.signal import lfilter
 from scipy.special import polygamma
-from scipy.stats import chi2 as chi2_dist
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve, edf_overlapping, overlapping_avar
-from imu_allan.core.fit import AxisFit, fit_axis, json_floats, json_num
+from imu_allan.core.evidence import RawKeeper
+from imu_allan.core.fit import AxisFit, json_floats, json_num
 from imu_allan.core.noise_params import AxisNoise
+from imu_allan.core.search import EFFECT_TERM as _EFFECT_TERM, search_axis
 from imu_allan.core.simulate import (flicker_noise, quantization_noise, rate_ramp,
                                      simulate_state_space, sinusoid)
 from imu_allan.errors import InputError
@@ -62,11 +64,6 @@ EFFECTS = ('quantization', 'white', 'bias_instability', 'gauss_markov', 'random_
            'rate_ramp', 'sinusoid')
 #: The paper's model: white noise, Gauss-Markov bias instability, random walk.
 DEFAULT_BASE = ('white', 'gauss_markov', 'random_walk')
-#: Fit term behind each effect when it is *added* ('bias_instability' is flicker noise).
-_EFFECT_TERM = {'quantization': 'quantization', 'white': 'white',
-                'bias_instability': 'flicker', 'gauss_markov': 'gauss_markov',
-                'random_walk': 'random_walk', 'rate_ramp': 'rate_ramp',
-                'sinusoid': 'sinusoid'}
 #: Fit term behind each name of the base model: 'gauss_markov' is the paper's
 #: bias-instability Gauss-Markov term (B, T_B).
 _BASE_TERM = dict(_EFFECT_TERM, gauss_markov='bias_instability')
@@ -78,22 +75,12 @@ _EFFECT_SYMBOLS = {'quantization': (('Q', 'Q'),), 'white': (('N', 'N'),),
 #: Unit templates of the reported symbols ('u' = the sample unit).
 _UNITS = {'Q': 'u*s', 'N': 'u*s^0.5', 'B': 'u', 'T': 's', 'K': 'u/s^0.5', 'R': 'u/s',
           'A': 'u', 'f0_hz': 'Hz'}
-#: At most this many of a repeatable effect (gauss_markov, sinusoid) are added.
-MAX_REPEATS = 2
 #: A gap at or below this (with an acceptable chi-square) is consistent: no search.
 GAP_OK = 1.5
 #: chi-square p-value below which the fit itself says the model misses something.
 P_INCONSISTENT = 1e-3
-#: Extra drop of the GLS chi-square, beyond BIC's ln(k) per parameter, that an added
-#: effect must buy (bench/diagnose_cases.py: no invented effect on clean axes).
-DELTA_MIN = 10.0
-#: A sinusoid's amplitude from the curve and from the periodogram must agree within
-#: this factor (a curve-only 'sinusoid' that stands in for broadband noise does not).
-AMPLITUDE_FACTOR = 3.0
 #: |z| above this marks a tau as disagreeing (two-sided 95 %).
 Z_BAND = 2.0
-#: Most steps (added effects) per axis.
-MAX_STEPS = 4
 #: Default number of simulated replicas.
 N_REPLICAS = 8
 
@@ -465,184 +452,6 @@ def find_bands(tau_s, z, threshold: float = Z_BAND) -> tuple:
     return tuple(bands)
 
 
-# ------------------------------------------------------------------- raw-sample keeper
-
-class RawKeeper:
-    """
-    A bounded copy of the raw samples for the periodogram check (block averages).
-
-    Samples are appended as they arrive; when more than ``max_samples`` rows are held,
-    neighbouring pairs are averaged (the decimation factor doubles).  Averaging is a
-    low-pass filter (sinc response), harmless for the slow sinusoids the Allan curve
-    can see.  Memory: at most ``max_samples`` x n_axes x 8 bytes.
-
-    Parameters
-    ----------
-    rate_hz : float
-        Rate of the incoming samples [Hz].
-    n_axes : int
-        Columns per sample.
-    max_samples : int
-        Rows kept at most (even).
-
-    """
-
-    def __init__(self, rate_hz: float, n_axes: int = len(AXES), max_samples: int = 1 << 20):
-        if not (math.isfinite(rate_hz) and rate_hz > 0):
-            raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
-        self.rate_hz = float(rate_hz)
-        self.max_samples = max(int(max_samples) // 2 * 2, 2)
-        self.factor = 1
-        self._data = np.empty((self.max_samples, n_axes))
-        self._n = 0
-        self._carry = np.empty((0, n_axes))
-
-    def add(self, samples) -> None:
-        """
-        Append samples.
-
-        Parameters
-        ----------
-        samples : array_like
-            Shape (n, n_axes), in the keeper's units.
-
-        """
-        y = np.asarray(samples, dtype=np.float64).reshape(-1, self._data.shape[1])
-        if self._carry.size:
-            y = np.vstack([self._carry, y])
-        usable = y.shape[0] // self.factor * self.factor
-        self._carry = y[usable:].copy()
-        blocks = y[:usable].reshape(-1, self.factor, y.shape[1]).mean(axis=1)
-        while blocks.shape[0]:
-            room = self.max_samples - self._n
-            take = min(room, blocks.shape[0])
-            self._data[self._n:self._n + take] = blocks[:take]
-            self._n += take
-            blocks = blocks[take:]
-            if self._n == self.max_samples:
-                half = self._data[:self._n].reshape(-1, 2, self._data.shape[1]).mean(axis=1)
-                self._n = half.shape[0]
-                self._data[:self._n] = half
-                self.factor *= 2
-                if blocks.shape[0]:
-                    odd = blocks.shape[0] % 2
-                    if odd:
-                        self._carry = np.vstack(
-                            [np.repeat(blocks[-1:], self.factor // 2, axis=0), self._carry])
-                    blocks = blocks[:blocks.shape[0] - odd].reshape(
-                        -1, 2, blocks.shape[1]).mean(axis=1)
-
-    @property
-    def samples(self) -> np.ndarray:
-        """Shape (n, n_axes): the kept (block-averaged) samples."""
-        return self._data[:self._n].copy()
-
-    @property
-    def kept_rate_hz(self) -> float:
-        """Rate of the kept samples [Hz]."""
-        return self.rate_hz / self.factor
-
-
-class PeakCheck(NamedTuple):
-    """
-    A periodogram peak.
-
-    Attributes
-    ----------
-    f0_hz : float
-        Frequency of the peak (interpolated) [Hz].
-    amplitude : float
-        Amplitude of a pure line at the peak, 2 |X(f)| / sum(w) [unit].
-    band_amplitude : float
-        Amplitude sqrt(2 var) of the power within +-max(5 bins, 5 %) of the peak above
-        the background, which also counts a line spread by drift [unit].
-    ratio : float
-        Peak power over the median power of its neighbourhood [-].
-    threshold : float
-        Ratio a peak needs to count (false-alarm probability 1e-3 over the band).
-    bin_hz : float
-        Frequency resolution 1 / T [Hz].
-    significant : bool
-        ratio >= threshold.
-
-    """
-
-    f0_hz: float
-    amplitude: float
-    band_amplitude: float
-    ratio: float
-    threshold: float
-    bin_hz: float
-    significant: bool
-
-
-def periodogram_peak(y, rate_hz: float, f_lo: float, f_hi: float) -> PeakCheck | None:
-    """
-    Find the strongest line of a Hann-windowed periodogram within [f_lo, f_hi].
-
-    The record is detrended (a line: bias and ramp).  Noise power in one bin is about
-    exponentially distributed around the local mean; the peak counts when its power
-    exceeds the neighbourhood median (frequencies within a factor 2, the peak's own
-    +-3 bins left out) by ln(n_bins / 1e-3) / ln 2 (false-alarm 1e-3 over the n_bins
-    searched).  Amplitude A = 2 |X(f)| / sum(w) at the interpolated peak (Hann window,
-    parabolic interpolation of the log power).
-
-    Parameters
-    ----------
-    y : array_like
-        Shape (n,), samples [unit].
-    rate_hz : float
-        Their rate [Hz].
-    f_lo, f_hi : float
-        Search range [Hz].
-
-    Returns
-    -------
-    PeakCheck or None
-        None when the range holds no resolvable frequency.
-
-    """
-    y = np.asarray(y, dtype=np.float64)
-    n = y.size
-    if n < 16:
-        return None
-    t = np.arange(n)
-    y = y - np.polyval(np.polyfit(t, y, 1), t)
-    w = np.hanning(n)
-    spec = np.fft.rfft(y * w)
-    power = np.abs(spec) ** 2
-    freqs = np.fft.rfftfreq(n, 1.0 / rate_hz)
-    bin_hz = rate_hz / n
-    lo, hi = max(f_lo, 3.0 * bin_hz), min(f_hi, 0.45 * rate_hz)
-    sel = np.flatnonzero((freqs >= lo) & (freqs <= hi))
-    if sel.size == 0:
-        return None
-    k = int(sel[np.argmax(power[sel])])
-    nb = np.flatnonzero((freqs >= freqs[k] / 2.0) & (freqs <= freqs[k] * 2.0)
-                        & (np.abs(np.arange(freqs.size) - k) > 3) & (freqs > 0))
-    background = float(np.median(power[nb])) if nb.size else float(np.median(power[1:]))
-    ratio = float(power[k] / max(background, 1e-300))
-    threshold = math.log(max(sel.size, 1) / 1e-3) / math.log(2.0)
-    shift = 0.0
-    if 0 < k < power.size - 1:
-        a, b, c = np.log(np.maximum(power[k - 1:k + 2], 1e-300))
-        den = a - 2.0 * b + c
-        if den < 0:
-            shift = float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
-    # Hann window: the main lobe at offset d bins scales the amplitude by
-    # sinc(d) / (1 - d^2); undo it at the interpolated offset.
-    gain = np.sinc(shift) / (1.0 - shift * shift)
-    amp = 2.0 * abs(spec[k]) / w.sum() / max(gain, 1e-3)
-    # Parseval with the window: sum (y w)^2 = (2 / n) sum_{k > 0} |X_k|^2, and
-    # E sum (y w)^2 = var(y) sum w^2 for a stationary signal.
-    half = max(5, int(math.ceil(0.05 * k)))
-    band = slice(max(k - half, 1), k + half + 1)
-    excess = np.clip(power[band] - background / math.log(2.0), 0.0, None).sum()
-    var = 2.0 / n * excess / float(np.sum(w * w))
-    return PeakCheck(float((k + shift) * bin_hz), float(amp), float(math.sqrt(2.0 * var)),
-                     ratio, float(threshold), float(bin_hz), ratio >= threshold)
-
-
 # -------------------------------------------------------------------- model & simulation
 
 @dataclass(frozen=True)
@@ -651,11 +460,14 @@ class _Model:
 
     noise: AxisNoise
     flicker_b: float = 0.0
+    filter_s: float = 0.0
 
 
 def _model_from_fit(fit: AxisFit, labels: Sequence[str]) -> _Model:
-    """Fitted model; the flicker term is kept apart (AxisNoise has one B)."""
+    """Fitted model; flicker and the sensor's filter are kept apart (AxisNoise has neither)."""
     noise = replace(fit.model, bias=0.0)
+    filter_s = next((float(phi[0]) for label, _, phi in fit.components
+                     if label == 'filtered_white'), 0.0)
     flicker = 0.0
     if 'flicker' in fit.terms:
         if 'bias_instability' in labels:
@@ -668,7 +480,52 @@ def _model_from_fit(fit: AxisFit, labels: Sequence[str]) -> _Model:
             noise = replace(noise, B=0.0, T_B=None)
     if noise.B > 0 and not noise.T_B:
         flicker, noise = noise.B, replace(noise, B=0.0, T_B=None)
-    return _Model(noise, float(flicker))
+    return _Model(noise, float(flicker), filter_s)
+
+
+def filtered_white_noise(n_density: float, filter_s: float, rate_hz: float, n_samples: int,
+                         rng: np.random.Generator) -> np.ndarray:
+    """
+    White noise of density N seen through a first-order filter, sampled by averaging.
+
+    The filtered rate x is an Ornstein-Uhlenbeck process of time constant T and driving
+    noise q^2 = N^2 / T^2 (DC gain 1); each output sample is its mean over the sample
+    period h, as the ``filtered_white`` term of :data:`imu_allan.core.model.TERMS`
+    assumes.  Exact discretisation: with a = exp(-h/T), x' = a x + w1 and the integral
+    I = T (1 - a) x + w2, where Var w1 = q^2 T (1 - a^2) / 2, Var w2 = q^2 T^2 (h -
+    2 T (1 - a) + T (1 - a^2) / 2) and Cov(w1, w2) = q^2 T^2 (1 - a)^2 / 2.
+
+    Parameters
+    ----------
+    n_density : float
+        N [unit*s^0.5].
+    filter_s : float
+        T [s].
+    rate_hz : float
+        Output rate [Hz].
+    n_samples : int
+        Output samples.
+    rng : np.random.Generator
+        Random source.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n_samples,), samples [unit].
+
+    """
+    h, t = 1.0 / rate_hz, float(filter_s)
+    a = math.exp(-h / t)
+    q2 = n_density ** 2 / (t * t)
+    v1 = q2 * t * (1.0 - a * a) / 2.0
+    v2 = q2 * t * t * (h - 2.0 * t * (1.0 - a) + t * (1.0 - a * a) / 2.0)
+    c12 = q2 * t * t * (1.0 - a) ** 2 / 2.0
+    chol = np.linalg.cholesky(np.array([[v1, c12], [c12, v2]]) + 1e-300 * np.eye(2))
+    w = chol @ rng.standard_normal((2, n_samples))
+    x0 = rng.standard_normal() * math.sqrt(q2 * t / 2.0)
+    # x_k at the start of each sample period: x_0 stationary, x_{k+1} = a x_k + w1_k.
+    x = lfilter([1.0], [1.0, -a], np.concatenate(([x0], w[0, :-1])))
+    return (t * (1.0 - a) * x + w[1]) / h
 
 
 def simulate_model_avar(model: _Model, rate_hz: float, n_samples: int, m: np.ndarray,
@@ -703,6 +560,9 @@ def simulate_model_avar(model: _Model, rate_hz: float, n_samples: int, m: np.nda
 
     """
     noise = model.noise
+    white = 0.0
+    if model.filter_s > 0:
+        white, noise = noise.N, replace(noise, N=0.0)
     total = np.zeros(m.size)
     done = 0
     t_s = None
@@ -710,6 +570,8 @@ def simulate_model_avar(model: _Model, rate_hz: float, n_samples: int, m: np.nda
         r = min(2, n_replicas - done)
         y = simulate_state_space(noise, rate_hz, n_samples, rng, r).y
         for j in range(r):
+            if white > 0:
+                y[:, j] += filtered_white_noise(white, model.filter_s, rate_hz, n_samples, rng)
             if model.flicker_b > 0:
                 y[:, j] += flicker_noise(model.flicker_b, rate_hz, n_samples, rng)
             if noise.Q > 0:
@@ -736,17 +598,6 @@ class _State(NamedTuple):
     model: _Model
     adev_sim: np.ndarray
     gap: float
-
-
-def _label_for(effect: str, labels: Sequence[str]) -> str | None:
-    """Fit label of an effect to add, or None when it cannot be added again."""
-    term = _EFFECT_TERM[effect]
-    if effect in ('gauss_markov', 'sinusoid'):
-        used = [lb for lb in labels if lb == term or lb.startswith(term + '_')]
-        if len(used) >= MAX_REPEATS:
-            return None
-        return term if term not in labels else f'{term}_{len(used) + 1}'
-    return None if term in labels else term
 
 
 def _fit_symbol(fit: AxisFit, label: str, sym: str):
@@ -788,22 +639,12 @@ def _term_avar(tau: np.ndarray, fit: AxisFit, effect: str, params: dict) -> np.n
     return coef * term.shape(tau, *nonlinear)
 
 
-def _fit(tau, avar, edf, rate_hz, n_samples, labels, unit) -> AxisFit:
-    return fit_axis(tau, avar, edf, rate_hz, n_samples, terms=list(labels), unit=unit)
-
-
-def _consistent(state: _State) -> bool:
-    dof = max(state.fit.dof, 1)
-    p = float(chi2_dist.sf(state.fit.chi2, dof))
-    return state.gap <= GAP_OK and p >= P_INCONSISTENT
-
-
 def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
                   raw=None, raw_rate_hz: float | None = None,
                   base_model: Sequence[str] = DEFAULT_BASE, axis: str = 'axis',
                   unit: str = 'unit', rng: np.random.Generator | None = None,
                   n_replicas: int = N_REPLICAS,
-                  effects: Sequence[str] = EFFECTS) -> AxisDiagnosis:
+                  effects: Sequence[str] | None = None) -> AxisDiagnosis:
     """
     Diagnose one axis: fit, simulate, compare, name and add what is missing, repeat.
 
@@ -833,7 +674,9 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     n_replicas : int
         Simulated replicas per model.
     effects : sequence of str
-        Effects that may be added (default all of :data:`EFFECTS`).
+        Effects that may be added (default all of :data:`EFFECTS` not in the base; with
+        the default base that is the search's own list, so the diagnosis ends at the
+        model every analysis reports).
 
     Returns
     -------
@@ -847,7 +690,7 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
 
     """
     rng = np.random.default_rng(0) if rng is None else rng
-    for name in tuple(base_model) + tuple(effects):
+    for name in tuple(base_model) + tuple(effects or ()):
         if name not in _BASE_TERM:
             raise InputError(f'unknown effect {name!r}; known: {", ".join(EFFECTS)}')
     if not base_model:
@@ -856,8 +699,14 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     tau_all = np.asarray(tau_s, dtype=np.float64)
     avar_all = np.asarray(avar, dtype=np.float64)
     edf_all = np.asarray(edf, dtype=np.float64)
-    fit0 = _fit(tau_all, avar_all, edf_all, rate_hz, n_samples, base_labels, unit)
-    # The comparison grid: the base fit's taus (thinned, filter-bent taus left out).
+    # The same search as every analysis (one model); here each step is also simulated.
+    search = search_axis(tau_all, avar_all, edf_all, rate_hz, n_samples, raw=raw,
+                         raw_rate_hz=raw_rate_hz, unit=unit, base_labels=base_labels,
+                         effects=tuple(e for e in (EFFECTS if effects is None else effects)
+                                       if e not in base_model),
+                         keep_steps=True)
+    fit0 = search.base
+    # The comparison grid: the fit's taus (thinned to two per octave).
     idx = np.array([int(np.argmin(np.abs(tau_all - t))) for t in fit0.tau_s])
     tau, a_meas = tau_all[idx], avar_all[idx]
     adev = np.sqrt(a_meas)
@@ -869,110 +718,51 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     # Greenhall), which only widens s(tau).
     e_meas = np.minimum(edf_all[idx], edf_overlapping(0, m, int(n_samples)))
     s_ln = ln_adev_stderr(e_meas)
-    k = tau.size
 
     def state_of(labels, fit) -> _State:
         model = _model_from_fit(fit, labels)
         sim = np.sqrt(simulate_model_avar(model, rate_hz, int(n_samples), m, rng, n_replicas))
         return _State(tuple(labels), fit, model, sim, gap(adev, sim, s_ln))
 
-    first = state_of(base_labels, fit0)
+    first = state_of(fit0.terms, fit0)
     state = first
     gaps = [first.gap]
     findings: list[Finding] = []
-    notes: list[str] = []
-    raw_y = None if raw is None else np.asarray(raw, dtype=np.float64)
-    raw_rate = float(raw_rate_hz or rate_hz)
-    for _ in range(MAX_STEPS):
-        if _consistent(state):
-            break
+    notes = [n for n in search.fit.notes if 'not confirm' in n or 'same periodogram' in n
+             or 'rate_ramp' in n]
+    for step in search.steps:
         z = gap_z(adev, state.adev_sim, s_ln)
         bands = find_bands(tau, z)
-        ranked = []
-        for effect in effects:
-            label = _label_for(effect, state.labels)
-            if label is None:
-                continue
-            labels = state.labels + (label,)
-            try:
-                fit = _fit(tau_all, avar_all, edf_all, rate_hz, n_samples, labels, unit)
-            except InputError:
-                continue
-            if label not in fit.terms:
-                continue
-            n_par = len(_EFFECT_SYMBOLS[effect])
-            drop = state.fit.chi2 - fit.chi2
-            score = drop - n_par * math.log(k) - DELTA_MIN
-            if score <= 0:
-                continue
-            got = _effect_params(fit, effect, label, unit)
-            if got is None:
-                continue
-            params, ci, units = got
-            note = ''
-            if effect == 'sinusoid' and raw_y is not None:
-                f0 = params['f0_hz']
-                peak = periodogram_peak(raw_y, raw_rate, f0 / 2.0, f0 * 2.0)
-                if peak is None:
-                    note = f'frequency {f0:.3g} Hz beyond the raw samples; not checked'
-                elif not peak.significant or not (
-                        1.0 / AMPLITUDE_FACTOR <= peak.band_amplitude / params['A']
-                        <= AMPLITUDE_FACTOR):
-                    notes.append(f'sinusoid at {f0:.3g} Hz (A {params["A"]:.2g}) fits the '
-                                 f'curve but the periodogram does not confirm it (line '
-                                 f'{peak.ratio:.0f} x background, needs {peak.threshold:.0f}; '
-                                 f'amplitude {peak.band_amplitude:.2g}); not added')
-                    continue
-                elif any(g.effect == 'sinusoid' and abs(g.params['f0_hz'] - peak.f0_hz)
-                         <= max(3.0 * peak.bin_hz, 0.05 * peak.f0_hz) for g in findings):
-                    notes.append(f'a further sinusoid near {peak.f0_hz:.3g} Hz would model the '
-                                 'same periodogram line again (a line wider than a pure '
-                                 'tone); not added')
-                    continue
-                else:
-                    params = dict(params, f0_hz=peak.f0_hz)
-                    ci = dict(ci, f0_hz=(peak.f0_hz - peak.bin_hz, peak.f0_hz + peak.bin_hz))
-                    note = (f'periodogram line at {peak.f0_hz:.4g} Hz ({peak.ratio:.0f} x '
-                            f'background; curve fit {f0:.3g} Hz), amplitude '
-                            f'{peak.band_amplitude:.3g} {unit} (curve fit {params["A"]:.3g})')
-            elif effect == 'sinusoid':
-                note = 'no raw samples: frequency from the Allan curve only'
-            ranked.append((score, effect, label, fit, params, ci, units, drop, note))
-        new = None
-        for cand in sorted(ranked, key=lambda c: -c[0]):
-            _, effect, label, fit, params, ci, units, drop, note = cand
-            trial = state_of(state.labels + (label,), fit)
-            if trial.gap < state.gap:
-                new = trial
-                break
-            notes.append(f'{effect} lowers the chi-square but not the simulated gap '
-                         f'({state.gap:.2f} -> {trial.gap:.2f}); not added')
-        if new is None:
-            break
-        term_avar = _term_avar(tau, fit, effect, _effect_params(fit, effect, label, unit)[0])
+        got = _effect_params(step.fit, step.effect, step.label, unit)
+        if got is None:
+            continue
+        params, ci, units = got
+        new = state_of(step.fit.terms, step.fit)
+        term_avar = _term_avar(tau, step.fit, step.effect, params)
         rest = np.maximum(new.adev_sim ** 2 - term_avar, 1e-300)
         tau_range = _visible_range(tau, term_avar, rest, s_ln)
         in_band = [b for b in bands if b.tau_range_s[1] >= tau_range[0]
                    and b.tau_range_s[0] <= tau_range[1]]
         shape = max(in_band, key=lambda b: b.peak_z).shape if in_band else 'level'
-        findings.append(Finding(effect, params, ci, units, tau_range, shape, state.gap,
-                                new.gap, float(drop), note))
+        note = step.evidence + (f'; rival: {step.rival}' if step.rival else '')
+        findings.append(Finding(step.effect, params, ci, units, tau_range, shape, state.gap,
+                                new.gap, float(step.chi2_drop), note))
         state = new
         gaps.append(new.gap)
     bands_before = find_bands(tau, gap_z(adev, first.adev_sim, s_ln))
     bands_after = find_bands(tau, gap_z(adev, state.adev_sim, s_ln))
-    if not _consistent(state) and not findings:
+    if search.fit.model_consistent is False and not findings:
         desc = '; '.join(f'{b.shape} {b.sign} at {b.tau_range_s[0]:.3g}-'
                          f'{b.tau_range_s[1]:.3g} s' for b in bands_before)
         notes.append('the base model disagrees with the data' + (f' ({desc})' if desc else '')
                      + ' but no listed effect is supported')
     diag = AxisDiagnosis(
-        axis=axis, unit=unit, base_terms=base_labels, terms=state.labels,
+        axis=axis, unit=unit, base_terms=fit0.terms, terms=state.labels,
         missing=tuple(findings), gap_before=first.gap, gap_after=state.gap,
         gaps=tuple(gaps), tau_s=tau, adev=adev, s_ln=s_ln, adev_before=first.adev_sim,
         adev_after=state.adev_sim, bands_before=bands_before, bands_after=bands_after,
-        chi2_before=float(first.fit.chi2), chi2_after=float(state.fit.chi2),
-        dof=int(state.fit.dof), fit_before=first.fit, fit_after=state.fit,
+        chi2_before=float(first.fit.chi2), chi2_after=float(search.fit.chi2),
+        dof=int(search.fit.dof), fit_before=first.fit, fit_after=search.fit,
         notes=tuple(notes))
     return replace(diag, summary=summary_line(diag))
 
@@ -1128,8 +918,9 @@ def diagnose_session(session, raw: RawKeeper | None = None, *,
     if curve is None or curve.tau_s.size < 3:
         return None
     raw_samples = raw_rate = None
-    if raw is not None and raw.samples.shape[0] >= 16:
-        raw_samples, raw_rate = raw.samples, raw.kept_rate_hz
+    if raw is not None and raw.samples.shape[0] >= 16 and (raw.rate_hz or session.rate_hz):
+        raw_samples = raw.samples
+        raw_rate = (raw.rate_hz or float(session.rate_hz)) / raw.factor
     return diagnose_curve(curve, int(session.stats.n_used), raw=raw_samples,
                           raw_rate_hz=raw_rate, base_model=base_model, seed=seed,
                           n_replicas=n_replicas, duration_s=float(session.duration_s),

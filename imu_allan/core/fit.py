@@ -57,7 +57,7 @@ B convention (paper eq. 8): B is the ADEV floor / 0.664; the Gauss-Markov drivin
 is S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import combinations
 import math
 from typing import NamedTuple, Sequence
@@ -80,9 +80,10 @@ DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
 CORE_PARAMS = {'N': 'white', 'B': 'bias_instability', 'T_B': 'bias_instability',
                'K': 'random_walk'}
 #: The paper's model: always part of the fit that yields the reported intervals.
-_CORE_TERMS = ('white', 'bias_instability', 'random_walk')
+_CORE_TERMS = ('white', 'filtered_white', 'bias_instability', 'random_walk')
 #: Symbols reported without a term prefix (others become '<term>.<symbol>').
-_PLAIN = {'quantization': ('Q',), 'white': ('N',), 'flicker': ('B',),
+_PLAIN = {'quantization': ('Q',), 'white': ('N',), 'filtered_white': ('N', 'T_f'),
+          'flicker': ('B',),
           'bias_instability': ('B', 'T_B'), 'random_walk': ('K',), 'rate_ramp': ('R',)}
 #: Kinds of a reported parameter.
 KINDS = ('estimate', 'upper_bound', 'lower_bound', 'not_identified')
@@ -173,6 +174,16 @@ class AxisFit:
         Shape (k,), Allan variance of ``model`` at ``tau_s`` [unit^2].
     avar_sd : np.ndarray
         Shape (k,), standard deviation of each Allan estimate under that model [unit^2].
+    avar_meas, edf : np.ndarray
+        Shape (k,), the measured Allan variance [unit^2] and its EDF at ``tau_s``.
+    components : tuple of (str, float, tuple)
+        The fitted model exactly: (term label, coefficient in SI, nonlinear parameters)
+        per term (:meth:`avar_at` evaluates it at any tau).
+    effects : tuple of dict
+        Effects the search added (:mod:`imu_allan.core.search`), in order.
+    model_consistent : bool or None
+        Whether the final model explains the curve (chi-square p >= 1e-3); None when no
+        search ran.
 
     """
 
@@ -186,6 +197,32 @@ class AxisFit:
     tau_s: np.ndarray = None
     avar_fit: np.ndarray = None
     avar_sd: np.ndarray = None
+    avar_meas: np.ndarray = None
+    edf: np.ndarray = None
+    components: tuple = ()
+    effects: tuple = ()
+    model_consistent: bool | None = None
+
+    def avar_at(self, tau_s) -> np.ndarray:
+        """
+        Allan variance of the fitted model (every term) at any taus.
+
+        Parameters
+        ----------
+        tau_s : array_like
+            Shape (k,), averaging times [s].
+
+        Returns
+        -------
+        np.ndarray
+            Shape (k,), AVAR [unit^2].
+
+        """
+        tau = np.asarray(tau_s, dtype=np.float64)
+        out = np.zeros(tau.shape)
+        for label, c_si, phi in self.components:
+            out += c_si * TERMS[base_name(label)].shape(tau, *phi)
+        return out
 
     def to_json(self) -> dict:
         """
@@ -203,6 +240,9 @@ class AxisFit:
         return {'params': {k: v.to_json() for k, v in self.optimised.items()},
                 'nominal': {k: v.to_json() for k, v in self.nominal.items()},
                 'terms': list(self.terms), 'notes': list(self.notes),
+                'effects': [dict(e, chi2_drop=json_num(e['chi2_drop']))
+                            for e in self.effects],
+                'model_consistent': self.model_consistent,
                 'gof': {'chi2': json_num(self.chi2), 'dof': int(self.dof),
                         'p_value': p_value}}
 
@@ -599,7 +639,8 @@ def _families(slots: Sequence[_Slot]) -> list:
 
 
 def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | None = None,
-                 fix: _Fix | None = None, local: bool = False) -> _Solution:
+                 fix: _Fix | None = None, local: bool = False,
+                 grid_slots: Sequence[int] | None = None) -> _Solution:
     """
     Fit one model at the current weights: NNLS inside a search over phi.
 
@@ -608,7 +649,9 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
     slot's nonlinear parameters, e.g. S_B from B and T) and the other coefficients are
     fitted to the rest of the curve.  Interchangeable terms keep their order (first
     label, shortest T), so a profile cannot swap their roles.  ``local`` skips the grid
-    and searches near ``phi0`` only (profiles move in small steps).
+    and searches near ``phi0`` only (profiles move in small steps).  ``grid_slots``
+    limits the grid sweeps to those slots' parameters (a term added to a fitted model:
+    the others start where they are and move in the polish).
     """
     fixed_nl = {}
     fixed_level = None
@@ -673,8 +716,9 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
         coef, j = solve(phi)
         return _Solution(coef, phi, j)
     # Coordinate grid sweeps, then a local polish.
-    for _ in range(1 if len(nl_index) == 1 else 2):
-        for d in range(len(nl_index)):
+    sweep = [d for d, (i, _) in enumerate(nl_index) if grid_slots is None or i in grid_slots]
+    for _ in range(1 if len(nl_index) == 1 or grid_slots is not None else 2):
+        for d in sweep:
             grid = np.linspace(bounds[d, 0], bounds[d, 1], 41)
             vals = []
             for g in grid:
@@ -878,7 +922,7 @@ class _Fitter:
         return out
 
     def irls(self, slots, phi0=None, sigma0: np.ndarray | None = None,
-             max_iter: int = 8) -> tuple[_Solution, np.ndarray]:
+             max_iter: int = 8, local: bool = False) -> tuple[_Solution, np.ndarray]:
         """
         Fit one model by iteratively re-weighted GLS; return the fit and Sigma at it.
 
@@ -898,13 +942,15 @@ class _Fitter:
         """
         y = self.data.y
         self.data.set_sigma(np.diag(2.0 * y ** 2 / self.edf0) if sigma0 is None else sigma0)
-        sol = _fit_fixed_w(self.data, slots, phi0)
+        # local: the nonlinear parameters start at a fitted model's (an effect search
+        # step) and are polished, not searched again over their whole ranges.
+        sol = _fit_fixed_w(self.data, slots, phi0, local=local and phi0 is not None)
         for it in range(max_iter):
             if not np.any(sol.coef > 0):
                 break
             sigma = self.sigma(slots, sol, expected=True)
             self.data.set_sigma(sigma)
-            new = _fit_fixed_w(self.data, slots, sol.phi)
+            new = _fit_fixed_w(self.data, slots, sol.phi, local=local)
             before = _design(slots, self.data.tau, sol.phi) @ sol.coef
             after = _design(slots, self.data.tau, new.phi) @ new.coef
             sol = new
@@ -925,6 +971,9 @@ def _slot(label: str, tau: np.ndarray, rate_hz: float) -> _Slot:
             # The bump (at 1.89 T) must fall inside the record: a shorter T is white
             # noise to the curve, a longer one random walk.
             bounds.append((2.0 * tau.min(), tau.max()))
+        elif name == 'T_f':
+            # The sensor's filter: from a tiny fraction of a sample period to a few.
+            bounds.append((0.01 / rate_hz, 4.0 / rate_hz))
         elif name == 'f0_hz':
             bounds.append((0.371 / (2.0 * tau.max()), min(0.742 / tau.min(), 0.5 * rate_hz)))
         else:  # pragma: no cover - a registry entry without search bounds
@@ -999,7 +1048,8 @@ def _filtered_start(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> int:
 
 def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
              terms: Sequence[str] | None = None, unit: str = 'unit',
-             method: str = 'overlapping') -> AxisFit:
+             method: str = 'overlapping', select: bool = True,
+             phi0: dict | None = None, sigma0: np.ndarray | None = None) -> AxisFit:
     """
     Fit the noise model of one axis to its Allan curve (nominal and optimised).
 
@@ -1026,6 +1076,18 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     method : str
         Estimator of the curve: 'overlapping' (exact covariance) or 'nonoverlapping'
         (overlapping correlations, variances from ``edf``).
+    select : bool
+        True: keep the subset of ``terms`` the data support (AIC over every subset).
+        False: ``terms`` were already selected (:mod:`imu_allan.core.search`); fit them
+        all, and report a term whose coefficient comes out zero as a bound.
+    phi0 : dict of str to tuple, optional
+        Starting nonlinear parameters per term label (the search's values); a
+        sinusoid's frequency then stays within 20 % of its start (a line the
+        periodogram confirmed).
+    sigma0 : np.ndarray, optional
+        Shape (k, k), covariance of the thinned curve to start the re-weighting from
+        (the search's last one, in the fit's scaled units), instead of the paper's
+        diagonal weights.
 
     Returns
     -------
@@ -1042,10 +1104,12 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     # The matrices are tiny (k ~ 20-30 taus): OpenBLAS threads only add overhead and
     # oversubscribe a busy machine (measured: 2-3x slower wall time with them).
     with _single_thread_blas():
-        return _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method)
+        return _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
+                         select, phi0, sigma0)
 
 
-def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method) -> AxisFit:
+def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
+              select=True, phi0=None, sigma0=None) -> AxisFit:
     """Body of :func:`fit_axis` (same arguments)."""
     tau, avar, edf = _check_inputs(curve_tau_s, avar, edf, rate_hz, n_samples)
     if method not in ('overlapping', 'nonoverlapping'):
@@ -1064,7 +1128,8 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method) -
     keep = _thin(tau)
     tau, avar, edf = tau[keep], avar[keep], edf[keep]
     notes: list[str] = []
-    first = _filtered_start(tau, avar, rate_hz)
+    # With the filtered_white term the filter is part of the model, not cut away.
+    first = 0 if 'filtered_white' in candidates else _filtered_start(tau, avar, rate_hz)
     if first:
         notes.append(f'tau < {tau[first]:.3g} s left out: flatter than white noise there '
                      "(the sensor's low-pass filter)")
@@ -1076,14 +1141,27 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method) -
     n_terms = np.maximum(int(n_samples) + 1 - 2 * m, 1)
     fitter = _Fitter(tau, avar, edf, m, n_terms, dt, int(n_samples), method)
     slots_all = [_slot(lbl, tau, rate_hz) for lbl in candidates]
+    start = None
+    if phi0:
+        start = [tuple(phi0.get(s.label, [math.sqrt(lo * hi) for lo, hi in s.bounds]))
+                 for s in slots_all]
+        slots_all = [replace(s, bounds=((p[0] / 1.2, p[0] * 1.2),))
+                     if s.term.name == 'sinusoid' and s.label in phi0 else s
+                     for s, p in zip(slots_all, start)]
     symbols = _symbols(slots_all)
 
     # Full candidate model, then every subset at its weights (AIC).
-    full_sol, full_sigma = fitter.irls(slots_all)
+    if sigma0 is not None and np.shape(sigma0) != (tau.size, tau.size):
+        sigma0 = None
+    full_sol, full_sigma = fitter.irls(slots_all, phi0=start, sigma0=sigma0,
+                                       local=start is not None)
     fitter.data.set_sigma(full_sigma)
     phi_full = dict(zip([s.label for s in slots_all], full_sol.phi))
     best = None
-    for r in range(1, len(slots_all) + 1):
+    if not select:
+        kept = tuple(i for i, c in enumerate(full_sol.coef) if c > 0)
+        best = (0.0, kept) if kept else None
+    for r in range(1, len(slots_all) + 1 if select else 1):
         for subset in combinations(range(len(slots_all)), r):
             slots = [slots_all[i] for i in subset]
             if _n_params(slots) >= tau.size:
@@ -1110,7 +1188,8 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method) -
     else:
         sol, sigma = fitter.irls(slots, phi0=[phi_full[s.label] for s in slots],
                                  sigma0=full_sigma)
-    sol = _fit_fixed_w(fitter.data, slots, sol.phi)   # J at exactly these weights
+    # J at exactly these weights (from the search's model: a polish, not a new search).
+    sol = _fit_fixed_w(fitter.data, slots, sol.phi, local=start is not None)
     chi2_value = float(sol.j)
     dof = int(tau.size - _n_params(slots))
     # Sigma is the model's own covariance of the curve (checked against Monte Carlo in
@@ -1199,10 +1278,13 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method) -
         if s.label not in values and s.term.name in _CORE_TERMS:
             values[s.label] = s.term.to_params(sol.coef[i] * fitter.data.scale, *sol.phi[i])
     avar_fit = _design(slots, tau, sol.phi) @ sol.coef * fitter.data.scale
+    components = tuple((s.label, float(c * fitter.data.scale), tuple(p))
+                       for s, c, p in zip(slots, sol.coef, sol.phi) if c > 0)
     return AxisFit(nominal=nominal, optimised=optimised, model=noise_from_terms(values),
                    terms=tuple(s.label for s in slots if s.label in supported),
                    notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
-                   avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale)
+                   avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
+                   avar_meas=avar, edf=edf, components=components)
 
 
 def _upper_bound(fitter: _Fitter, slots: list, sol: _Solution, extra: _Slot) -> float:

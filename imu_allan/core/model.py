@@ -412,6 +412,19 @@ TERMS: dict[str, Term] = {
         None, lambda c, f0: {'A': math.sqrt(max(c, 0.0)), 'f0_hz': f0},
         lambda v, f0: v * v, ('u', 'Hz')),
 }
+#: White noise seen through the sensor's own low-pass filter (anti-aliasing, decimation):
+#: first-order filtered white noise is a Gauss-Markov process of time constant T_f, so
+#: its AVAR is the Gauss-Markov shape scaled to N^2, N^2 / tau (1 - T_f / (2 tau) (3 -
+#: 4 exp(-tau/T_f) + exp(-2 tau/T_f))), white noise of density N for tau >> T_f.
+#: T_f is a nuisance parameter of at most a few sample periods; N is the density the
+#: filter passes at long tau, what a Kalman filter running at the output rate sees.
+TERMS['filtered_white'] = Term(
+    'filtered_white', ('N', 'T_f'), ('T_f',), lambda tau, T: _gm_shape(_as_tau(tau) / T) / T,
+    lambda u, T: _gcov_gauss_markov(u, T) / (T * T),
+    lambda c, T: {'N': math.sqrt(max(c, 0.0)), 'T_f': T}, lambda v, T: v * v,
+    ('u*s^0.5', 's'), reach=_reach_gauss_markov,
+    tail=lambda d, m1, m2, dt, T: _tail_gauss_markov(d, m1, m2, dt, T) / (T * T),
+    psd_phase=lambda f, dt, T: _PSD_PHASE['gauss_markov'](f, dt, T) / (T * T))
 #: 'bias_instability' is the paper's Gauss-Markov term with T_B (symbols B, T_B).
 TERMS['bias_instability'] = Term(
     'bias_instability', ('B', 'T_B'), ('T_B',), TERMS['gauss_markov'].shape,
@@ -564,7 +577,7 @@ def noise_from_terms(values: dict[str, dict[str, float]]) -> AxisNoise:
         base = base_name(name)
         if base == 'quantization':
             kw['Q'] = p['Q']
-        elif base == 'white':
+        elif base in ('white', 'filtered_white'):
             kw['N'] = p['N']
         elif base == 'flicker':
             kw['B'] = p['B']

@@ -14,9 +14,10 @@ import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve
-from imu_allan.core.fit import AxisFit, fit_curve, json_floats
+from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.kalman import imu_covariance, kalibr_yaml, kalman_model, KalmanModel
 from imu_allan.core.noise_params import AxisNoise
+from imu_allan.core.search import search_axis
 from imu_allan.core.units import format_quoted, sensor_of
 from imu_allan.errors import InputError
 
@@ -119,6 +120,8 @@ class AnalysisResult:
                        (f'{sym}_ci95_hi', _g(p.ci95[1])), (f'{sym}_unit', p.unit),
                        (f'{sym}_kind', p.kind)]
         problems = _trust_problems(fit)
+        if fit.model_consistent is False:
+            problems.append('no listed effect explains the curve (N from its white region)')
         if any(k in self.hygiene and self.hygiene[k] for k in ('n_motion_events',)):
             problems.append('motion was detected')
         level = 'warn' if problems else 'ok'
@@ -164,6 +167,10 @@ class AnalysisResult:
                              notes=['no usable noise (frozen or constant axis)'])
             else:
                 entry.update(fit.to_json())
+                # The final model at every tau, and the range it was fitted on (beyond
+                # it, a plot of adev_model is an extrapolation).
+                entry['adev_model'] = json_floats(np.sqrt(fit.avar_at(self.curve.tau_s)))
+                entry['model_tau_range_s'] = json_floats([fit.tau_s.min(), fit.tau_s.max()])
                 entry['quoted'] = {
                     sym: format_quoted(sym, sensor_of(axis), p.value, digits=4)
                     for sym, p in fit.optimised.items()
@@ -184,9 +191,13 @@ class AnalysisResult:
         }
 
 
-def analyze(session, source: str = '') -> AnalysisResult | None:
+def analyze(session, source: str = '', raw=None) -> AnalysisResult | None:
     """
-    Fit every axis of a session's current Allan curve.
+    Fit every axis of a session's current Allan curve, effect search included.
+
+    The node, ``imu-allan analyze`` and ``imu-allan diagnose`` all come here (or to
+    :func:`imu_allan.core.search.search_axis` with the same inputs), so they report the
+    same model for the same data.
 
     Parameters
     ----------
@@ -194,6 +205,10 @@ def analyze(session, source: str = '') -> AnalysisResult | None:
         The session (node or offline) after its samples were added.
     source : str
         What was analysed, for the report.
+    raw : imu_allan.core.evidence.RawKeeper, optional
+        Block-averaged copy of the samples fed to the session: the periodogram and
+        ramp evidence of the effect search.  Without it sinusoids and ramps are named
+        from the Allan curve alone.
 
     Returns
     -------
@@ -204,6 +219,11 @@ def analyze(session, source: str = '') -> AnalysisResult | None:
     curve = session.curve(confidence=CONFIDENCE)
     if curve is None or curve.tau_s.size < 3:
         return None
+    samples = raw_rate = None
+    if raw is not None and raw.samples.shape[0] >= 16 and (raw.rate_hz or session.rate_hz):
+        # A copy started before the stream's rate was known takes the session's.
+        samples = raw.samples
+        raw_rate = (raw.rate_hz or float(session.rate_hz)) / raw.factor
     fits = {}
     for j, axis in enumerate(AXES):
         avar = curve.avar[:, j]
@@ -211,7 +231,10 @@ def analyze(session, source: str = '') -> AnalysisResult | None:
             fits[axis] = None
             continue
         try:
-            fits[axis] = fit_curve(curve, j, session.stats.n_used, unit=AXIS_UNITS[axis])
+            fits[axis] = search_axis(
+                curve.tau_s, avar, curve.edf[:, j], curve.rate_hz, int(session.stats.n_used),
+                raw=None if samples is None else samples[:, j], raw_rate_hz=raw_rate,
+                unit=AXIS_UNITS[axis]).fit
         except InputError:
             fits[axis] = None
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}

@@ -304,10 +304,11 @@ class ImuAllanNode(Node):
 
     def _keep_raw(self, samples: np.ndarray) -> None:
         rows = self.values['diagnose_raw_samples']
-        if rows < 2 or self.session.rate_hz <= 0:  # the rate is known after a few blocks
+        if rows < 2:
             return
         if self._raw is None or self._raw[0] is not self.session:
-            self._raw = (self.session, RawKeeper(self.session.rate_hz, len(AXES), rows))
+            # The rate is known after a few blocks; the copy keeps every sample anyway.
+            self._raw = (self.session, RawKeeper(None, len(AXES), rows))
         self._raw[1].add(samples[np.isfinite(samples).all(axis=1)])
 
     def _check_resume(self, stamp_ns: np.ndarray, samples: np.ndarray) -> tuple:
@@ -359,14 +360,10 @@ class ImuAllanNode(Node):
         if self.session.duration_s < self.values['min_duration_s'] or self.fitting:
             return
         self._process()
-        view = self._snapshot()
-        self._fit_thread = threading.Thread(target=self._fit_and_publish, args=(view,),
+        view, raw = self._snapshot()
+        self._fit_thread = threading.Thread(target=self._fit_and_publish, args=(view, raw),
                                             name='imu_allan_fit', daemon=True)
         self._fit_thread.start()
-
-    def _snapshot(self) -> _SessionView:
-        with self._lock:
-            return _SessionView(self.session)
 
     def publish_now(self):
         """
@@ -379,12 +376,14 @@ class ImuAllanNode(Node):
 
         """
         self._process()
-        return self._fit_and_publish(self._snapshot())
+        return self._fit_and_publish(*self._snapshot())
 
-    def _fit_and_publish(self, view: _SessionView):
+    def _fit_and_publish(self, view: _SessionView, raw: RawKeeper | None = None):
         if view.curve() is None:
             return None
-        result = analyze(view, source=self.subscription.topic_name)
+        # The raw copy feeds the effect search's periodogram and ramp evidence, so the
+        # node publishes the model analyze and diagnose give for the same data.
+        result = analyze(view, source=self.subscription.topic_name, raw=raw)
         if result is None:
             return None
         self._last_result = result
@@ -490,7 +489,7 @@ class ImuAllanNode(Node):
                 'published on ~/diagnosis'
             return response
         self._process()
-        view, raw = self._diagnose_snapshot()
+        view, raw = self._snapshot()
         if view.curve() is None:
             response.success = False
             response.message = 'not enough data for any Allan deviation yet'
@@ -504,12 +503,13 @@ class ImuAllanNode(Node):
                             'the summary will be published on ~/diagnosis')
         return response
 
-    def _diagnose_snapshot(self) -> tuple:
+    def _snapshot(self) -> tuple:
         """Return (session view, copy of its kept samples or None), taken together."""
         with self._lock:
             raw = None
             if self._raw is not None and self._raw[0] is self.session:
                 raw = copy.deepcopy(self._raw[1])
+                raw.rate_hz = raw.rate_hz or (self.session.rate_hz or None)
             return _SessionView(self.session), raw
 
     def _diagnose_and_log(self, view, raw) -> None:
@@ -546,7 +546,7 @@ class ImuAllanNode(Node):
         """
         if view is None:
             self._process()
-            view, raw = self._diagnose_snapshot()
+            view, raw = self._snapshot()
         result = diagnose_session(view, raw, source=self.subscription.topic_name)
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
