@@ -1,4 +1,4 @@
-"""The parameter table drives config/imu_allan.yaml and the README table."""
+"""The parameter table drives config/imu_allan.yaml and the table in docs/node.md."""
 
 import yaml
 
@@ -16,8 +16,8 @@ def test_config_file_is_generated_from_the_table():
         assert p.check(p.default) is None, p.name
 
 
-def test_readme_table_is_generated_from_the_table():
-    assert markdown_table() in (REPO / 'README.md').read_text(), \
+def test_docs_table_is_generated_from_the_table():
+    assert markdown_table() in (REPO / 'docs' / 'node.md').read_text(), \
         'regenerate: python -m imu_allan.ros.params markdown'
 
 

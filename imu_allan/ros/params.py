@@ -1,9 +1,9 @@
 """
-The node's parameters: one table for declaration, validation, config YAML and README.
+The node's parameters: one table for declaration, validation, config YAML and docs.
 
 No ROS import here: the node turns each row into a declared parameter with a
 descriptor and range; ``python -m imu_allan.ros.params yaml|markdown`` prints the
-config file and the README table from the same rows (a test checks both are in sync).
+config file and the table of docs/node.md from the same rows (a test keeps them in sync).
 """
 
 from dataclasses import dataclass
@@ -149,7 +149,7 @@ def config_yaml() -> str:
 
 
 def markdown_table() -> str:
-    """Return the README parameter table."""
+    """Return the parameter table of docs/node.md."""
     rows = ['| name | type | default | unit | range | description |',
             '| --- | --- | --- | --- | --- | --- |']
     for p in PARAMS:
