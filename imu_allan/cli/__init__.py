@@ -15,24 +15,55 @@ from imu_allan import __version__
 from imu_allan.errors import InputError
 
 SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'demo')
+#: Every command: (module in SUBCOMMANDS, one-line help).  Only the module of the command
+#: that runs is imported, so ``imu-allan --help`` loads neither numpy nor scipy.
+COMMANDS = {
+    'adev': ('adev', 'Allan deviation of CSV columns, with confidence bounds'),
+    'analyze': ('analyze', 'characterise the IMU noise of bags or CSV files'),
+    'simulate': ('simulate', 'simulate an IMU record from a noise-parameter YAML'),
+    'csv-to-bag': ('simulate', 'convert a CSV IMU log into a bag of sensor_msgs/Imu'),
+    'diagnose': ('diagnose', 'find what the noise model misses (simulation vs measurement)'),
+    'demo': ('demo', 'run the node on a simulated IMU (make demo)'),
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Build the top-level parser with every sub-command registered."""
+def build_parser(argv=None) -> argparse.ArgumentParser:
+    """
+    Build the top-level parser; only the chosen command's module fills in its options.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments about to be parsed (default ``sys.argv[1:]``): the first one that
+        names a command selects the module to import.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser.
+
+    """
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    chosen = next((a for a in argv if a in COMMANDS), None)
+    wanted = COMMANDS[chosen][0] if chosen else None
     parser = argparse.ArgumentParser(
         prog='imu-allan',
         description='Allan-variance characterisation of IMU noise (N, B, K, T_B).')
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for name in SUBCOMMANDS:
-        module = importlib.import_module(f'imu_allan.cli.{name}')
-        module.add_parser(sub)
+        if name == wanted:
+            importlib.import_module(f'imu_allan.cli.{name}').add_parser(sub)
+            continue
+        for command, (module, text) in COMMANDS.items():
+            if module == name:
+                sub.add_parser(command, help=text, add_help=False)
     return parser
 
 
 def main(argv=None) -> int:
     """Run the CLI; return the process exit code."""
-    parser = build_parser()
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
         return int(args.run(args) or 0)
