@@ -51,6 +51,6 @@ def test_every_relative_link_resolves(page):
 def test_link_check_can_fail(tmp_path):
     page = tmp_path / 'p.md'
     page.write_text('# Title\n\n[x](missing.md) [y](#title) [z](#nope)\n')
-    found = [t for t in LINK.findall(page.read_text())]
+    found = LINK.findall(page.read_text())
     assert found == ['missing.md', '#title', '#nope']
     assert 'title' in _anchors(page) and 'nope' not in _anchors(page)

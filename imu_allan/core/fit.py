@@ -674,8 +674,24 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
             vals[i][j] = float(v)
         return tuple(tuple(v) for v in vals)
 
+    # Columns depend only on their own slot's nonlinear parameters: a search that moves
+    # one of them (grid sweeps, profiles) reuses the others.
+    columns: dict = {}
+
+    def design(phi):
+        cols = []
+        for s, nl in zip(slots, phi):
+            key = (s.label, nl)
+            col = columns.get(key)
+            if col is None:
+                col = s.term.shape(data.tau, *nl)
+                if len(columns) < 4096:
+                    columns[key] = col
+            cols.append(col)
+        return np.column_stack(cols)
+
     def solve(phi):
-        a = _design(slots, data.tau, phi)
+        a = design(phi)
         if fixed_level is None:
             return _solve_linear(data, a)
         i = fixed_level.slot
@@ -748,8 +764,9 @@ def _polish_1d(objective, lo: float, hi: float, x0: float, f0: float) -> float:
 
 def _polish_nd(objective, x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     """Nelder-Mead from x, clipped to bounds (k, 2); keep x unless it improves."""
+    # fatol in chi-square units: 1e-6 is far below what moves an interval or a choice.
     res = minimize(objective, x, method='Nelder-Mead',
-                   options={'xatol': 1e-4, 'fatol': 1e-9, 'maxiter': 400})
+                   options={'xatol': 1e-3, 'fatol': 1e-6, 'maxiter': 400})
     return np.clip(res.x, bounds[:, 0], bounds[:, 1]) if res.fun <= objective(x) else x
 
 

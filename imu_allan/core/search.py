@@ -358,7 +358,9 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
     labels = list(base_labels)
     sol, sigma = irls(labels)
     base_j = sol.j
-    if 'white' in labels and tau.size > _n_params(slots_of(labels)) + 2:
+    dof = k - _n_params(slots_of(labels))
+    # The filter only where the base model leaves something to explain.
+    if 'white' in labels and dof > 2 and chi2.sf(sol.j, dof) < P_CONSISTENT:
         alt = ['filtered_white' if lb == 'white' else lb for lb in labels]
         trial = _fit_fixed_w(fitter.data, slots_of(alt))
         i_f = alt.index('filtered_white')
