@@ -42,8 +42,9 @@ import numpy as np
 from scipy.stats import chi2
 
 from imu_allan.core.evidence import periodogram_peak, ramp_test
-from imu_allan.core.fit import (_check_inputs, _design, _fit_fixed_w, _Fitter, _n_params,
-                                _slot, _thin, AxisFit, fit_axis, Param)
+from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
+from imu_allan.core.fit.result import AxisFit, Param
+from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter
 from imu_allan.core.model import base_name, TERMS
 from imu_allan.errors import InputError
 

@@ -1,0 +1,485 @@
+"""
+Fit one axis: candidate terms, selection, intervals, bounds (the per-axis driver).
+
+Part of :mod:`imu_allan.core.fit` (see its docstring for the method).
+"""
+
+from dataclasses import replace
+from itertools import combinations
+import math
+from typing import Sequence
+
+import numpy as np
+from scipy.optimize import brentq
+from scipy.special import ndtr
+from scipy.stats import chi2
+from scipy.stats import f as fdist
+
+from imu_allan.core.allan import _single_thread_blas, AllanCurve
+from imu_allan.core.fit.nominal import nominal_fit
+from imu_allan.core.fit.result import _unit, AxisFit, Param
+from imu_allan.core.fit.solver import (_design, _fit_fixed_w, _Fitter, _profile_interval, _Slot,
+                                       _Solution)
+from imu_allan.core.model import base_name, GM_PEAK_TAU, noise_from_terms, TERMS
+from imu_allan.errors import InputError
+
+#: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
+DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
+#: Parameters always reported, with the term they belong to.
+CORE_PARAMS = {'N': 'white', 'B': 'bias_instability', 'T_B': 'bias_instability',
+               'K': 'random_walk'}
+#: The paper's model: always part of the fit that yields the reported intervals.
+_CORE_TERMS = ('white', 'filtered_white', 'bias_instability', 'random_walk')
+#: Symbols reported without a term prefix (others become '<term>.<symbol>').
+_PLAIN = {'quantization': ('Q',), 'white': ('N',), 'filtered_white': ('N', 'T_f'),
+          'flicker': ('B',),
+          'bias_instability': ('B', 'T_B'), 'random_walk': ('K',), 'rate_ramp': ('R',)}
+#: Penalty per parameter of the information criterion (AIC).
+IC_PENALTY = 2.0
+Z95 = 1.959963984540054
+Z95_ONE_SIDED = 1.6448536269514722
+
+
+def _slot(label: str, tau: np.ndarray, rate_hz: float) -> _Slot:
+    base = base_name(label)
+    term = TERMS[base]
+    bounds = []
+    for name in term.nonlinear:
+        if name in ('T', 'T_B'):
+            # The bump (at 1.89 T) must fall inside the record: a shorter T is white
+            # noise to the curve, a longer one random walk.
+            bounds.append((2.0 * tau.min(), tau.max()))
+        elif name == 'T_f':
+            # The sensor's filter: from a tiny fraction of a sample period to a few.
+            bounds.append((0.01 / rate_hz, 4.0 / rate_hz))
+        elif name == 'f0_hz':
+            bounds.append((0.371 / (2.0 * tau.max()), min(0.742 / tau.min(), 0.5 * rate_hz)))
+        else:  # pragma: no cover - a registry entry without search bounds
+            raise InputError(f'no search range for parameter {name} of term {label}')
+    return _Slot(label, term, tuple(bounds))
+
+
+def _n_params(slots: Sequence[_Slot]) -> int:
+    return sum(1 + len(s.bounds) for s in slots)
+
+
+def _symbols(slots: Sequence[_Slot]) -> dict:
+    """Map every (label, symbol) pair of the candidate slots to its reported name."""
+    out, used = {}, set()
+    for s in slots:
+        base = base_name(s.label)
+        for sym in s.term.symbols:
+            plain = sym in _PLAIN.get(base, ()) and s.label == base
+            name = sym if plain and sym not in used else f'{s.label}.{sym}'
+            used.add(name)
+            out[(s.label, sym)] = name
+    return out
+
+
+def _check_inputs(tau, avar, edf, rate_hz, n_samples):
+    tau = np.atleast_1d(np.asarray(tau, dtype=np.float64))
+    avar = np.atleast_1d(np.asarray(avar, dtype=np.float64))
+    edf = np.atleast_1d(np.asarray(edf, dtype=np.float64))
+    if not (tau.shape == avar.shape == edf.shape and tau.ndim == 1):
+        raise InputError('tau, avar and edf must be 1-D arrays of the same length, got '
+                         f'{tau.shape}, {avar.shape}, {edf.shape}')
+    if not (isinstance(rate_hz, (int, float, np.integer, np.floating))
+            and math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+    if int(n_samples) != n_samples or n_samples < 4:
+        raise InputError(f'number of samples must be an integer >= 4, got {n_samples!r}')
+    ok = np.isfinite(tau) & np.isfinite(avar) & np.isfinite(edf) & (avar > 0) & (edf > 0)
+    order = np.argsort(tau[ok])
+    return tau[ok][order], avar[ok][order], edf[ok][order]
+
+
+def _thin(tau: np.ndarray, per_octave: float = 2.0) -> np.ndarray:
+    """Return the indices that keep at most ``per_octave`` points per octave of tau."""
+    keep, last = [], -np.inf
+    for i, t in enumerate(np.log2(tau)):
+        if t - last >= 1.0 / per_octave - 1e-9:
+            keep.append(i)
+            last = t
+    return np.array(keep, dtype=np.int64)
+
+
+def _filtered_start(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> int:
+    """
+    Return the index of the first tau to fit: leading taus bent by the sensor's filter.
+
+    Real IMUs low-pass filter (anti-aliasing, decimation) before they output samples, so
+    at the first few cluster sizes neighbouring samples are correlated and the curve is
+    flatter than the white-noise slope of -1/2 (no noise term of the model does that:
+    quantization is steeper).  Those points carry the largest EDF, so left in they
+    would pull N below the density that matters at longer tau and recruit a fast
+    Gauss-Markov term to bridge the bend.  Leading points whose ADEV slope to the next
+    point is above -0.48 are dropped, at most those below 64 sample periods; a white
+    record keeps them all (its slope noise there is ~0.003).
+    """
+    first = 0
+    slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
+    while (first < slope.size and tau[first] * rate_hz < 64.0 and slope[first] > -0.48
+           and tau.size - first > 3):
+        first += 1
+    return first
+
+
+def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
+             terms: Sequence[str] | None = None, unit: str = 'unit',
+             method: str = 'overlapping', select: bool = True,
+             phi0: dict | None = None, sigma0: np.ndarray | None = None) -> AxisFit:
+    """
+    Fit the noise model of one axis to its Allan curve (nominal and optimised).
+
+    Parameters
+    ----------
+    curve_tau_s : array_like
+        Shape (k,), averaging times [s], multiples of 1 / rate_hz.
+    avar : array_like
+        Shape (k,), overlapping Allan variance [unit^2].
+    edf : array_like
+        Shape (k,), equivalent degrees of freedom of each estimate (the nominal
+        intervals and the first weights; the optimised fit then uses the model's own
+        covariance).
+    rate_hz : float
+        Sample rate [Hz].
+    n_samples : int
+        Number of samples the curve was computed from.
+    terms : sequence of str, optional
+        Candidate terms (names of :data:`imu_allan.core.model.TERMS`, numbered for repeats:
+        'gauss_markov', 'gauss_markov_2', 'sinusoid' ...).  Default
+        :data:`DEFAULT_TERMS`.  The fit keeps the subset the data support.
+    unit : str
+        Unit of the samples ('rad/s', 'm/s^2'), used in the parameter units.
+    method : str
+        Estimator of the curve: 'overlapping' (exact covariance) or 'nonoverlapping'
+        (overlapping correlations, variances from ``edf``).
+    select : bool
+        True: keep the subset of ``terms`` the data support (AIC over every subset).
+        False: ``terms`` were already selected (:mod:`imu_allan.core.search`); fit them
+        all, and report a term whose coefficient comes out zero as a bound.
+    phi0 : dict of str to tuple, optional
+        Starting nonlinear parameters per term label (the search's values); a
+        sinusoid's frequency then stays within 20 % of its start (a line the
+        periodogram confirmed).
+    sigma0 : np.ndarray, optional
+        Shape (k, k), covariance of the thinned curve to start the re-weighting from
+        (the search's last one, in the fit's scaled units), instead of the paper's
+        diagonal weights.
+
+    Returns
+    -------
+    AxisFit
+        Nominal and optimised parameters with 95 % intervals, the selected model and
+        notes.
+
+    Raises
+    ------
+    InputError
+        Mismatched arrays, a bad rate, an unknown term, or fewer than 3 usable taus.
+
+    """
+    # The matrices are tiny (k ~ 20-30 taus): OpenBLAS threads only add overhead and
+    # oversubscribe a busy machine (measured: 2-3x slower wall time with them).
+    with _single_thread_blas():
+        return _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
+                         select, phi0, sigma0)
+
+
+def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
+              select=True, phi0=None, sigma0=None) -> AxisFit:
+    """Body of :func:`fit_axis` (same arguments)."""
+    tau, avar, edf = _check_inputs(curve_tau_s, avar, edf, rate_hz, n_samples)
+    if method not in ('overlapping', 'nonoverlapping'):
+        raise InputError(f'the fit needs an Allan curve (overlapping or nonoverlapping), '
+                         f'got method {method!r}')
+    candidates = tuple(DEFAULT_TERMS if terms is None else terms)
+    for label in candidates:
+        try:
+            base_name(label)
+        except KeyError:
+            raise InputError(f'unknown noise term {label!r}; known: '
+                             f'{", ".join(sorted(TERMS))}') from None
+    if len(set(candidates)) != len(candidates):
+        raise InputError('each term may appear once; number repeats, e.g. gauss_markov_2')
+    nominal = nominal_fit(tau, avar, edf, unit)
+    keep = _thin(tau)
+    tau, avar, edf = tau[keep], avar[keep], edf[keep]
+    notes: list[str] = []
+    # With the filtered_white term the filter is part of the model, not cut away.
+    first = 0 if 'filtered_white' in candidates else _filtered_start(tau, avar, rate_hz)
+    if first:
+        notes.append(f'tau < {tau[first]:.3g} s left out: flatter than white noise there '
+                     "(the sensor's low-pass filter)")
+        tau, avar, edf = tau[first:], avar[first:], edf[first:]
+    if tau.size < 3:
+        raise InputError(f'the fit needs at least 3 averaging times, got {tau.size}')
+    dt = 1.0 / float(rate_hz)
+    m = np.maximum(np.round(tau * rate_hz), 1).astype(np.int64)
+    n_terms = np.maximum(int(n_samples) + 1 - 2 * m, 1)
+    fitter = _Fitter(tau, avar, edf, m, n_terms, dt, int(n_samples), method)
+    slots_all = [_slot(lbl, tau, rate_hz) for lbl in candidates]
+    start = None
+    if phi0:
+        start = [tuple(phi0.get(s.label, [math.sqrt(lo * hi) for lo, hi in s.bounds]))
+                 for s in slots_all]
+        slots_all = [replace(s, bounds=((p[0] / 1.2, p[0] * 1.2),))
+                     if s.term.name == 'sinusoid' and s.label in phi0 else s
+                     for s, p in zip(slots_all, start)]
+    symbols = _symbols(slots_all)
+
+    # Full candidate model, then every subset at its weights (AIC).
+    if sigma0 is not None and np.shape(sigma0) != (tau.size, tau.size):
+        sigma0 = None
+    full_sol, full_sigma = fitter.irls(slots_all, phi0=start, sigma0=sigma0,
+                                       local=start is not None)
+    fitter.data.set_sigma(full_sigma)
+    phi_full = dict(zip([s.label for s in slots_all], full_sol.phi))
+    best = None
+    if not select:
+        kept = tuple(i for i, c in enumerate(full_sol.coef) if c > 0)
+        best = (0.0, kept) if kept else None
+    for r in range(1, len(slots_all) + 1 if select else 1):
+        for subset in combinations(range(len(slots_all)), r):
+            slots = [slots_all[i] for i in subset]
+            if _n_params(slots) >= tau.size:
+                continue
+            sol = _fit_fixed_w(fitter.data, slots, [phi_full[s.label] for s in slots])
+            if np.any(sol.coef <= 0):
+                continue  # a zero term: the same fit as a smaller subset
+            ic = sol.j + IC_PENALTY * _n_params(slots)
+            if best is None or ic < best[0]:
+                best = (ic, subset)
+    if best is None:
+        raise InputError('no noise term fits this curve (all coefficients zero)')
+    supported = {slots_all[i].label for i in best[1]}
+    # Values and intervals come from the supported terms plus the paper's core terms
+    # (white, bias instability, random walk) even where the data do not support them:
+    # a weak random walk dropped from the fit would push B and T_B up and make their
+    # intervals too narrow.  Other unsupported candidates (quantization, say) are left
+    # out, since keeping them only blurs N.  The selection decides what is reported as
+    # an estimate and what as an upper bound.
+    slots = [s for s in slots_all if s.label in supported or s.term.name in _CORE_TERMS]
+    if len(slots) == len(slots_all):
+        sol, sigma = full_sol, full_sigma
+        fitter.data.set_sigma(sigma)
+    else:
+        sol, sigma = fitter.irls(slots, phi0=[phi_full[s.label] for s in slots],
+                                 sigma0=full_sigma)
+    # J at exactly these weights (from the search's model: a polish, not a new search).
+    sol = _fit_fixed_w(fitter.data, slots, sol.phi, local=start is not None)
+    chi2_value = float(sol.j)
+    dof = int(tau.size - _n_params(slots))
+    # Sigma is the model's own covariance of the curve (checked against Monte Carlo in
+    # test_fit.py), so the scale is known and the threshold is the chi-square quantile
+    # (likelihood-ratio interval, Bates & Watts 1988).  Where the model fits worse than
+    # that covariance allows (J / dof > 1: an effect the model lacks, or a Sigma too
+    # small because it was evaluated at an estimate whose long-tau points run low), the
+    # observed dispersion scales the threshold up, with the F quantile for a dispersion
+    # that is itself estimated.
+    dispersion = chi2_value / dof if dof > 0 else 0.0
+    if dispersion > 1.0:
+        threshold = fdist.ppf(0.95, 1, dof) * dispersion
+    else:
+        threshold = chi2.ppf(0.95, 1)
+
+    optimised: dict[str, Param] = {}
+    values: dict[str, dict] = {}
+    for i, s in enumerate(slots):
+        if s.label not in supported:
+            continue
+        c_si = sol.coef[i] * fitter.data.scale
+        params = s.term.to_params(c_si, *sol.phi[i])
+        values[s.label] = params
+        for sym, template in zip(s.term.symbols, s.term.units):
+            v = params[sym]
+            kind = 'estimate'
+            if sym not in s.term.nonlinear:
+                ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold)
+            else:
+                lo_b, hi_b = s.bounds[s.term.nonlinear.index(sym)]
+                ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold,
+                                       (lo_b, hi_b))
+                if ci[1] >= hi_b * 0.999:
+                    kind, ci = 'lower_bound', (ci[0], math.inf)
+                    notes.append(f'{symbols[(s.label, sym)]}: may exceed the longest tau '
+                                 'of the record; only a lower bound')
+                elif ci[0] <= lo_b * 1.001:
+                    notes.append(f'{symbols[(s.label, sym)]}: may lie below the shortest '
+                                 'tau; poorly identified')
+            optimised[symbols[(s.label, sym)]] = Param(
+                float(v), (float(ci[0]), float(ci[1])), kind, _unit(template, unit))
+
+    # Candidates the data do not support: an upper bound for core or requested terms.
+    for s in slots_all:
+        if s.label in supported:
+            continue
+        if s.term.name not in _CORE_TERMS and terms is None:
+            notes.append(f'{s.label}: not supported by the data (left out)')
+            continue
+        others = [i for i, x in enumerate(slots) if x.label != s.label]
+        rest = _Solution(sol.coef[others], tuple(sol.phi[i] for i in others), sol.j)
+        if s.label not in [x.label for x in slots]:    # a requested extra term
+            others, rest = list(range(len(slots))), sol
+        bound = _upper_bound(fitter, [slots[i] for i in others], rest, s)
+        lin_sym = s.term.symbols[0]
+        name = symbols[(s.label, lin_sym)]
+        if math.isfinite(bound) and bound > 0:
+            optimised[name] = Param(bound, (0.0, bound), 'upper_bound',
+                                    _unit(s.term.units[0], unit))
+            notes.append(f'{name}: not supported by the data (too small or the record too '
+                         'short); 95 % upper bound')
+        else:
+            # A degenerate bound (0 or inf): the record cannot constrain the term at all.
+            optimised[name] = Param(math.nan, (math.nan, math.nan), 'not_identified',
+                                    _unit(s.term.units[0], unit))
+            notes.append(f'{name}: the record cannot constrain it (too short); no bound')
+        for sym, template in zip(s.term.symbols[1:], s.term.units[1:]):
+            optimised[symbols[(s.label, sym)]] = Param(
+                math.nan, (math.nan, math.nan), 'not_identified', _unit(template, unit))
+    for sym, base in CORE_PARAMS.items():
+        if sym not in optimised:
+            units = dict(zip(TERMS[base].symbols, TERMS[base].units))
+            optimised[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified',
+                                   _unit(units.get(sym, 'u'), unit))
+            if base not in [base_name(x) for x in candidates]:
+                notes.append(f'{sym}: not modelled (term {base} not among the candidates)')
+    if dof > 0 and chi2.sf(chi2_value, dof) < 1e-3:
+        notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
+                     f'{dof} dof): a missing effect? (imu-allan diagnose)')
+    order = ['N', 'B', 'T_B', 'K']
+    rest = sorted(k for k in optimised if k not in order)
+    optimised = {k: optimised[k] for k in order + rest}
+    # The model keeps the core terms reported as bounds at their point estimates: it is
+    # the curve the data support best, e.g. for simulation and diagnosis.
+    for i, s in enumerate(slots):
+        if s.label not in values and s.term.name in _CORE_TERMS:
+            values[s.label] = s.term.to_params(sol.coef[i] * fitter.data.scale, *sol.phi[i])
+    avar_fit = _design(slots, tau, sol.phi) @ sol.coef * fitter.data.scale
+    components = tuple((s.label, float(c * fitter.data.scale), tuple(p))
+                       for s, c, p in zip(slots, sol.coef, sol.phi) if c > 0)
+    return AxisFit(nominal=nominal, optimised=optimised, model=noise_from_terms(values),
+                   terms=tuple(s.label for s in slots if s.label in supported),
+                   notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
+                   avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
+                   avar_meas=avar, edf=edf, components=components)
+
+
+def _upper_bound(fitter: _Fitter, slots: list, sol: _Solution, extra: _Slot) -> float:
+    """
+    One-sided 95 % upper bound of an unsupported term's level (its first symbol).
+
+    The selected model plus the term is fitted by unconstrained GLS at the selected
+    model's weights, so the term's coefficient is a fixed linear combination
+    c_hat = g^T avar of the Allan estimates.  The bound is the coefficient c0 at which
+    P(c_hat <= observed | c0) = 5 %, with the covariance evaluated *under* c0 (a bound
+    computed with the covariance of a model without the term would be far too tight):
+    c_hat = c0 X + e, X ~ chi2_nu / nu for the term's own part (nu = 2 c0^2 / its
+    variance, Satterthwaite) and e Gaussian with the rest of the variance.  A term with
+    a nonlinear parameter (Gauss-Markov T) takes the largest bound over a grid of it
+    within the observed tau range.
+    """
+    tau = fitter.data.tau
+    grid: list = [()]
+    if extra.bounds:
+        lo, hi = extra.bounds[0]
+        if extra.term.name in ('gauss_markov', 'bias_instability'):
+            lo, hi = tau.min() / GM_PEAK_TAU, tau.max() / GM_PEAK_TAU
+        grid = [(float(g),) for g in np.geomspace(lo, hi, 6)]
+    base = _design(slots, tau, sol.phi)
+    best = 0.0
+    for nl in grid:
+        a = np.column_stack([base, extra.term.shape(tau, *nl)])
+        aw = fitter.data.whiten(a)
+        g = np.linalg.pinv(aw)[-1] @ fitter.data.inv      # c_hat = g @ y (scaled units)
+        c_obs = float(g @ fitter.data.y)
+        terms = [s.term for s in slots] + [extra.term]
+        blocks, active = fitter.cov.blocks(terms, list(sol.phi) + [nl])
+        quad = np.einsum('i,abij,j->ab', g, blocks, g)
+        coef = np.append(sol.coef, 0.0)[active]
+        x = len(terms) - 1
+        v0 = float(coef @ quad @ coef)
+        if x in active:
+            ix = active.index(x)
+            v1 = float(coef @ quad[:, ix])
+            v2 = float(quad[ix, ix])
+        else:
+            v1 = v2 = 0.0
+        c_ub = _one_sided_bound(c_obs, v0, v1, v2)
+        if not math.isfinite(c_ub):
+            return math.inf
+        value = extra.term.to_params(c_ub * fitter.data.scale, *nl)[extra.term.symbols[0]]
+        best = max(best, value)
+    return float(best)
+
+
+def _one_sided_bound(c_obs: float, v0: float, v1: float, v2: float) -> float:
+    """Smallest c0 with P(c0 X + e <= c_obs) <= 5 % (see :func:`_upper_bound`)."""
+    v0 = max(v0, 0.0)
+    if v2 <= 0.0:
+        return max(c_obs, 0.0) + Z95_ONE_SIDED * math.sqrt(v0)
+    nu = 2.0 / v2
+    u = (np.arange(256) + 0.5) / 256.0
+    x = chi2.ppf(u, nu) / nu
+
+    def prob(c0: float) -> float:
+        s_e = math.sqrt(max(v0 + 2.0 * c0 * v1, 1e-300))
+        return float(np.mean(ndtr((c_obs - c0 * x) / s_e)))
+
+    scale = max(abs(c_obs), math.sqrt(v0), 1e-300)
+    lo, hi = 0.0, scale
+    if prob(lo) <= 0.05:
+        return 0.0
+    while prob(hi) > 0.05:
+        lo, hi = hi, hi * 4.0
+        if hi > 1e8 * scale:
+            return math.inf
+    return float(brentq(lambda c: prob(c) - 0.05, lo, hi, xtol=1e-6 * hi))
+
+
+def fit_curve(curve: AllanCurve, axis_index: int, n_samples: int | None = None, *,
+              terms: Sequence[str] | None = None, unit: str | None = None) -> AxisFit:
+    """
+    Fit one axis of an :class:`~imu_allan.core.allan.AllanCurve` (batch or streaming).
+
+    Parameters
+    ----------
+    curve : AllanCurve
+        The curve; ``curve.method`` must be 'overlapping' or 'nonoverlapping'.
+    axis_index : int
+        Column of ``curve.avar`` to fit.
+    n_samples : int, optional
+        Number of samples behind the curve; default from the shortest tau's term count
+        (n_terms + 2 m - 1 for the overlapping estimator, (n_terms + 1) m otherwise).
+    terms : sequence of str, optional
+        Candidate terms, see :func:`fit_axis`.
+    unit : str, optional
+        Unit of the samples; default from ``imu_allan.AXIS_UNITS`` when the curve has
+        the six contract axes, else 'unit'.
+
+    Returns
+    -------
+    AxisFit
+        See :func:`fit_axis`.
+
+    """
+    from imu_allan import AXES, AXIS_UNITS
+
+    avar = np.asarray(curve.avar)
+    if avar.ndim == 1:
+        avar = avar[:, None]
+    edf = np.asarray(curve.edf)
+    if edf.ndim == 1:
+        edf = edf[:, None]
+    if not 0 <= axis_index < avar.shape[1]:
+        raise InputError(f'axis index {axis_index} outside 0..{avar.shape[1] - 1}')
+    if curve.method not in ('overlapping', 'nonoverlapping'):
+        raise InputError(f'the fit needs an Allan curve (overlapping or nonoverlapping), '
+                         f'got a {curve.method} curve')
+    if n_samples is None:
+        m0, n0 = int(np.asarray(curve.m)[0]), int(np.asarray(curve.n_terms)[0])
+        n_samples = n0 + 2 * m0 - 1 if curve.method == 'overlapping' else (n0 + 1) * m0
+    if unit is None:
+        unit = AXIS_UNITS[AXES[axis_index]] if avar.shape[1] == len(AXES) else 'unit'
+    return fit_axis(curve.tau_s, avar[:, axis_index], edf[:, axis_index], curve.rate_hz,
+                    n_samples, terms=terms, unit=unit, method=curve.method)

@@ -1,0 +1,251 @@
+"""
+Covariance of the Allan estimates at all fitted taus, exact for Gaussian terms.
+
+Part of :mod:`imu_allan.core.fit` (see its docstring for the method).
+"""
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from imu_allan.core.model import Term
+
+# Lag-sum quadrature: lags within _EXACT of a kink are summed exactly, the rest is
+# integrated with Gauss-Legendre on pieces that double in size away from the kinks.
+# (8, 4 points) keeps Sigma within 3e-4 (relative to its diagonal) of (24, 8 points) on
+# 3 h, 100 Hz octave and dense curves and a short 10 Hz one, for T_B from 3 s to
+# 3000 s, with half the nodes (bench/bench_fit.py: the fit's main cost).
+_EXACT = 8
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
+_STENCIL = ((0, 1.0), (1, -2.0), (2, 1.0))
+
+
+class _LagQuadrature:
+    """
+    Quadrature of sum_{k<n_p} sum_{l<n_q} f(l - k) for every pair p <= q of taus.
+
+    For each pair the lag axis is cut at the stencil kinks i m_p - j m_q (i, j in 0..2)
+    and at the kinks of the pair-count weight w(h); lags within ``_EXACT`` of a cut are
+    summed exactly, the rest is integrated (sum_{h=s}^{e} f(h) ~ int_{s-1/2}^{e+1/2})
+    with 8-point Gauss-Legendre on pieces graded geometrically away from the cuts.
+    """
+
+    def __init__(self, m: np.ndarray, n_terms: np.ndarray, reach: np.ndarray):
+        k = m.size
+        hs, ws, pair_ids, pairs = [], [], [], []
+        for p in range(k):
+            for q in range(p, k):
+                h, w = self._nodes(int(m[p]), int(m[q]), int(n_terms[p]), int(n_terms[q]),
+                                   int(reach[p] + reach[q]))
+
+                pair_ids.append(np.full(h.size, len(pairs), dtype=np.int64))
+                pairs.append((p, q))
+                hs.append(h)
+                ws.append(w)
+        self.h = np.concatenate(hs)
+        self.weight = np.concatenate(ws)
+        self.pair = np.concatenate(pair_ids)
+        self.starts = np.concatenate([[0], np.cumsum([h.size for h in hs])[:-1]])
+        self.pairs = np.array(pairs, dtype=np.int64)
+        self.m1 = m[self.pairs[self.pair, 0]].astype(np.float64)
+        self.m2 = m[self.pairs[self.pair, 1]].astype(np.float64)
+        # Inner kink range of each node's pair: polynomial terms vanish outside it.
+        self.kmin = -2.0 * self.m2
+        self.kmax = 2.0 * self.m1
+        self.k = k
+
+    @staticmethod
+    def _nodes(m1: int, m2: int, n1: int, n2: int, reach: int):
+        kinks = sorted({i * m1 - j * m2 for i in range(3) for j in range(3)})
+        lo = max(kinks[0] - reach, -(n1 - 1))
+        hi = min(kinks[-1] + reach, n2 - 1)
+        cuts = sorted({c for c in kinks + [0, n2 - n1, lo, hi] if lo <= c <= hi})
+        zones: list[list[int]] = []
+        for c in cuts:
+            s, e = max(lo, c - _EXACT), min(hi, c + _EXACT)
+            if zones and s <= zones[-1][1] + 1:
+                zones[-1][1] = max(zones[-1][1], e)
+            else:
+                zones.append([s, e])
+        hs = [np.arange(s, e + 1, dtype=np.float64) for s, e in zones]
+        ws = [np.ones(e + 1 - s) for s, e in zones]
+        for (_, e0), (s1, _) in zip(zones[:-1], zones[1:]):
+            edges = _graded(e0 + 0.5, s1 - 0.5, float(_EXACT))
+            half = 0.5 * np.diff(edges)
+            mid = 0.5 * (edges[1:] + edges[:-1])
+            hs.append((mid[:, None] + half[:, None] * _GL_X).ravel())
+            ws.append((half[:, None] * _GL_W).ravel())
+        h = np.concatenate(hs)
+        w_pairs = np.clip(np.minimum(n1, n2 - h) - np.maximum(0.0, -h), 0.0, None)
+        return h, np.concatenate(ws) * w_pairs
+
+    def gamma(self, term: Term, nonlinear: tuple, dt: float) -> np.ndarray:
+        """Covariance of the second differences per unit coefficient at every node."""
+        inside = (self.h >= self.kmin) & (self.h <= self.kmax)
+        reach = (np.zeros(self.h.size) if term.reach is None
+                 else term.reach(self.m1, self.m2, dt, *nonlinear))
+        direct = (inside if term.tail is not None else
+                  (self.h >= self.kmin - reach) & (self.h <= self.kmax + reach))
+        g = np.zeros(self.h.size)
+        h, m1, m2 = self.h[direct], self.m1[direct], self.m2[direct]
+        for i, ai in _STENCIL:
+            for j, aj in _STENCIL:
+                g[direct] += ai * aj * term.gcov(dt * (i * m1 - j * m2 - h), *nonlinear)
+        if term.tail is not None:
+            beyond = np.where(self.h > self.kmax, self.h - self.kmax, self.kmin - self.h)
+            tail = ~inside & (beyond <= reach)
+            g[tail] = term.tail(beyond[tail], self.m1[tail], self.m2[tail], dt, *nonlinear)
+        return g
+
+    def blocks(self, gammas: list, scale: np.ndarray) -> np.ndarray:
+        """C[a, b] (k, k) = sum of weight * gamma_a * gamma_b per pair, times scale."""
+        n = len(gammas)
+        out = np.zeros((n, n, self.k, self.k))
+        if n == 0:
+            return out
+        p, q = self.pairs[:, 0], self.pairs[:, 1]
+        a_idx, b_idx = np.triu_indices(n)
+        g = np.stack(gammas)
+        wg = g * self.weight
+        # The nodes are stored pair by pair, so each pair's sum is one reduceat segment.
+        sums = np.add.reduceat(wg[a_idx] * g[b_idx], self.starts, axis=1) * scale[p, q]
+        for s, a, b in zip(sums, a_idx, b_idx):
+            out[a, b, p, q] = s
+            out[a, b, q, p] = s
+            out[b, a] = out[a, b]
+        return out
+
+
+def _lru_get(cache: dict, key, size: int, make):
+    """Return cache[key], computed by ``make()`` when absent; drops the oldest entries."""
+    value = cache.pop(key, None)
+    if value is None:
+        value = make()
+    cache[key] = value
+    while len(cache) > size:
+        cache.pop(next(iter(cache)), None)
+    return value
+
+
+def _graded(a: float, b: float, first: float) -> np.ndarray:
+    """Edges of pieces covering [a, b], sizes first, 2 first, 4 first ... from both ends."""
+    left, right = [a], [b]
+    size = first
+    while right[-1] - left[-1] > 2.0 * size:
+        left.append(left[-1] + size)
+        right.append(right[-1] - size)
+        size *= 2.0
+    return np.array(left + right[::-1])
+
+
+class _CurveCovariance:
+    """Sigma(c, phi) of the overlapping Allan estimates of one curve (module docstring)."""
+
+    def __init__(self, m: np.ndarray, n_terms: np.ndarray, dt: float, n_samples: int):
+        self.m, self.n_terms, self.dt = m, n_terms, dt
+        tau = m * dt
+        self.scale = 2.0 / (4.0 * np.outer(tau ** 2, tau ** 2) * np.outer(n_terms, n_terms))
+        self.n_samples = n_samples
+        self._quad: dict[int, _LagQuadrature] = {}
+        self._gammas: dict = {}     # second-difference covariances at the nodes
+        self._blocks: dict = {}     # per-pair blocks of a term combination (small)
+
+    def _quadrature(self, tails: bool) -> _LagQuadrature:
+        # Without tails (polynomial covariances) the lags stop at the kinks; with them
+        # (Gauss-Markov, flicker) they run over the whole record, graded, so that one
+        # set of nodes serves every correlation time.
+        if tails not in self._quad:
+            reach = np.full(self.m.size, int(self.n_terms.max()) if tails else 0)
+            self._quad[tails] = _LagQuadrature(self.m, self.n_terms, reach)
+        return self._quad[tails]
+
+    def blocks(self, terms: Sequence[Term], nonlinear: Sequence[tuple]) -> tuple:
+        """
+        Per-pair covariance blocks of a model's random terms.
+
+        Parameters
+        ----------
+        terms : sequence of Term
+            The model's terms; deterministic ones (gcov None) are skipped.
+        nonlinear : sequence of tuple
+            Each term's nonlinear parameter values.
+
+        Returns
+        -------
+        blocks : np.ndarray
+            Shape (n_active, n_active, k, k): Sigma = sum_ab c_a c_b blocks[a, b]
+            [unit^4 per unit coefficients].
+        active : list of int
+            Index into ``terms`` of each block row.
+
+        """
+        active = [i for i, t in enumerate(terms) if t.gcov is not None]
+        quad = self._quadrature(any(terms[i].reach is not None for i in active))
+        gammas, keys = [], []
+        for i in active:
+            # Sigma varies slowly with T: a grid of 2^(1/32) steps lets the IRLS steps,
+            # profiles and bounds share the work.
+            t, nl = terms[i], tuple(2.0 ** (round(32.0 * math.log2(v)) / 32.0)
+                                    for v in nonlinear[i])
+            key = (id(quad), t.name, nl)
+            gamma = _lru_get(self._gammas, key, 24, lambda: quad.gamma(t, nl, self.dt))
+            gammas.append(gamma)
+            keys.append(key)
+        blocks = _lru_get(self._blocks, tuple(keys), 256,
+                          lambda: quad.blocks(gammas, self.scale))
+        return blocks, active
+
+    def sigma(self, terms: Sequence[Term], coef: np.ndarray, nonlinear: Sequence[tuple],
+              coef_cov: np.ndarray | None = None):
+        """
+        Covariance matrix of the Allan estimates under a model.
+
+        Sigma is quadratic in the coefficients, Sigma = sum_ab c_a c_b blocks[a, b]; with
+        ``coef_cov`` the product c_a c_b is replaced by its expectation
+        c_a c_b + cov(c_a, c_b) over uncertain coefficients.
+
+        Parameters
+        ----------
+        terms : sequence of Term
+            The model's terms; deterministic ones (gcov None) add nothing.
+        coef : np.ndarray
+            Shape (n_terms,), linear coefficients.
+        nonlinear : sequence of tuple
+            Each term's nonlinear parameter values.
+        coef_cov : np.ndarray, optional
+            Shape (n_terms, n_terms), covariance of the coefficients (same units).
+
+        Returns
+        -------
+        np.ndarray
+            Shape (k, k), covariance [unit^4].
+
+        """
+        blocks, active = self.blocks(terms, nonlinear)
+        c = np.asarray(coef, dtype=np.float64)[active]
+        moment = np.outer(c, c)
+        if coef_cov is not None:
+            moment = moment + np.asarray(coef_cov, dtype=np.float64)[np.ix_(active, active)]
+        return np.einsum('ab,abij->ij', moment, blocks)
+
+
+_COV_CACHE: dict = {}
+#: Curves whose covariance machinery is kept: the six axes of one Allan curve share the
+#: taus and term counts, so their quadrature nodes and the Sigma blocks of the terms
+#: without nonlinear parameters are built once (about a third of a fit's time).  One
+#: curve: its nodes and cached covariances take some 10-50 MB on a 3 h, 100 Hz record.
+_COV_CACHE_SIZE = 1
+
+
+def _shared_covariance(m: np.ndarray, n_terms: np.ndarray, dt: float,
+                       n_samples: int) -> _CurveCovariance:
+    """Return the cached :class:`_CurveCovariance` of a curve geometry (small LRU)."""
+    key = (m.tobytes(), n_terms.tobytes(), float(dt), int(n_samples))
+    cov = _COV_CACHE.pop(key, None)
+    if cov is None:
+        cov = _CurveCovariance(m, n_terms, dt, n_samples)
+    _COV_CACHE[key] = cov            # most recent last
+    while len(_COV_CACHE) > _COV_CACHE_SIZE:
+        _COV_CACHE.pop(next(iter(_COV_CACHE)))
+    return cov

@@ -1,0 +1,170 @@
+"""
+Result types of the fit: one parameter with its interval, one axis' fit.
+
+Part of :mod:`imu_allan.core.fit` (see its docstring for the method).
+"""
+
+from dataclasses import dataclass
+import math
+from typing import NamedTuple
+
+import numpy as np
+from scipy.stats import chi2
+
+from imu_allan.core.model import base_name, TERMS
+from imu_allan.core.noise_params import AxisNoise
+
+#: Kinds of a reported parameter.
+KINDS = ('estimate', 'upper_bound', 'lower_bound', 'not_identified')
+
+
+class Param(NamedTuple):
+    """
+    One reported parameter.
+
+    Attributes
+    ----------
+    value : float
+        Estimate [unit]; for an upper bound, the bound itself; NaN when not identified.
+    ci95 : tuple of float
+        (lo, hi), the 95 % interval [unit]; (0, bound) for an upper bound, (lo, inf)
+        for a lower bound, (nan, nan) when not identified.
+    kind : str
+        'estimate', 'upper_bound', 'lower_bound' or 'not_identified'.
+    unit : str
+        SI unit, e.g. 'rad/s*s^0.5'.
+
+    """
+
+    value: float
+    ci95: tuple[float, float]
+    kind: str
+    unit: str
+
+    def to_json(self) -> dict:
+        """Return {'value', 'ci95', 'kind', 'unit'}; NaN and inf become None."""
+        return {'value': json_num(self.value), 'ci95': [json_num(v) for v in self.ci95],
+                'kind': self.kind, 'unit': self.unit}
+
+
+def json_num(x):
+    """Return x as a float for strict JSON, or None where it is None, NaN or infinite."""
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def json_floats(a) -> list:
+    """Return the values of an array as a list for strict JSON (None for NaN/inf)."""
+    return [json_num(v) for v in np.asarray(a, dtype=np.float64).ravel()]
+
+
+@dataclass(frozen=True)
+class AxisFit:
+    """
+    Result of :func:`fit_axis` for one axis.
+
+    Attributes
+    ----------
+    nominal : dict of str to Param
+        IEEE Std 952 read-off: N, B, K, T_B.
+    optimised : dict of str to Param
+        GLS fit: N, B, T_B, K always (estimate, upper bound or not identified), plus
+        the symbols of every further selected or requested term (Q, R, '<term>.<sym>').
+    model : AxisNoise
+        The optimised model, SI: the supported terms plus the core terms (N, B/T_B, K)
+        at their GLS point estimates even where those are reported as upper bounds
+        (the best-fitting curve, e.g. for simulation); use ``optimised`` for values
+        with their status.
+    terms : tuple of str
+        Terms the data support (the selected model).
+    notes : tuple of str
+        Human one-liners, e.g. 'K: not supported by the data (too small or the record
+        too short); 95 % upper bound'.
+    chi2 : float
+        GLS chi-square of the fitted model (supported plus core terms) at its own
+        covariance [-].
+    dof : int
+        Number of fitted tau minus number of fitted parameters.
+    tau_s : np.ndarray
+        Shape (k,), the averaging times used [s].
+    avar_fit : np.ndarray
+        Shape (k,), Allan variance of ``model`` at ``tau_s`` [unit^2].
+    avar_sd : np.ndarray
+        Shape (k,), standard deviation of each Allan estimate under that model [unit^2].
+    avar_meas, edf : np.ndarray
+        Shape (k,), the measured Allan variance [unit^2] and its EDF at ``tau_s``.
+    components : tuple of (str, float, tuple)
+        The fitted model exactly: (term label, coefficient in SI, nonlinear parameters)
+        per term (:meth:`avar_at` evaluates it at any tau).
+    effects : tuple of dict
+        Effects the search added (:mod:`imu_allan.core.search`), in order.
+    model_consistent : bool or None
+        Whether the final model explains the curve (chi-square p >= 1e-3); None when no
+        search ran.
+
+    """
+
+    nominal: dict
+    optimised: dict
+    model: AxisNoise
+    terms: tuple
+    notes: tuple
+    chi2: float = math.nan
+    dof: int = 0
+    tau_s: np.ndarray = None
+    avar_fit: np.ndarray = None
+    avar_sd: np.ndarray = None
+    avar_meas: np.ndarray = None
+    edf: np.ndarray = None
+    components: tuple = ()
+    effects: tuple = ()
+    model_consistent: bool | None = None
+
+    def avar_at(self, tau_s) -> np.ndarray:
+        """
+        Allan variance of the fitted model (every term) at any taus.
+
+        Parameters
+        ----------
+        tau_s : array_like
+            Shape (k,), averaging times [s].
+
+        Returns
+        -------
+        np.ndarray
+            Shape (k,), AVAR [unit^2].
+
+        """
+        tau = np.asarray(tau_s, dtype=np.float64)
+        out = np.zeros(tau.shape)
+        for label, c_si, phi in self.components:
+            out += c_si * TERMS[base_name(label)].shape(tau, *phi)
+        return out
+
+    def to_json(self) -> dict:
+        """
+        Return the JSON-ready result of the axis.
+
+        Returns
+        -------
+        dict
+            ``{'params': {P: {value, ci95, kind, unit}}, 'nominal': {...},
+            'terms': [...], 'notes': [...], 'gof': {'chi2', 'dof', 'p_value'}}``;
+            ``params`` is the optimised fit (DESIGN.md result contract).
+
+        """
+        p_value = float(chi2.sf(self.chi2, self.dof)) if self.dof > 0 else None
+        return {'params': {k: v.to_json() for k, v in self.optimised.items()},
+                'nominal': {k: v.to_json() for k, v in self.nominal.items()},
+                'terms': list(self.terms), 'notes': list(self.notes),
+                'effects': [dict(e, chi2_drop=json_num(e['chi2_drop']))
+                            for e in self.effects],
+                'model_consistent': self.model_consistent,
+                'gof': {'chi2': json_num(self.chi2), 'dof': int(self.dof),
+                        'p_value': p_value}}
+
+
+def _unit(template: str, unit: str) -> str:
+    """Replace the sample-unit placeholder 'u' of a Term unit template."""
+    if template == 's' or template == 'Hz':
+        return template
+    return unit + template[1:]
