@@ -265,6 +265,44 @@ def _by_likelihood(fitter, slots_of, labels: list, ranked: list, penalty: float)
     return [r for _, r in scored] + ranked[N_RIVALS:]
 
 
+def _neg2_loglik(fitter, sol, n_params: int, penalty: float) -> float:
+    """-2 ln L + BIC penalty of a solution at the fitter's current Sigma."""
+    logdet = 2.0 * float(np.sum(np.log(np.abs(np.diag(fitter.data.chol)))))
+    return sol.j + logdet + n_params * penalty
+
+
+def _second_chance(fitter, slots_of, labels: list, sol, sigma, effects, penalty: float):
+    """
+    Re-fit each noise effect with its own weights; return the best step or None.
+
+    Used when the screen at the current weights found nothing but the chi-square still
+    rejects the model.  Sinusoids and ramps need their time-domain evidence and are
+    not tried here.  A step is taken when its penalised -2 ln L (:func:`_by_likelihood`)
+    beats the current model's by :data:`DELTA_MIN`.
+    """
+    fitter.data.set_sigma(sigma)
+    current = _neg2_loglik(fitter, sol, _n_params(slots_of(labels)), penalty)
+    best = None
+    for effect in effects:
+        label = _label_for(effect, labels)
+        if label is None or effect in ('sinusoid', 'rate_ramp'):
+            continue
+        if effect == 'quantization' and not shows_quantization(fitter.data.tau, fitter.data.y):
+            continue
+        slots = slots_of(labels + [label])
+        if _n_params(slots) >= fitter.data.tau.size:
+            continue
+        new, _ = fitter.irls(slots, phi0=list(sol.phi) + [
+            tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)])
+        if new.coef[-1] <= 0:
+            continue
+        value = _neg2_loglik(fitter, new, _n_params(slots), penalty)
+        if current - value > DELTA_MIN and (best is None or value < best[0]):
+            best = (value, (float(current - value), effect, label, new, '',
+                            'chosen by likelihood with its own weights'))
+    return None if best is None else best[1]
+
+
 def _short_sinusoid(slot, tau: np.ndarray):
     """
     Keep a sinusoid candidate to at least about 8 periods in the record.
@@ -444,6 +482,12 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
                           if r[2] != effect), '')
             chosen = (drop, effect, label, new, rival, evidence)
             break
+        if chosen is None:
+            # Second chance: at the current weights a model that overshoots the long
+            # taus gives them little weight, so no effect buys its margin there.  Each
+            # noise effect is re-fitted with its own weights and compared by likelihood.
+            chosen = _second_chance(fitter, slots_of, labels, sol, sigma, effects, penalty)
+            fitter.data.set_sigma(sigma)
         if chosen is None:
             break
         drop, effect, label, new, rival, evidence = chosen
