@@ -20,10 +20,9 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 
 from imu_allan.errors import InputError
-from imu_allan.io.bag_reader import (decode_imu_cdr, decode_imu_payloads, ImuBlock,
-                                     list_imu_topics, list_topics, open_imu,
-                                     set_imu_covariances_cdr)
+from imu_allan.io.bag_reader import ImuBlock, list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
+from imu_allan.io.imu_cdr import decode_imu_cdr, decode_imu_payloads, set_imu_covariances_cdr
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)

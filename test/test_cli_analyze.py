@@ -420,14 +420,14 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
     The node's path, emulated at the Session level, against ``imu-allan analyze``.
 
     The node (imu_allan/ros/node.py) receives raw CDR payloads, decodes what accumulated
-    at each timer tick with ``bag_reader.decode_imu_cdr`` and calls ``Session.add``;
+    at each timer tick with ``imu_cdr.decode_imu_cdr`` and calls ``Session.add``;
     here the bag's raw payloads (read by rosbags, as a raw subscription delivers them)
     take that path in irregular tick-sized blocks.
     """
     from rosbags.rosbag2 import Reader
 
     from imu_allan.core.evidence import RawKeeper
-    from imu_allan.io.bag_reader import decode_imu_cdr
+    from imu_allan.io.imu_cdr import decode_imu_cdr
     from imu_allan.pipeline.analysis import analyze
     from imu_allan.pipeline.session import Session
 

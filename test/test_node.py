@@ -529,7 +529,7 @@ def test_the_node_keeps_raw_samples_for_the_diagnosis_periodogram(rig):
 
 
 # ------------------------------------------------------ the executable itself
-def _start(out: Path, *params: str) -> subprocess.Popen:
+def _start(out: Path, *params: str, env: dict | None = None) -> subprocess.Popen:
     exe = Path(sys.executable).parent / 'imu_allan_node'
     cmd = [str(exe) if exe.exists() else sys.executable]
     if not exe.exists():
@@ -539,7 +539,8 @@ def _start(out: Path, *params: str) -> subprocess.Popen:
             '-p', 'progress_period_s:=1.0']
     for p in params:
         cmd += ['-p', p]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
 
 
 class Player:
@@ -617,6 +618,36 @@ def test_checkpoint_and_resume_across_a_killed_process(context, tmp_path):
         assert 'not resuming: the checkpoint was taken at 200.000 Hz but the data now ' \
             'arrive at 100.000 Hz' in err, err[-3000:]
         assert list(out.glob('checkpoint.*.npz'))             # old state kept aside
+    finally:
+        player.close()
+
+
+def test_node_runs_and_characterises_without_the_bag_libraries(context, tmp_path):
+    # A robot with only the ROS runtime: rosbags, mcap, lz4 and zstandard refuse to
+    # import in the node's process (stub packages first on its path).
+    stubs = tmp_path / 'stubs'
+    for name in ('rosbags', 'mcap', 'lz4', 'zstandard'):
+        (stubs / name).mkdir(parents=True)
+        (stubs / name / '__init__.py').write_text(
+            f'raise ImportError("{name} is not installed on this robot")\n')
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(stubs)] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]))
+    out = tmp_path / 'out'
+    player = Player(context)
+    try:
+        t, y = _record(200.0, 20.0)
+        proc = _start(out, env=env)
+        player.play(t, y, set())
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 0 and 'Traceback' not in err, err[-3000:]
+        assert 'not installed on this robot' not in err
+        result = json.loads((out / 'result.json').read_text())
+        assert result['n_samples'] >= 0.5 * t.size
+        for axis in AXES:
+            n = result['axes'][axis]['params']['N']['value']
+            assert n == pytest.approx(SPEC.axes[axis].N, rel=0.1), axis
     finally:
         player.close()
 

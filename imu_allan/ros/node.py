@@ -3,7 +3,7 @@ imu_allan_node: live six-axis IMU noise characterisation beside a stationary rob
 
 Thin by design, so that 1 kHz input costs little CPU: the subscription is raw (no
 deserialisation) and its callback only appends the serialized message to a buffer; a
-timer decodes the buffer in one vectorised step (:func:`~imu_allan.io.bag_reader.
+timer decodes the buffer in one vectorised step (:func:`~imu_allan.io.imu_cdr.
 decode_imu_cdr`) and feeds the pipeline :class:`~imu_allan.pipeline.Session` that the
 offline mode uses too.  The fit (seconds of CPU) runs on a worker thread on a snapshot
 of the Allan curve, so the executor keeps taking messages while it runs.  Other timers
@@ -39,7 +39,7 @@ from std_srvs.srv import Trigger
 from imu_allan import AXES
 from imu_allan.core.diagnose import diagnose_session, RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.io.bag_reader import decode_imu_cdr, set_imu_covariances_cdr
+from imu_allan.io.imu_cdr import decode_imu_cdr, set_imu_covariances_cdr
 from imu_allan.io.report import write_outputs
 from imu_allan.pipeline.analysis import analyze, CONFIDENCE
 from imu_allan.pipeline.session import Session

@@ -1,0 +1,311 @@
+"""
+The sensor_msgs/Imu wire layout, once: numpy-only decoding and covariance patching.
+
+ROS 2 messages are CDR (4 encapsulation bytes, then ``header.stamp`` sec int32 and
+nanosec uint32, ``frame_id`` as uint32 length and bytes, padding to 8, then 37
+doubles: orientation (4), its covariance (9), angular_velocity (3), its covariance
+(9), linear_acceleration (3), its covariance (9)).  ROS 1 messages carry ``seq``,
+``secs``, ``nsecs`` uint32, ``frame_id`` (uint32 length, bytes), then the doubles.
+Used by the node (which needs nothing of the bag libraries), the bag readers and the
+tests.  Only payloads that fit neither layout go through rosbags' own deserialiser,
+imported on demand.
+"""
+
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from imu_allan.errors import InputError
+
+#: Message type names of sensor_msgs/Imu (ROS 2, ROS 1).
+IMU_MSGTYPES = ('sensor_msgs/msg/Imu', 'sensor_msgs/Imu')
+
+
+_N_DOUBLES_BYTES = 37 * 8
+
+
+#: Leading fields of a serialised Imu message (CDR: encapsulation bytes; both: frame_id
+#: length, read in either byte order).
+_HEAD = np.dtype({'names': ['enc0', 'enc1', 'frame_len_le', 'frame_len_be'],
+                  'formats': ['u1', 'u1', '<u4', '>u4'], 'offsets': [0, 1, 12, 12],
+                  'itemsize': 16})
+
+
+def _records(u8: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """
+    Read one structured record at each offset of a byte buffer.
+
+    Parameters
+    ----------
+    u8 : numpy.ndarray
+        (size,) uint8 buffer; every ``starts + dtype.itemsize`` must fit in it.
+    starts : numpy.ndarray
+        (n,) int64 byte offsets.
+    dtype : numpy.dtype
+        Record layout.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) records: a zero-copy strided view when the offsets are equally spaced
+        (messages of one length back to back), otherwise a gathered copy.
+
+    """
+    n = starts.size
+    if n == 1 or (n > 1 and starts[1] - starts[0] >= dtype.itemsize
+                  and (np.diff(starts) == starts[1] - starts[0]).all()):
+        step = int(starts[1] - starts[0]) if n > 1 else dtype.itemsize
+        return np.ndarray((n,), dtype, buffer=u8, offset=int(starts[0]), strides=(step,))
+    return _gather(u8, starts, dtype.itemsize).view(dtype).reshape(n)
+
+
+def _gather(u8: np.ndarray, starts: np.ndarray, nbytes: int) -> np.ndarray:
+    """
+    Copy ``nbytes`` bytes at each offset of a byte buffer into an (n, nbytes) array.
+
+    A void-typed view with a one-byte stride makes every offset one item, so numpy
+    copies whole runs instead of indexing byte by byte (several times faster).
+    """
+    if u8.size < nbytes:
+        return u8[np.asarray(starts)[:, None] + np.arange(nbytes)]   # IndexError, as numpy
+    items = np.ndarray((u8.size - nbytes + 1,), np.dtype((np.void, nbytes)), buffer=u8,
+                       offset=0, strides=(1,))
+    return items[starts].view(np.uint8).reshape(-1, nbytes)
+
+
+def _fields_dtype(doubles_offset: int, big: bool, ros1: bool, itemsize: int,
+                  packed: bool) -> np.dtype:
+    """
+    Return the dtype of the decoded fields of one Imu message.
+
+    Parameters
+    ----------
+    doubles_offset : int
+        Offset of orientation.x inside the payload [bytes].
+    big : bool
+        Big-endian CDR.
+    ros1 : bool
+        ROS 1 (unsigned seconds).
+    itemsize : int
+        Record size [bytes] (the payload length for strided views).
+    packed : bool
+        Layout of the 56 gathered bytes (stamp, angular_velocity, linear_acceleration)
+        instead of the payload itself.
+
+    Returns
+    -------
+    numpy.dtype
+        Fields sec, nanosec, angular_velocity (3,), linear_acceleration (3,).
+
+    """
+    e = '>' if big else '<'
+    offsets = [0, 4, 8, 32] if packed else [4, 8, doubles_offset + 104, doubles_offset + 200]
+    return np.dtype({'names': ['sec', 'nanosec', 'angular_velocity', 'linear_acceleration'],
+                     'formats': [e + ('u4' if ros1 else 'i4'), e + 'u4', (e + 'f8', (3,)),
+                                 (e + 'f8', (3,))],
+                     'offsets': offsets, 'itemsize': itemsize})
+
+
+def _fallback_decode(payload: bytes, ros1: bool) -> Optional[Tuple[int, list]]:
+    """Decode one odd payload with rosbags; return (stamp_ns, six values) or None."""
+    from rosbags.typesys import get_typestore, Stores
+
+    try:
+        if ros1:
+            msg = get_typestore(Stores.ROS1_NOETIC).deserialize_ros1(payload, IMU_MSGTYPES[0])
+        else:
+            msg = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(payload, IMU_MSGTYPES[0])
+        av, la = msg.angular_velocity, msg.linear_acceleration
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        return stamp, [av.x, av.y, av.z, la.x, la.y, la.z]
+    except Exception:   # noqa: B902 - any failure means: not a decodable Imu payload
+        return None
+
+
+def _imu_layout(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
+                ros1: bool) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Where the doubles of each serialised Imu message start, and in which byte order.
+
+    Returns (n,) int64 offset of orientation.x from the payload start [bytes], (n,)
+    bool big-endian, and (n,) bool "this plain layout fits the payload".
+    """
+    n = starts.size
+    has_head = (lengths >= 16) & (starts + 16 <= u8.size)
+    if has_head.all():
+        head = _records(u8, starts, _HEAD)
+    elif has_head.any():
+        # Short payloads read a stand-in head; they are never marked as fitting below.
+        head = _records(u8, np.where(has_head, starts, starts[has_head][0]), _HEAD)
+    else:
+        head = np.zeros(n, _HEAD)
+    frame_len = head['frame_len_le'].astype(np.int64)
+    if ros1:
+        big = np.zeros(n, bool)
+        known = has_head
+        doubles_offset = 16 + frame_len
+    else:
+        # Encapsulation 0x0000 = CDR big-endian, 0x0001 = CDR little-endian.
+        big = head['enc1'] == 0
+        known = has_head & (head['enc0'] == 0) & (head['enc1'] <= 1)
+        if big.any():
+            frame_len = np.where(big, head['frame_len_be'], frame_len)
+        known &= frame_len >= 1   # a CDR string always carries its NUL
+        # The doubles are 8-aligned relative to the end of the 4-byte encapsulation header.
+        doubles_offset = 4 + (12 + frame_len + 7) // 8 * 8
+    fits = known & (frame_len < lengths) & (doubles_offset + _N_DOUBLES_BYTES <= lengths)
+    return doubles_offset, big, fits
+
+
+def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
+                        encoding: str = 'cdr') -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Decode many serialised sensor_msgs/Imu payloads held in one byte buffer.
+
+    Parameters
+    ----------
+    u8 : numpy.ndarray
+        (size,) uint8 buffer holding the payloads.
+    starts : numpy.ndarray
+        (n,) int64 offset of each payload in ``u8`` [bytes].
+    lengths : numpy.ndarray
+        (n,) int64 length of each payload [bytes].
+    encoding : {'cdr', 'ros1'}
+        ROS 2 CDR (with encapsulation header, either byte order) or ROS 1.
+
+    Returns
+    -------
+    stamp_ns : numpy.ndarray
+        (n,) int64 header.stamp [ns].
+    samples : numpy.ndarray
+        (n, 6) float64 angular_velocity [rad/s], linear_acceleration [m/s^2] (NaN where
+        not decodable).
+    ok : numpy.ndarray
+        (n,) bool, False for payloads that are not a decodable Imu message.
+
+    """
+    ros1 = encoding == 'ros1'
+    starts = np.asarray(starts, np.int64)
+    lengths = np.asarray(lengths, np.int64)
+    n = starts.size
+    stamp_ns = np.zeros(n, np.int64)
+    samples = np.full((n, 6), np.nan)
+    ok = np.zeros(n, bool)
+    if n == 0:
+        return stamp_ns, samples, ok
+    doubles_offset, big, fits = _imu_layout(u8, starts, lengths, ros1)
+    # One group per layout (doubles offset, byte order); nearly always a single group.
+    key = np.where(fits, doubles_offset * 2 + big, -1)
+    everything = bool(fits.all() and (key == key[0]).all())
+    keys = [int(key[0])] if everything else np.unique(key[fits]).tolist()
+    for k in keys:
+        offset, is_big = k // 2, bool(k % 2)
+        idx = slice(None) if everything else np.flatnonzero(key == k)
+        group = starts[idx]
+        steps = np.diff(group)
+        if group.size > 1 and steps[0] >= offset + _N_DOUBLES_BYTES and (steps == steps[0]).all():
+            # Equally spaced payloads (one length, back to back): a zero-copy strided view.
+            fields = _records(u8, group, _fields_dtype(offset, is_big, ros1,
+                                                       offset + _N_DOUBLES_BYTES, False))
+        else:
+            # Gather only the 56 bytes needed (stamp, angular_velocity, linear_acceleration),
+            # as three runs of bytes per message.
+            packed = np.empty((group.size, 56), np.uint8)
+            packed[:, :8] = _gather(u8, group + 4, 8)
+            packed[:, 8:32] = _gather(u8, group + (offset + 104), 24)
+            packed[:, 32:] = _gather(u8, group + (offset + 200), 24)
+            fields = packed.view(_fields_dtype(offset, is_big, ros1, 56, True)).ravel()
+        stamp_ns[idx] = (fields['sec'].astype(np.int64) * 1_000_000_000
+                         + fields['nanosec'].astype(np.int64))
+        samples[idx, :3] = fields['angular_velocity']
+        samples[idx, 3:] = fields['linear_acceleration']
+        ok[idx] = True
+    for i in np.flatnonzero(~fits).tolist():
+        decoded = _fallback_decode(u8[starts[i]:starts[i] + lengths[i]].tobytes(), ros1)
+        if decoded is not None:
+            stamp_ns[i], samples[i] = decoded
+            ok[i] = True
+    return stamp_ns, samples, ok
+
+
+def decode_imu_cdr(payloads) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Decode a list of serialised ROS 2 sensor_msgs/msg/Imu messages (CDR) at once.
+
+    Parameters
+    ----------
+    payloads : sequence of bytes
+        n serialised messages, e.g. from an rclpy raw subscription.
+
+    Returns
+    -------
+    stamp_ns : numpy.ndarray
+        (n,) int64 header.stamp [ns].
+    samples : numpy.ndarray
+        (n, 6) float64 angular_velocity [rad/s], linear_acceleration [m/s^2].
+
+    Raises
+    ------
+    InputError
+        If any payload is not a decodable Imu message (none is returned then).
+
+    """
+    if not len(payloads):
+        return np.zeros(0, np.int64), np.zeros((0, 6))
+    stamp_ns, samples, ok = decode_imu_payloads(*_join(payloads), 'cdr')
+    if not ok.all():
+        raise InputError(f'{ok.size - np.count_nonzero(ok)} of {ok.size} payloads are not '
+                         'CDR sensor_msgs/msg/Imu messages')
+    return stamp_ns, samples
+
+
+def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
+                            linear_acceleration_covariance) -> List[Optional[bytes]]:
+    """
+    Copy serialised ROS 2 sensor_msgs/msg/Imu messages (CDR) with new covariances.
+
+    The two 3x3 covariances are written straight into the bytes, so republishing
+    costs no Python message per sample.
+
+    Parameters
+    ----------
+    payloads : sequence of bytes
+        n serialised messages, e.g. from an rclpy raw subscription.
+    angular_velocity_covariance : array_like
+        (9,) row-major 3x3 covariance [(rad/s)^2].
+    linear_acceleration_covariance : array_like
+        (9,) row-major 3x3 covariance [(m/s^2)^2].
+
+    Returns
+    -------
+    list
+        n patched payloads (bytes); None where the payload is not in the plain CDR
+        layout (the caller deserialises those).
+
+    """
+    if not len(payloads):
+        return []
+    u8, starts, lengths = _join(payloads)
+    u8 = u8.copy()  # writable
+    offset, big, fits = _imu_layout(u8, starts, lengths, False)
+    # The covariances follow orientation (4 doubles), its covariance (9) and
+    # angular_velocity (3), then linear_acceleration (3): byte 128 and 224 of the doubles.
+    for field_at, cov in ((128, angular_velocity_covariance),
+                          (224, linear_acceleration_covariance)):
+        for is_big in (False, True):
+            sel = np.flatnonzero(fits & (big == is_big))
+            if sel.size:
+                data = np.frombuffer(np.asarray(cov, '>f8' if is_big else '<f8').tobytes(),
+                                     np.uint8)
+                u8[(starts[sel] + offset[sel] + field_at)[:, None] + np.arange(72)] = data
+    joined = u8.tobytes()
+    return [joined[a:a + n] if ok else None
+            for a, n, ok in zip(starts.tolist(), lengths.tolist(), fits.tolist())]
+
+
+def _join(payloads) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Concatenate byte strings; return (buffer uint8, (n,) starts, (n,) lengths)."""
+    lengths = np.fromiter(map(len, payloads), np.int64, len(payloads))
+    starts = np.zeros(lengths.size, np.int64)
+    np.cumsum(lengths[:-1], out=starts[1:])
+    return np.frombuffer(b''.join(payloads), np.uint8), starts, lengths
