@@ -518,6 +518,10 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
     if steps:
         fit = fit_axis(tau0, avar0, edf0, rate_hz, n_samples, terms=labels, unit=unit,
                        select=False, phi0=phi_of, sigma0=sigma)
+        # A step the final fit holds at zero is not named (the model has no such term).
+        unheld = [st for st in steps if st.label not in fit.terms]
+        steps = [st for st in steps if st not in unheld]
+        notes += [f'{st.effect}: the final fit holds it at zero (left out)' for st in unheld]
         # Where the final model explains the curve, its profile intervals are plain
         # likelihood-ratio intervals: an effect whose level may be zero is not named.
         if fit.dof > 0 and chi2.sf(fit.chi2, fit.dof) >= P_CONSISTENT:

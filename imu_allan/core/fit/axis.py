@@ -157,7 +157,9 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     select : bool
         True: keep the subset of ``terms`` the data support (AIC over every subset).
         False: ``terms`` were already selected (:mod:`imu_allan.core.search`); fit them
-        all, and report a term whose coefficient comes out zero as a bound.
+        all, and report a term whose coefficient comes out zero as a bound; of several
+        Gauss-Markov terms, the one with the largest B is then reported as B and T_B
+        (with ``select`` True the fastest is, see :func:`_dominant_bias_instability`).
     phi0 : dict of str to tuple, optional
         Starting nonlinear parameters per term label (the search's values); a
         sinusoid's frequency then stays within 20 % of its start (a line the
@@ -268,6 +270,11 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                                  sigma0=full_sigma)
     # J at exactly these weights (from the search's model: a polish, not a new search).
     sol = _fit_fixed_w(fitter.data, slots, sol.phi, local=start is not None)
+    relabelled = (_dominant_bias_instability(slots, sol, fitter.data.scale) if not select
+                  else slots)
+    swap = {a.label: b.label for a, b in zip(slots, relabelled) if a.label != b.label}
+    supported = {swap.get(lb, lb) for lb in supported}
+    slots = relabelled
     chi2_value = float(sol.j)
     dof = int(tau.size - _n_params(slots))
     # Sigma is the model's own covariance of the curve (checked against Monte Carlo in
@@ -363,6 +370,32 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                    notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
                    avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
                    avar_meas=avar, edf=edf, components=components)
+
+
+def _dominant_bias_instability(slots: list, sol: _Solution, scale: float) -> list:
+    """
+    Give the label 'bias_instability' (B, T_B) to the Gauss-Markov term with the largest B.
+
+    Interchangeable Gauss-Markov terms are fitted in order of their correlation time (the
+    solver keeps the first label the fastest, so profiles cannot swap their roles).  The
+    paper's B is the floor of the curve, so the term reported as B and T_B is the one
+    with the highest ADEV peak (0.664 B, paper eq. 8); the others are reported as further
+    Gauss-Markov processes.  Only labels move: positions, order and values stay.
+    """
+    family = [i for i, s in enumerate(slots)
+              if s.term.name in ('bias_instability', 'gauss_markov')]
+    bias = [i for i in family if slots[i].term.name == 'bias_instability']
+    if len(family) < 2 or not bias:
+        return slots
+    level = {i: slots[i].term.to_params(sol.coef[i] * scale, *sol.phi[i])['B'] for i in family}
+    top = max(family, key=lambda i: level[i])
+    if top == bias[0]:
+        return slots
+    out = list(slots)
+    a, b = bias[0], top
+    out[a] = replace(slots[a], label=slots[b].label, term=slots[b].term)
+    out[b] = replace(slots[b], label=slots[a].label, term=slots[a].term)
+    return out
 
 
 def _upper_bound(fitter: _Fitter, slots: list, sol: _Solution, extra: _Slot) -> float:
