@@ -463,22 +463,13 @@ class _Model:
     filter_s: float = 0.0
 
 
-def _model_from_fit(fit: AxisFit, labels: Sequence[str]) -> _Model:
+def _model_from_fit(fit: AxisFit) -> _Model:
     """Fitted model; flicker and the sensor's filter are kept apart (AxisNoise has neither)."""
     noise = replace(fit.model, bias=0.0)
     filter_s = next((float(phi[0]) for label, _, phi in fit.components
                      if label == 'filtered_white'), 0.0)
     flicker = 0.0
-    if 'flicker' in fit.terms:
-        if 'bias_instability' in labels:
-            flicker = _fit_symbol(fit, 'flicker', 'B').value
-            if 'bias_instability' in fit.terms:
-                noise = replace(noise, B=fit.optimised['B'].value,
-                                T_B=fit.optimised['T_B'].value)
-        else:
-            flicker = noise.B
-            noise = replace(noise, B=0.0, T_B=None)
-    if noise.B > 0 and not noise.T_B:
+    if noise.B > 0 and not noise.T_B:   # B without T_B is flicker (model.noise_from_terms)
         flicker, noise = noise.B, replace(noise, B=0.0, T_B=None)
     return _Model(noise, float(flicker), filter_s)
 
@@ -720,7 +711,7 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     s_ln = ln_adev_stderr(e_meas)
 
     def state_of(labels, fit) -> _State:
-        model = _model_from_fit(fit, labels)
+        model = _model_from_fit(fit)
         sim = np.sqrt(simulate_model_avar(model, rate_hz, int(n_samples), m, rng, n_replicas))
         return _State(tuple(labels), fit, model, sim, gap(adev, sim, s_ln))
 

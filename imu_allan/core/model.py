@@ -573,6 +573,7 @@ def noise_from_terms(values: dict[str, dict[str, float]]) -> AxisNoise:
 
     """
     kw: dict = {'gauss_markov': [], 'sinusoids': []}
+    flicker_b, bias = 0.0, (0.0, None)
     for name, p in values.items():
         base = base_name(name)
         if base == 'quantization':
@@ -580,9 +581,9 @@ def noise_from_terms(values: dict[str, dict[str, float]]) -> AxisNoise:
         elif base in ('white', 'filtered_white'):
             kw['N'] = p['N']
         elif base == 'flicker':
-            kw['B'] = p['B']
+            flicker_b = p['B']
         elif base == 'bias_instability':
-            kw['B'], kw['T_B'] = p['B'], p['T_B']
+            bias = (p['B'], p['T_B'])
         elif base == 'gauss_markov':
             kw['gauss_markov'].append(GaussMarkov(p['B'], p['T']))
         elif base == 'random_walk':
@@ -591,6 +592,15 @@ def noise_from_terms(values: dict[str, dict[str, float]]) -> AxisNoise:
             kw['R'] = p['R']
         elif base == 'sinusoid':
             kw['sinusoids'].append(Sinusoid(p['A'], p['f0_hz']))
+    # AxisNoise has one B: a Gauss-Markov floor (B, T_B), or flicker (B, no T_B).  With
+    # both, flicker takes B and the Gauss-Markov process joins the further ones.
+    if bias[0] > 0 and flicker_b > 0:
+        kw['gauss_markov'].insert(0, GaussMarkov(*bias))
+        kw['B'] = flicker_b
+    elif bias[0] > 0:
+        kw['B'], kw['T_B'] = bias
+    elif flicker_b > 0:
+        kw['B'] = flicker_b
     kw['gauss_markov'] = tuple(kw['gauss_markov'])
     kw['sinusoids'] = tuple(kw['sinusoids'])
     return AxisNoise(**kw)

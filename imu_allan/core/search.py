@@ -561,6 +561,12 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str) -> AxisFit:
     consistent = follows_curve(fit.avar_meas, fit.edf, fit.avar_fit, fit.chi2, fit.dof)
     optimised = dict(fit.optimised)
     notes = list(fit.notes) + notes
+    flicker = optimised.get('flicker.B')
+    if optimised['B'].kind != 'estimate' and flicker is not None and flicker.kind == 'estimate':
+        # The floor is flicker noise, not a Gauss-Markov process: B is its level and
+        # T_B stays undefined (the Kalman model then uses kalman.flicker_time_s).
+        optimised['B'] = flicker
+        notes.append('B is flicker noise (no Gauss-Markov floor): no T_B')
     effects = tuple({'effect': s.effect, 'term': s.label, 'chi2_drop': s.chi2_drop,
                      'rival': s.rival, 'evidence': s.evidence} for s in steps)
     if not consistent:

@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES  # noqa: E402
-from imu_allan.core.model import avar_model, avar_terms  # noqa: E402
+from imu_allan.core.model import base_name, TERMS  # noqa: E402
 
 _COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
 _PANELS = ((GYRO_AXES, 'gyro ADEV [rad/s]'), (ACCEL_AXES, 'accel ADEV [m/s$^2$]'))
@@ -51,6 +51,10 @@ def plot_result(result, base) -> list:
     tau_fine = np.geomspace(tau[0], tau[-1], 200)
     fig, panels = plt.subplots(1, 2, figsize=(13, 5.2))
     for ax, (axes, ylabel) in zip(panels, _PANELS):
+        cols = [AXES.index(a) for a in axes]
+        lo_hi = curve.adev_lo[:, cols], curve.adev_hi[:, cols]
+        shown = [np.nanmin(np.where(lo_hi[0] > 0, lo_hi[0], np.nan)),
+                 np.nanmax(np.where(np.isfinite(lo_hi[1]), lo_hi[1], np.nan))]
         for axis in axes:
             j = AXES.index(axis)
             colour = _COLOURS[axis[-1]]
@@ -64,19 +68,33 @@ def plot_result(result, base) -> list:
             fit = result.fits.get(axis)
             if fit is None:
                 continue
-            ax.loglog(tau_fine, np.sqrt(avar_model(tau_fine, fit.model)), '-', color=colour,
-                      lw=1.4, label=f'{axis} fitted model')
-            for name, avar in avar_terms(tau_fine, fit.model).items():
-                ax.loglog(tau_fine, np.sqrt(avar), ':', color=colour, lw=0.9, alpha=0.8)
+            # The model where it was fitted, dashed where it extrapolates.
+            lo, hi = fit.tau_s.min(), fit.tau_s.max()
+            inside = (tau_fine >= lo * 0.999) & (tau_fine <= hi * 1.001)
+            model = np.sqrt(fit.avar_at(tau_fine))
+            ax.loglog(tau_fine[inside], model[inside], '-', color=colour, lw=1.4,
+                      label=f'{axis} model ({", ".join(fit.terms)})')
+            for part in (tau_fine < lo, tau_fine > hi):
+                if part.any():
+                    ax.loglog(tau_fine[part], model[part], '--', color=colour, lw=1.0,
+                              alpha=0.7)
+            for label, c_si, phi in fit.components:
+                avar = c_si * TERMS[base_name(label)].shape(tau_fine[inside], *phi)
+                ax.loglog(tau_fine[inside], np.sqrt(avar), ':', color=colour, lw=0.9,
+                          alpha=0.8)
                 k = int(np.argmax(avar))
-                ax.annotate(name, (tau_fine[k], np.sqrt(avar[k])), fontsize=6,
+                ax.annotate(label, (tau_fine[inside][k], np.sqrt(avar[k])), fontsize=6,
                             color=colour, alpha=0.8)
         ax.set_xlabel('averaging time tau [s]')
         ax.set_ylabel(ylabel)
         ax.grid(True, which='both', alpha=0.3)
-        ax.legend(fontsize=7, loc='best')
+        if np.all(np.isfinite(shown)):
+            # The measured curves set the range; a term far below them is cut off.
+            ax.set_ylim(shown[0] / 30.0, shown[1] * 3.0)
+        ax.legend(fontsize=6, loc='lower left')
     fig.suptitle(f'Allan deviation: {result.source or "input"}  ({result.n_samples} samples, '
-                 f'{result.duration_s / 3600:.2f} h at {result.rate_hz:.1f} Hz; dotted: terms)',
+                 f'{result.duration_s / 3600:.2f} h at {result.rate_hz:.1f} Hz; dotted: terms, '
+                 'dashed: beyond the fitted taus)',
                  fontsize=10)
     return _save(fig, Path(base))
 
