@@ -227,3 +227,23 @@ def test_adis16405_real_record(shared_dir, tmp_path):
     f = [f for f in d.missing if f.effect == 'sinusoid'][0]
     assert_allclose(f.params['f0_hz'], 0.564, atol=0.01)
     assert d.gap_after < d.gap_before
+
+
+def test_analyze_and_diagnose_report_one_model():
+    # The same session and raw copy through analyze (the node and the CLI) and through
+    # diagnose: the final model of every axis is the same, effect included.
+    from imu_allan.pipeline.analysis import analyze
+    from imu_allan.pipeline.session import Session, SessionConfig
+    y, axis, _ = cases.make_case('sinusoid', 3)
+    stamps = np.round(np.arange(y.shape[0]) / cases.RATE_HZ * 1e9).astype(np.int64)
+    session = Session(SessionConfig())
+    keeper = RawKeeper(None)
+    for k in range(0, y.shape[0], 5000):
+        session.add(stamps[k:k + 5000], y[k:k + 5000])
+        keeper.add(y[k:k + 5000])
+    session.flush()
+    result = analyze(session, raw=keeper)
+    diag = diagnose_session(session, keeper, n_replicas=2)
+    assert 'sinusoid' in result.fits[axis].terms
+    for name, d in diag.axes.items():
+        assert d.fit_after.to_json() == result.fits[name].to_json(), name

@@ -54,7 +54,7 @@ from imu_allan.core.allan import AllanCurve, edf_overlapping, overlapping_avar
 from imu_allan.core.evidence import RawKeeper
 from imu_allan.core.fit import AxisFit, json_floats, json_num
 from imu_allan.core.noise_params import AxisNoise
-from imu_allan.core.search import EFFECT_TERM as _EFFECT_TERM, search_axis
+from imu_allan.core.search import EFFECT_TERM as _EFFECT_TERM, search_axis, SEARCH_EFFECTS
 from imu_allan.core.simulate import (flicker_noise, quantization_noise, rate_ramp,
                                      simulate_state_space, sinusoid)
 from imu_allan.errors import InputError
@@ -591,6 +591,11 @@ class _State(NamedTuple):
     gap: float
 
 
+def _default_effects(base_model: Sequence[str]) -> tuple:
+    """The search's own effects, plus white noise or random walk where the base lacks them."""
+    return SEARCH_EFFECTS + tuple(e for e in ('white', 'random_walk') if e not in base_model)
+
+
 def _fit_symbol(fit: AxisFit, label: str, sym: str):
     for key in (f'{label}.{sym}', sym):
         if key in fit.optimised:
@@ -665,9 +670,10 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     n_replicas : int
         Simulated replicas per model.
     effects : sequence of str
-        Effects that may be added (default all of :data:`EFFECTS` not in the base; with
-        the default base that is the search's own list, so the diagnosis ends at the
-        model every analysis reports).
+        Effects that may be added (default the search's own list,
+        :data:`imu_allan.core.search.SEARCH_EFFECTS`, plus white noise or random walk
+        where the base lacks them: with the default base the diagnosis ends at the model
+        every analysis reports).
 
     Returns
     -------
@@ -693,7 +699,8 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     # The same search as every analysis (one model); here each step is also simulated.
     search = search_axis(tau_all, avar_all, edf_all, rate_hz, n_samples, raw=raw,
                          raw_rate_hz=raw_rate_hz, unit=unit, base_labels=base_labels,
-                         effects=tuple(e for e in (EFFECTS if effects is None else effects)
+                         effects=tuple(e for e in (_default_effects(base_model) if effects
+                                                   is None else effects)
                                        if e not in base_model),
                          keep_steps=True)
     fit0 = search.base

@@ -128,6 +128,8 @@ class Search(NamedTuple):
 def _label_for(effect: str, labels: Sequence[str]) -> str | None:
     """Fit label of an effect to add, or None when it cannot be added again."""
     term = EFFECT_TERM[effect]
+    if effect == 'white' and 'filtered_white' in labels:
+        return None
     if effect in ('gauss_markov', 'sinusoid'):
         used = [lb for lb in labels if lb == term or lb.startswith(term + '_')]
         if len(used) >= MAX_REPEATS:
