@@ -121,7 +121,7 @@ class AnalysisResult:
                        (f'{sym}_kind', p.kind)]
         problems = _trust_problems(fit)
         if fit.model_consistent is False:
-            problems.append('no listed effect explains the curve (N from its white region)')
+            problems.append('no listed effect explains the curve (see the notes)')
         if any(k in self.hygiene and self.hygiene[k] for k in ('n_motion_events',)):
             problems.append('motion was detected')
         level = 'warn' if problems else 'ok'
