@@ -592,7 +592,7 @@ class _State(NamedTuple):
 
 
 def _default_effects(base_model: Sequence[str]) -> tuple:
-    """The search's own effects, plus white noise or random walk where the base lacks them."""
+    """Return the search's own effects, plus white or random walk where the base lacks them."""
     return SEARCH_EFFECTS + tuple(e for e in ('white', 'random_walk') if e not in base_model)
 
 
