@@ -50,12 +50,11 @@ variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 """
 
 import json
-import os
 from pathlib import Path
-import tempfile
 
 import numpy as np
 
+from imu_allan.atomic import write_atomic
 from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
 from imu_allan.errors import InputError
 
@@ -420,10 +419,21 @@ class AllanAccumulator:
     # ------------------------------------------------------------ save/load
     def _copy(self) -> 'AllanAccumulator':
         new = AllanAccumulator(self.n_axes, self.rate_hz, self.exact_max_m, self.per_decade)
-        new._set_state(*self._get_state())
+        new._set_state(*self.to_state())
         return new
 
-    def _get_state(self) -> tuple[dict, dict]:
+    def to_state(self) -> tuple[dict, dict]:
+        """
+        Return the whole state in memory: JSON-able metadata and named arrays.
+
+        Returns
+        -------
+        meta : dict
+            Settings, counters and the format version (JSON-able).
+        arrays : dict of str to np.ndarray
+            Copies of the sums, counts, history and reference values.
+
+        """
         meta = {
             'format': STATE_FORMAT, 'version': STATE_VERSION, 'n_axes': self.n_axes,
             'rate_hz': self.rate_hz, 'exact_max_m': self.exact_max_m,
@@ -467,18 +477,8 @@ class AllanAccumulator:
 
         """
         path = Path(path)
-        meta, arrays = self._get_state()
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + '.', suffix='.tmp')
-        try:
-            with os.fdopen(fd, 'wb') as f:
-                np.savez(f, meta=np.array(json.dumps(meta)), **arrays)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
+        meta, arrays = self.to_state()
+        write_atomic(path, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
 
     @classmethod
     def load(cls, path) -> 'AllanAccumulator':
@@ -512,7 +512,7 @@ class AllanAccumulator:
             raise InputError(f'accumulator state {path} is unreadable or corrupt '
                              f'({type(exc).__name__})') from None
         try:
-            acc = cls._from_state(meta, arrays)
+            acc = cls.from_state(meta, arrays)
         except InputError as exc:
             raise InputError(f'accumulator state {path}: {exc}') from None
         except (KeyError, TypeError, ValueError) as exc:
@@ -521,7 +521,30 @@ class AllanAccumulator:
         return acc
 
     @classmethod
-    def _from_state(cls, meta, arrays: dict) -> 'AllanAccumulator':
+    def from_state(cls, meta, arrays: dict) -> 'AllanAccumulator':
+        """
+        Rebuild an accumulator from :meth:`to_state`, checking every field.
+
+        Parameters
+        ----------
+        meta : dict
+            The metadata.
+        arrays : dict of str to np.ndarray
+            The arrays.
+
+        Returns
+        -------
+        AllanAccumulator
+            Ready for more samples.
+
+        Raises
+        ------
+        InputError
+            Wrong format or version, or fields that do not fit together.
+        KeyError, TypeError, ValueError
+            Missing or mistyped fields (:meth:`load` turns them into InputError).
+
+        """
         if not isinstance(meta, dict) or meta.get('format') != STATE_FORMAT:
             raise InputError('not an imu_allan accumulator state')
         if meta.get('version') != STATE_VERSION:

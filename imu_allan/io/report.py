@@ -8,12 +8,11 @@ Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
 """
 
 import json
-import os
 from pathlib import Path
-import tempfile
 
 import yaml
 
+from imu_allan.atomic import write_atomic
 from imu_allan.core.noise_params import dump_params, NoiseSpec
 from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
 
@@ -30,11 +29,7 @@ FILES = {
 
 def _atomic_write(path: Path, text: str) -> Path:
     """Write text to path through a temporary file, so a crash never leaves half a file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.')
-    with os.fdopen(fd, 'w') as f:
-        f.write(text)
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, lambda f: f.write(text), mode='w')
 
 
 def summary_text(result: AnalysisResult) -> str:

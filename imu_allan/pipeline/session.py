@@ -11,14 +11,13 @@ Because every mode goes through this object, the numbers cannot differ between t
 from dataclasses import asdict, dataclass, field, fields, replace
 import json
 import math
-import os
 from pathlib import Path
-import tempfile
 from typing import Callable
 
 import numpy as np
 
 from imu_allan import AXES
+from imu_allan.atomic import write_atomic
 from imu_allan.core.accumulator import AllanAccumulator
 from imu_allan.core.allan import AllanCurve
 from imu_allan.errors import InputError
@@ -660,26 +659,16 @@ class Session:
             'moving': self._moving, 'in_motion': self._in_motion,
             'still_since_ns': self._still_since_ns, 'repeat': self._repeat.tolist(),
         }
-        fd, tmp_acc = tempfile.mkstemp(dir=path.parent, suffix='.acc.npz')
-        os.close(fd)
-        try:
-            self.acc.save(tmp_acc)
-            with np.load(tmp_acc, allow_pickle=False) as z:
-                arrays = {f'acc__{k}': z[k] for k in z.files}
-            arrays['session_meta'] = np.array(json.dumps(meta))
-            # Samples held for the motion check of a window not yet complete (version 3).
-            arrays['held_stamp_ns'] = np.concatenate(self._win_t or [np.empty(0, np.int64)])
-            arrays['held_samples'] = np.concatenate(self._win_y or [np.empty((0, N_AXES))])
-            arrays['last_value'] = self._last_value
-            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix='.npz')
-            with os.fdopen(fd, 'wb') as f:
-                np.savez(f, **arrays)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp_acc):
-                os.remove(tmp_acc)
+        # The accumulator's state in memory, under the keys its own file uses.
+        acc_meta, acc_arrays = self.acc.to_state()
+        arrays = {f'acc__{k}': v for k, v in acc_arrays.items()}
+        arrays['acc__meta'] = np.array(json.dumps(acc_meta))
+        arrays['session_meta'] = np.array(json.dumps(meta))
+        # Samples held for the motion check of a window not yet complete (version 3).
+        arrays['held_stamp_ns'] = np.concatenate(self._win_t or [np.empty(0, np.int64)])
+        arrays['held_samples'] = np.concatenate(self._win_y or [np.empty((0, N_AXES))])
+        arrays['last_value'] = self._last_value
+        write_atomic(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
     def load_state(cls, path, config: SessionConfig | None = None,
@@ -732,13 +721,12 @@ class Session:
         if config.rate_hz > 0 and abs(config.rate_hz / rate - 1) > config.rate_tolerance:
             raise InputError(f'checkpoint {path} was taken at {rate:.3f} Hz but the rate is now '
                              f'{config.rate_hz:.3f} Hz: not resuming')
-        fd, tmp = tempfile.mkstemp(suffix='.npz')
-        os.close(fd)
         try:
-            np.savez(tmp, **acc_arrays)
-            acc = AllanAccumulator.load(tmp)
-        finally:
-            os.remove(tmp)
+            acc = AllanAccumulator.from_state(
+                json.loads(str(acc_arrays['meta'])),
+                {k: v for k, v in acc_arrays.items() if k != 'meta'})
+        except InputError as exc:
+            raise InputError(f'checkpoint {path}: accumulator state: {exc}') from None
         session = cls(replace(config, rate_hz=rate), on_warning=on_warning)
         session.acc = acc
         session.stats = HygieneStats(**meta['stats'])
