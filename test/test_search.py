@@ -16,9 +16,10 @@ import pytest
 from imu_allan.core.allan import allan_curve, overlapping_avar
 from imu_allan.core.diagnose import filtered_white_noise
 from imu_allan.core.evidence import _stencil_cov, ramp_test
+from imu_allan.core.judge import shows_quantization
 from imu_allan.core.model import avar_random_walk, avar_white, TERMS
 from imu_allan.core.noise_params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
-from imu_allan.core.search import search_axis, shows_quantization
+from imu_allan.core.search import search_axis
 from imu_allan.core.simulate import simulate_imu
 
 RATE_HZ = 50.0

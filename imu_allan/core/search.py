@@ -44,7 +44,9 @@ from scipy.stats import chi2
 from imu_allan.core.evidence import periodogram_peak, ramp_test
 from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
 from imu_allan.core.fit.result import AxisFit, Param
-from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter
+from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
+from imu_allan.core.judge import (follows_curve, P_CONSISTENT, shows_quantization,
+                                  white_region, white_share)
 from imu_allan.core.model import base_name, TERMS
 from imu_allan.errors import InputError
 
@@ -62,17 +64,11 @@ EFFECT_TERM = {'quantization': 'quantization', 'white': 'white',
 MAX_REPEATS = 2
 #: Most effects added per axis.
 MAX_STEPS = 4
-#: A model whose chi-square p-value is at least this explains the curve: no search.
-P_CONSISTENT = 1e-3
-#: ... or one inside the curve's 95 % band (or within 5 %) at this share of the taus.
-FOLLOW_SHARE = 0.85
 #: Drop of the GLS chi-square, beyond BIC's ln(k) per parameter, that an effect must buy
 #: (keeps clean axes clean: bench/search_power.py).
 DELTA_MIN = 10.0
 #: A sinusoid's amplitude from the curve and from the periodogram agree within this.
 AMPLITUDE_FACTOR = 3.0
-#: The shortest taus must fall at least this steeply (ADEV slope) for quantization.
-QUANTIZATION_SLOPE = -0.75
 
 
 class Step(NamedTuple):
@@ -136,86 +132,6 @@ def _label_for(effect: str, labels: Sequence[str]) -> str | None:
             return None
         return term if term not in labels else f'{term}_{len(used) + 1}'
     return None if term in labels else term
-
-
-def follows_curve(avar: np.ndarray, edf: np.ndarray, model: np.ndarray, chi2_value: float,
-                  dof: int) -> bool:
-    """
-    Whether a model explains a measured curve.
-
-    Either its GLS chi-square is acceptable (p >= :data:`P_CONSISTENT`), or the model
-    lies inside the 95 % chi-square band of the measured ADEV, or within 5 % of it, at
-    :data:`FOLLOW_SHARE` of the taus.  The second reading matters on long real
-    records: with a million samples the shortest taus are known to 0.3 %, and a
-    chi-square with the exact covariance rejects every model of a real sensor.
-
-    Parameters
-    ----------
-    avar, edf, model : np.ndarray
-        Shape (k,), measured AVAR [unit^2], its EDF, the model's AVAR [unit^2].
-    chi2_value : float
-        GLS chi-square of the model.
-    dof : int
-        Its degrees of freedom.
-
-    Returns
-    -------
-    bool
-        True when the model explains the curve.
-
-    """
-    if dof > 0 and chi2.sf(chi2_value, dof) >= P_CONSISTENT:
-        return True
-    e = np.maximum(edf, 1e-3)
-    lo, hi = avar * e / chi2.ppf(0.975, e), avar * e / chi2.ppf(0.025, e)
-    inside = ((model >= lo) & (model <= hi)) | (np.abs(np.sqrt(model / avar) - 1.0) <= 0.05)
-    return bool(np.mean(inside) >= FOLLOW_SHARE)
-
-
-def shows_quantization(tau: np.ndarray, avar: np.ndarray) -> bool:
-    """
-    Whether the shortest taus fall as steeply as quantization noise makes them.
-
-    Quantization (white phase) gives an ADEV slope of -1; white noise -1/2, and a
-    low-pass filter makes the shortest taus flatter still.  The term is a candidate
-    only where the first ADEV slope is below :data:`QUANTIZATION_SLOPE`.
-    """
-    if tau.size < 2:
-        return False
-    slope = 0.5 * math.log(avar[1] / avar[0]) / math.log(tau[1] / tau[0])
-    return slope < QUANTIZATION_SLOPE
-
-
-def white_region(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray,
-                 share: np.ndarray) -> tuple[float, tuple[float, float]] | None:
-    """
-    Read N from the taus where white noise dominates the curve.
-
-    Parameters
-    ----------
-    tau, avar, edf : np.ndarray
-        Shape (k,), the curve [s], [unit^2], [-].
-    share : np.ndarray
-        Shape (k,), the white term's share of the fitted model's AVAR [-].
-
-    Returns
-    -------
-    (N, (lo, hi)) or None
-        Median of sqrt(avar tau) over the taus where the share is at least 0.8 (the
-        white region), with the 95 % range of those points' chi-square intervals
-        (NIST SP 1065 sec. 5.3), widened to cover their spread; None without such taus.
-
-    """
-    sel = np.flatnonzero(share >= 0.8)
-    if sel.size == 0:
-        return None
-    level = np.sqrt(avar[sel] * tau[sel])
-    n_value = float(np.median(level))
-    e = np.maximum(edf[sel], 1.0)
-    lo = level * np.sqrt(e / chi2.ppf(0.975, e))
-    hi = level * np.sqrt(e / chi2.ppf(0.025, e))
-    return n_value, (float(min(np.median(lo), level.min())),
-                     float(max(np.median(hi), level.max())))
 
 
 def _sinusoid_evidence(raw, raw_rate_hz: float, f0: float, amp: float,
@@ -367,186 +283,238 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
     for e in effects:
         if e not in EFFECT_TERM:
             raise InputError(f'unknown effect {e!r}; known: {", ".join(EFFECT_TERM)}')
-    tau0, avar0, edf0 = _check_inputs(tau_s, avar, edf, rate_hz, n_samples)
-    keep = _thin(tau0)
-    tau, y, e = tau0[keep], avar0[keep], edf0[keep]
-    if tau.size < 3:
-        raise InputError(f'the fit needs at least 3 averaging times, got {tau.size}')
-    k = tau.size
-    dt = 1.0 / float(rate_hz)
-    m = np.maximum(np.round(tau * rate_hz), 1).astype(np.int64)
-    n_terms = np.maximum(int(n_samples) + 1 - 2 * m, 1)
-    fitter = _Fitter(tau, y, e, m, n_terms, dt, int(n_samples), 'overlapping')
-    penalty = math.log(k)
-    raw_y = None if raw is None else np.asarray(raw, dtype=np.float64)
-    raw_rate = float(raw_rate_hz or rate_hz)
+    run = _Run(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, tuple(effects))
+    run.base(base_labels)
+    run.ramp_first()
+    run.forward()
+    run.backward()
+    fit = run.final()
+    steps = run.step_fits(fit) if keep_steps else run.steps
+    return Search(_finish(fit, steps, run.notes, unit), run.base_fit, tuple(steps))
 
-    # A sinusoid, once named, keeps its frequency within 20 % (the re-weighted fits
-    # must not move it to another feature of the curve).
-    narrowed: dict[str, tuple] = {}
 
-    def slots_of(labels):
-        return [replace(s, bounds=narrowed[s.label]) if s.label in narrowed else
-                _short_sinusoid(s, tau) for s in (_slot(lb, tau, rate_hz) for lb in labels)]
+class _Run:
+    """
+    One search: the curve, its fitter and the model as it grows, phase by phase.
 
-    def irls(labels, phi0=None, local=False):
+    The phases are methods, in the order :func:`search_axis` calls them: the base model
+    (with or without the sensor's filter), the ramp test on the record, the forward
+    search, the backward check and the final fit with intervals.  The class is longer
+    than a function should be because it is the search's state plus those phases; each
+    method is short.
+    """
+
+    def __init__(self, tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit,
+                 effects):
+        self.curve = _check_inputs(tau_s, avar, edf, rate_hz, n_samples)
+        tau0, avar0, edf0 = self.curve
+        keep = _thin(tau0)
+        self.tau, self.y, e = tau0[keep], avar0[keep], edf0[keep]
+        if self.tau.size < 3:
+            raise InputError(f'the fit needs at least 3 averaging times, got {self.tau.size}')
+        self.rate_hz, self.n_samples, self.unit = rate_hz, int(n_samples), unit
+        self.effects = effects
+        m = np.maximum(np.round(self.tau * rate_hz), 1).astype(np.int64)
+        n_terms = np.maximum(self.n_samples + 1 - 2 * m, 1)
+        self.fitter = _Fitter(self.tau, self.y, e, m, n_terms, 1.0 / float(rate_hz),
+                              self.n_samples, 'overlapping')
+        self.k = self.tau.size
+        self.penalty = math.log(self.k)
+        self.raw = None if raw is None else np.asarray(raw, dtype=np.float64)
+        self.raw_rate = float(raw_rate_hz or rate_hz)
+        # A sinusoid, once named, keeps its frequency within 20 % (the re-weighted fits
+        # must not move it to another feature of the curve).
+        self.narrowed: dict[str, tuple] = {}
+        self.lines_hz: list[float] = []
+        self.steps: list[Step] = []
+        self.notes: list[str] = []
+        self.labels: list[str] = []
+        self.base_labels: list[str] = []
+
+    def slots_of(self, labels):
+        """Return the slots of the labels, with narrowed sinusoid frequencies."""
+        return [replace(s, bounds=self.narrowed[s.label]) if s.label in self.narrowed else
+                _short_sinusoid(s, self.tau)
+                for s in (_slot(lb, self.tau, self.rate_hz) for lb in labels)]
+
+    def irls(self, labels, phi0=None, local=False) -> None:
+        """Fit ``labels`` by IRLS and make it the current model."""
         # IRLS leaves the plug-in Sigma of its solution as the weights; the candidates
         # are scored at those weights, so the model's own J is taken there too.
-        slots = slots_of(labels)
-        sol, sigma = fitter.irls(slots, phi0=phi0, local=local)
-        return _fit_fixed_w(fitter.data, slots, sol.phi, local=True), sigma
+        slots = self.slots_of(labels)
+        sol, self.sigma = self.fitter.irls(slots, phi0=phi0, local=local)
+        self.sol = _fit_fixed_w(self.fitter.data, slots, sol.phi, local=True)
+        self.labels = list(labels)
 
-    labels = list(base_labels)
-    sol, sigma = irls(labels)
-    base_j = sol.j
-    dof = k - _n_params(slots_of(labels))
-    # The filter only where the base model leaves something to explain.
-    if 'white' in labels and dof > 2 and chi2.sf(sol.j, dof) < P_CONSISTENT:
-        alt = ['filtered_white' if lb == 'white' else lb for lb in labels]
-        trial = _fit_fixed_w(fitter.data, slots_of(alt))
-        i_f = alt.index('filtered_white')
-        # A filter time at the bottom of its range is no filter: plain white noise.
-        shows = trial.phi[i_f][0] > 1.05 * slots_of(alt)[i_f].bounds[0][0]
-        if base_j - trial.j > penalty + DELTA_MIN and trial.coef[i_f] > 0 and shows:
-            labels = alt
-            sol, sigma = irls(labels, phi0=trial.phi)
-    base_fit = fit_axis(tau0, avar0, edf0, rate_hz, n_samples, terms=labels, unit=unit)
-    steps: list[Step] = []
-    notes: list[str] = []
-    lines_hz: list[float] = []
+    def rejected(self) -> bool:
+        """Whether the chi-square rejects the current model."""
+        dof = self.k - _n_params(self.slots_of(self.labels))
+        return dof > 0 and chi2.sf(self.sol.j, dof) < P_CONSISTENT
 
-    # A ramp is looked for in the record itself first: on the curve a random walk can
-    # absorb it (its +1/2 slope bends towards the ramp's +1 only at the last taus).
-    if 'rate_ramp' in effects and raw_y is not None and 'rate_ramp' not in labels:
-        check = ramp_test(raw_y, raw_rate, _noise_terms(slots_of(labels), sol.coef, sol.phi,
-                                                        fitter.data.scale))
-        if check is not None and check.significant:
-            slots = slots_of(labels + ['rate_ramp'])
-            new = _fit_fixed_w(fitter.data, slots, list(sol.phi) + [()])
-            if new.coef[-1] > 0:
-                steps.append(Step('rate_ramp', 'rate_ramp', float(sol.j - new.j), '',
-                                  f'ramp {check.slope:.3g} {unit}/s in the record: likelihood '
-                                  f'ratio {check.lr:.1f} against more random walk'))
-                labels.append('rate_ramp')
-                sol, sigma = irls(labels, phi0=new.phi, local=True)
-        elif check is not None:
-            notes.append(f'rate_ramp: not supported by the record (likelihood ratio '
-                         f'{check.lr:.1f} against more random walk)')
+    def base(self, base_labels) -> None:
+        """Fit the paper's model, through the sensor's filter where the curve shows one."""
+        self.irls(list(base_labels))
+        labels = self.labels
+        if 'white' in labels and self.rejected() and (
+                self.k - _n_params(self.slots_of(labels)) > 2):
+            alt = ['filtered_white' if lb == 'white' else lb for lb in labels]
+            trial = _fit_fixed_w(self.fitter.data, self.slots_of(alt))
+            i_f = alt.index('filtered_white')
+            # A filter time at the bottom of its range is no filter: plain white noise.
+            shows = trial.phi[i_f][0] > 1.05 * self.slots_of(alt)[i_f].bounds[0][0]
+            if (self.sol.j - trial.j > self.penalty + DELTA_MIN and trial.coef[i_f] > 0
+                    and shows):
+                self.irls(alt, phi0=trial.phi)
+        self.base_labels = list(self.labels)
+        tau0, avar0, edf0 = self.curve
+        self.base_fit = fit_axis(tau0, avar0, edf0, self.rate_hz, self.n_samples,
+                                 terms=self.labels, unit=self.unit)
 
-    while len(steps) < MAX_STEPS:
-        # The search goes on while the chi-square rejects the model (the margins keep
-        # it from inventing effects); 'follows the curve' only grades the final model.
-        dof = k - _n_params(slots_of(labels))
-        if dof <= 0 or chi2.sf(sol.j, dof) >= P_CONSISTENT:
-            break
+    def ramp_first(self) -> None:
+        """Test a rate ramp on the record itself, before the curve search."""
+        # On the curve a random walk can absorb a ramp (its +1/2 slope bends towards the
+        # ramp's +1 only at the last taus); in the record it cannot.
+        if 'rate_ramp' not in self.effects or self.raw is None:
+            return
+        sol, scale = self.sol, self.fitter.data.scale
+        check = ramp_test(self.raw, self.raw_rate,
+                          _noise_terms(self.slots_of(self.labels), sol.coef, sol.phi, scale))
+        if check is None:
+            return
+        if not check.significant:
+            self.notes.append(f'rate_ramp: not supported by the record (likelihood ratio '
+                              f'{check.lr:.1f} against more random walk)')
+            return
+        slots = self.slots_of(self.labels + ['rate_ramp'])
+        new = _fit_fixed_w(self.fitter.data, slots, list(sol.phi) + [()])
+        if new.coef[-1] > 0:
+            self.steps.append(Step(
+                'rate_ramp', 'rate_ramp', float(sol.j - new.j), '',
+                f'ramp {check.slope:.3g} {self.unit}/s in the record: likelihood ratio '
+                f'{check.lr:.1f} against more random walk'))
+            self.irls(self.labels + ['rate_ramp'], phi0=new.phi, local=True)
+
+    def screen(self) -> list:
+        """Score every effect not yet in the model at the current weights."""
         ranked = []
-        for effect in effects:
-            label = _label_for(effect, labels)
-            if label is None or effect == 'rate_ramp' and raw_y is not None:
+        for effect in self.effects:
+            label = _label_for(effect, self.labels)
+            if label is None or effect == 'rate_ramp' and self.raw is not None:
                 continue
-            if effect == 'quantization' and not shows_quantization(tau, y):
+            if effect == 'quantization' and not shows_quantization(self.tau, self.y):
                 continue
-            cand = labels + [label]
-            slots = slots_of(cand)
-            if _n_params(slots) >= k:
+            slots = self.slots_of(self.labels + [label])
+            if _n_params(slots) >= self.k:
                 continue
-            phi0 = list(sol.phi) + [tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)]
+            phi0 = list(self.sol.phi) + [tuple(math.sqrt(lo * hi)
+                                               for lo, hi in slots[-1].bounds)]
             # Interchangeable Gauss-Markov terms keep their order (shortest T first), so
             # a further one may need to take the other's place: grid them all.
             family = effect == 'gauss_markov' and any(
                 x.term.name in ('gauss_markov', 'bias_instability') for x in slots[:-1])
-            new = _fit_fixed_w(fitter.data, slots, phi0,
-                               grid_slots=None if family else [len(labels)])
+            new = _fit_fixed_w(self.fitter.data, slots, phi0,
+                               grid_slots=None if family else [len(self.labels)])
             if new.coef[-1] <= 0:
                 continue
-            n_par = 1 + len(slots[-1].bounds)
-            drop = float(sol.j - new.j)
-            score = drop - n_par * penalty - DELTA_MIN
+            drop = float(self.sol.j - new.j)
+            score = drop - (1 + len(slots[-1].bounds)) * self.penalty - DELTA_MIN
             if score > 0:
                 ranked.append((score, drop, effect, label, new))
-        ranked = _by_likelihood(fitter, slots_of, labels, ranked, penalty)
-        chosen = None
-        for i, (score, drop, effect, label, new) in enumerate(ranked):
+        return _by_likelihood(self.fitter, self.slots_of, self.labels, ranked, self.penalty)
+
+    def choose(self, ranked: list):
+        """Return the best ranked effect whose time-domain evidence holds, or None."""
+        for i, (_, drop, effect, label, new) in enumerate(ranked):
             evidence = ''
-            if effect == 'sinusoid' and raw_y is not None:
-                idx = len(labels)
-                f0 = new.phi[idx][0]
-                amp = math.sqrt(new.coef[idx] * fitter.data.scale)
-                ok, f_line, evidence = _sinusoid_evidence(raw_y, raw_rate, f0, amp, lines_hz)
+            if effect == 'sinusoid' and self.raw is not None:
+                idx = len(self.labels)
+                amp = math.sqrt(new.coef[idx] * self.fitter.data.scale)
+                ok, f_line, evidence = _sinusoid_evidence(self.raw, self.raw_rate,
+                                                          new.phi[idx][0], amp, self.lines_hz)
                 if not ok:
-                    notes.append(evidence)
+                    self.notes.append(evidence)
                     continue
-                lines_hz.append(f_line)
+                self.lines_hz.append(f_line)
                 phi = list(new.phi)
                 phi[idx] = (f_line,)
                 new = new._replace(phi=tuple(phi))
             rival = next((f'{r[2]} (chi2 drop {r[1]:.1f})' for r in ranked[i + 1:]
                           if r[2] != effect), '')
-            chosen = (drop, effect, label, new, rival, evidence)
-            break
-        if chosen is None:
-            # Second chance: at the current weights a model that overshoots the long
-            # taus gives them little weight, so no effect buys its margin there.  Each
-            # noise effect is re-fitted with its own weights and compared by likelihood.
-            chosen = _second_chance(fitter, slots_of, labels, sol, sigma, effects, penalty)
-            fitter.data.set_sigma(sigma)
-        if chosen is None:
-            break
-        drop, effect, label, new, rival, evidence = chosen
-        if effect == 'sinusoid':
-            f_line = new.phi[len(labels)][0]
-            narrowed[label] = ((f_line / 1.2, f_line * 1.2),)
-        labels.append(label)
-        sol, sigma = irls(labels, phi0=new.phi, local=True)
-        steps.append(Step(effect, label, drop, rival, evidence))
+            return drop, effect, label, new, rival, evidence
+        return None
 
-    # Backward check at the final weights: an effect whose removal no longer costs
-    # its margin (the others took over its role once re-weighted) is not named.
-    for st in list(steps):
-        rest = [lb for lb in labels if lb != st.label]
-        slots = slots_of(rest)
-        without = _fit_fixed_w(fitter.data, slots,
-                               [p for lb, p in zip(labels, sol.phi) if lb != st.label],
-                               local=True)
-        n_par = 1 + len(_slot(st.label, tau, rate_hz).bounds)
-        if without.j - sol.j < n_par * penalty + DELTA_MIN:
-            steps.remove(st)
-            labels = rest
-            notes.append(f'{st.effect}: lowered the chi-square at first, but the re-weighted '
-                         'model does as well without it (left out)')
-            sol, sigma = irls(labels, phi0=without.phi, local=True)
-    phi_of = dict(zip(labels, sol.phi))
-    fit = base_fit
-    if steps:
-        fit = fit_axis(tau0, avar0, edf0, rate_hz, n_samples, terms=labels, unit=unit,
-                       select=False, phi0=phi_of, sigma0=sigma)
-        # A step the final fit holds at zero is not named (the model has no such term).
-        unheld = [st for st in steps if st.label not in fit.terms]
-        steps = [st for st in steps if st not in unheld]
-        notes += [f'{st.effect}: the final fit holds it at zero (left out)' for st in unheld]
+    def forward(self) -> None:
+        """Add effects while the chi-square rejects the model (the margins keep it honest)."""
+        while len(self.steps) < MAX_STEPS and self.rejected():
+            chosen = self.choose(self.screen())
+            if chosen is None:
+                # Second chance: at the current weights a model that overshoots the long
+                # taus gives them little weight, so no effect buys its margin there.
+                chosen = _second_chance(self.fitter, self.slots_of, self.labels, self.sol,
+                                        self.sigma, self.effects, self.penalty)
+                self.fitter.data.set_sigma(self.sigma)
+            if chosen is None:
+                return
+            drop, effect, label, new, rival, evidence = chosen
+            if effect == 'sinusoid':
+                f_line = new.phi[len(self.labels)][0]
+                self.narrowed[label] = ((f_line / 1.2, f_line * 1.2),)
+            self.irls(self.labels + [label], phi0=new.phi, local=True)
+            self.steps.append(Step(effect, label, drop, rival, evidence))
+
+    def drop_steps(self, dropped: list, why: str) -> None:
+        """Remove steps (and their terms) from the model's record."""
+        gone = {st.label for st in dropped}
+        self.steps = [st for st in self.steps if st.label not in gone]
+        self.labels = [lb for lb in self.labels if lb not in gone]
+        self.notes += [f'{st.effect}: {why} (left out)' for st in dropped]
+
+    def backward(self) -> None:
+        """Drop an effect whose removal no longer costs its margin at the final weights."""
+        for st in list(self.steps):
+            rest = [lb for lb in self.labels if lb != st.label]
+            without = _fit_fixed_w(
+                self.fitter.data, self.slots_of(rest),
+                [p for lb, p in zip(self.labels, self.sol.phi) if lb != st.label], local=True)
+            n_par = 1 + len(_slot(st.label, self.tau, self.rate_hz).bounds)
+            if without.j - self.sol.j < n_par * self.penalty + DELTA_MIN:
+                self.drop_steps([st], 'lowered the chi-square at first, but the re-weighted '
+                                'model does as well without it')
+                self.irls(rest, phi0=without.phi, local=True)
+
+    def full_fit(self, labels, sigma0=None) -> AxisFit:
+        """Return the fit with intervals and bounds of these terms, from the search's values."""
+        tau0, avar0, edf0 = self.curve
+        return fit_axis(tau0, avar0, edf0, self.rate_hz, self.n_samples, terms=list(labels),
+                        unit=self.unit, select=False, phi0=self.phi_of, sigma0=sigma0)
+
+    def final(self) -> AxisFit:
+        """Return the final model's full fit; effects it does not hold are not named."""
+        self.phi_of = dict(zip(self.labels, self.sol.phi))
+        if not self.steps:
+            return self.base_fit
+        fit = self.full_fit(self.labels, self.sigma)
+        unheld = [st for st in self.steps if st.label not in fit.terms]
+        if unheld:
+            # The model has no such term: its record goes (the fit already left it out).
+            self.drop_steps(unheld, 'the final fit holds it at zero')
         # Where the final model explains the curve, its profile intervals are plain
         # likelihood-ratio intervals: an effect whose level may be zero is not named.
         if fit.dof > 0 and chi2.sf(fit.chi2, fit.dof) >= P_CONSISTENT:
-            dropped = [st for st in steps if not _level_above_zero(fit, st.label)]
+            dropped = [st for st in self.steps if not _level_above_zero(fit, st.label)]
             if dropped:
-                steps = [st for st in steps if st not in dropped]
-                labels = [lb for lb in labels if lb not in {st.label for st in dropped}]
-                notes += [f'{st.effect}: its level may be zero at 95 % (left out)'
-                          for st in dropped]
-                fit = base_fit if not steps else fit_axis(
-                    tau0, avar0, edf0, rate_hz, n_samples, terms=labels, unit=unit,
-                    select=False, phi0=phi_of)
-    if keep_steps and steps:
-        done = []
-        for i, s in enumerate(steps):
-            f = fit if i == len(steps) - 1 else fit_axis(
-                tau0, avar0, edf0, rate_hz, n_samples,
-                terms=list(labels[:len(labels) - len(steps) + i + 1]), unit=unit,
-                select=False, phi0=phi_of)
-            done.append(s._replace(fit=f))
-        steps = done
-    fit = _finish(fit, steps, notes, unit)
-    return Search(fit, base_fit, tuple(steps))
+                self.drop_steps(dropped, 'its level may be zero at 95 %')
+                fit = self.base_fit if not self.steps else self.full_fit(self.labels)
+        return fit
+
+    def step_fits(self, fit: AxisFit) -> list:
+        """Return each step with the full fit of the model up to it (the diagnosis' view)."""
+        out = []
+        for i, st in enumerate(self.steps):
+            labels = self.base_labels + [s.label for s in self.steps[:i + 1]]
+            f = fit if i == len(self.steps) - 1 else self.full_fit(labels)
+            out.append(st._replace(fit=f))
+        return out
 
 
 def _level_above_zero(fit: AxisFit, label: str) -> bool:
@@ -585,13 +553,3 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str) -> AxisFit:
                          f'distorted fit gave {n_fit.value:.4g})')
     return replace(fit, optimised=optimised, notes=tuple(notes), effects=effects,
                    model_consistent=consistent)
-
-
-def white_share(fit: AxisFit) -> np.ndarray | None:
-    """Share of the white term in the fitted AVAR at each of the fit's taus."""
-    for label, c_si, phi in fit.components:
-        if label in ('white', 'filtered_white'):
-            slot = _slot(label, fit.tau_s, 1.0 / max(fit.tau_s.min(), 1e-9))
-            part = c_si * _design([slot], fit.tau_s, [phi])[:, 0]
-            return part / np.maximum(fit.avar_fit, 1e-300)
-    return None
