@@ -27,11 +27,12 @@ import yaml
 from imu_allan import AXES
 from imu_allan.cli import analyze as cli_analyze
 from imu_allan.cli import main
-from imu_allan.cli.analyze import open_input, stream_input
 from imu_allan.core.noise_params import load_params
 from imu_allan.core.simulate import simulate_imu
+from imu_allan.io import inputs
 from imu_allan.io.bag_writer import serialize_imu, write_imu_bag
 from imu_allan.io.csv_io import write_csv
+from imu_allan.io.inputs import open_input, stream_input
 from imu_allan.pipeline.session import SessionConfig
 
 REPO = Path(__file__).resolve().parents[1]
@@ -393,7 +394,7 @@ def test_progress_goes_to_stderr_and_never_to_stdout(tmp_path, rec, capsys, monk
     write_imu_bag(tmp_path / 'p.mcap', stamps, samples)
     monkeypatch.setattr(cli_analyze.Progress, 'delay_s', 0.0)
     monkeypatch.setattr(cli_analyze.Progress, 'log_interval_s', 0.05)
-    monkeypatch.setattr(cli_analyze, 'CSV_BLOCK', 500)
+    monkeypatch.setattr(inputs, 'CSV_BLOCK', 500)
     code, out, err = _cli(['analyze', tmp_path / 'p.mcap', '--out', tmp_path / 'o',
                            '--format', 'json', '--no-plot'], capsys)
     assert code == 0
@@ -460,7 +461,7 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
 
 
 def test_read_ahead_keeps_order_and_passes_errors_on():
-    assert list(cli_analyze._prefetch(iter(range(1000)))) == list(range(1000))
+    assert list(inputs._prefetch(iter(range(1000)))) == list(range(1000))
 
     def broken():
         yield 1
@@ -468,11 +469,11 @@ def test_read_ahead_keeps_order_and_passes_errors_on():
 
     got = []
     with pytest.raises(ValueError, match='disk on fire'):
-        for item in cli_analyze._prefetch(broken()):
+        for item in inputs._prefetch(broken()):
             got.append(item)
     assert got == [1]
     # A consumer that stops early leaves no reader thread behind.
-    reader = cli_analyze._prefetch(iter(range(10**6)))
+    reader = inputs._prefetch(iter(range(10**6)))
     assert next(reader) == 0
     reader.close()
     assert not [t for t in threading.enumerate() if t.name == 'imu-allan-reader']

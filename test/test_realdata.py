@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from imu_allan.cli import main
-from imu_allan.cli.analyze import open_input, stream_input
+from imu_allan.io.inputs import open_input, stream_input
 from imu_allan.pipeline.session import SessionConfig
 
 

@@ -5,9 +5,8 @@ Every input (rosbag2 directory, .mcap, .db3, ROS 1 .bag, CSV) is streamed throug
 same :class:`~imu_allan.pipeline.Session` the node uses, fitted, and written as a
 report; several inputs are analysed in parallel and compared.
 
-Reusable pieces (also for ``diagnose``): :func:`open_input` opens any supported input
-as an :class:`InputSource` of ``(stamp_ns, samples)`` blocks, :func:`stream_input`
-feeds one through a Session, :func:`analyze_input` adds the fit.
+The input plumbing (open_input, stream_input, Progress, raw_tap) lives in
+:mod:`imu_allan.io.inputs`; :func:`analyze_input` adds the fit.
 """
 
 import argparse
@@ -17,25 +16,19 @@ import json
 import math
 import os
 from pathlib import Path
-import queue
-import stat
 import statistics
 import sys
-import threading
 import time
-from typing import Callable, Iterator, Optional
+from typing import Optional
 
 import numpy as np
 
 from imu_allan import AXES
 from imu_allan.core.fit import json_num
 from imu_allan.errors import InputError
+from imu_allan.io.inputs import check_path, open_input, Progress, raw_tap, stream_input
 from imu_allan.pipeline.analysis import analyze
-from imu_allan.pipeline.session import Session, SessionConfig
-
-CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
-#: Samples handed to the Session at a time for CSV input.
-CSV_BLOCK = 65536
+from imu_allan.pipeline.session import SessionConfig
 
 
 def add_input_options(p: argparse.ArgumentParser) -> None:
@@ -70,326 +63,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help='parallel inputs (default: the number of cores)')
     p.set_defaults(run=run)
     return p
-
-
-# --------------------------------------------------------------------------------------
-# Progress on stderr
-# --------------------------------------------------------------------------------------
-
-class Progress:
-    """
-    A one-line progress indicator on stderr, shown only when the work takes a while.
-
-    A daemon thread redraws the line (in place on a terminal, a new line every
-    ``log_interval_s`` otherwise), so slow steps without their own counter (the fit,
-    the plots) still show that work goes on.  Nothing is written to stdout.
-
-    Parameters
-    ----------
-    label : str
-        What is being worked on (a file name).
-    total : int or None
-        Messages expected (None: unknown).
-
-    """
-
-    #: Seconds before anything is shown.
-    delay_s = 2.0
-    #: Redraw period on a terminal, and line period otherwise [s].
-    tty_interval_s = 0.2
-    log_interval_s = 5.0
-
-    def __init__(self, label: str, total: Optional[int] = None, unit: str = 'messages'):
-        self.label, self.total, self.unit = label, total, unit
-        self.stage = 'reading'
-        self.done = 0
-        self.start = time.monotonic()
-        self.tty = sys.stderr.isatty()
-        self.shown = False
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, daemon=True)
-        self._thread.start()
-
-    def update(self, done: int, stage: Optional[str] = None) -> None:
-        """Record progress: items done so far, and optionally a new stage name."""
-        self.done = done
-        if stage is not None:
-            self.stage = stage
-
-    def set_stage(self, stage: str) -> None:
-        """Name the current step (e.g. 'fitting', 'writing plots')."""
-        self.stage = stage
-
-    def line(self) -> str:
-        """Return the current progress text."""
-        elapsed = time.monotonic() - self.start
-        if self.stage == 'reading':
-            pct = (f'{100.0 * self.done / self.total:5.1f}% ' if self.total else '')
-            text = f'reading {self.label}: {pct}{self.done:,} {self.unit}'
-            if elapsed > 0:
-                text += f', {self.done / elapsed / 1e6:.2f} M/s'
-        elif self.stage == 'analysed':
-            text = f'analysed {self.done} of {self.total} {self.unit}'
-        else:
-            text = f'{self.stage} {self.label}'
-        return f'imu-allan: {text} ({elapsed:.0f} s)'
-
-    def _draw(self) -> None:
-        text = self.line()
-        if self.tty:
-            print('\r' + text.ljust(79), end='', file=sys.stderr, flush=True)
-        else:
-            print(text, file=sys.stderr, flush=True)
-        self.shown = True
-
-    def _loop(self) -> None:
-        if self._stop.wait(self.delay_s):
-            return
-        interval = self.tty_interval_s if self.tty else self.log_interval_s
-        while True:
-            self._draw()
-            if self._stop.wait(interval):
-                return
-
-    def close(self) -> None:
-        """Stop redrawing; end the terminal line."""
-        self._stop.set()
-        self._thread.join()
-        if self.tty and self.shown:
-            print(file=sys.stderr, flush=True)
-
-    def __enter__(self) -> 'Progress':
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-# --------------------------------------------------------------------------------------
-# Inputs
-# --------------------------------------------------------------------------------------
-
-class InputSource:
-    """
-    One opened input (bag topic or CSV file) as blocks of stamped six-axis samples.
-
-    Attributes
-    ----------
-    path : pathlib.Path
-        The input.
-    label : str
-        File name plus topic, for reports.
-    kind : str
-        'csv', 'mcap', 'sqlite3' or 'ros1'.
-    topic : str or None
-        The Imu topic read (None for CSV).
-    n_messages : int or None
-        Samples expected, when known before reading.
-    warnings : list of str
-        Reader problems (truncation, skipped messages ...); complete after ``blocks()``.
-
-    """
-
-    def __init__(self, path: Path, label: str, kind: str, topic: Optional[str],
-                 n_messages: Optional[int], blocks: Callable[[], Iterator],
-                 warnings: list, close: Callable[[], None] = lambda: None):
-        self.path, self.label, self.kind, self.topic = path, label, kind, topic
-        self.n_messages, self.warnings = n_messages, warnings
-        self._blocks, self._close = blocks, close
-
-    def blocks(self) -> Iterator[tuple]:
-        """
-        Yield the samples in order.
-
-        Yields
-        ------
-        tuple of numpy.ndarray
-            stamp_ns (n,) int64 [ns] and samples (n, 6) float64 in AXES order
-            [rad/s, m/s^2].
-
-        """
-        return self._blocks()
-
-    def close(self) -> None:
-        """Release files."""
-        self._close()
-
-    def __enter__(self) -> 'InputSource':
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-def is_csv(path: Path) -> bool:
-    """Return True when the name says CSV (.csv, .txt, optionally .gz)."""
-    return path.name.lower().endswith(CSV_SUFFIXES)
-
-
-def _check_path(path: Path) -> None:
-    """Raise InputError for a missing path or one that is neither file nor directory."""
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        raise InputError(f'{path}: no such file or directory') from None
-    except OSError as err:
-        raise InputError(f'{path}: cannot access ({err.strerror})') from None
-    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
-        raise InputError(f'{path}: not a regular file or directory')
-    if not os.access(path, os.R_OK | (os.X_OK if stat.S_ISDIR(mode) else 0)):
-        raise InputError(f'{path}: permission denied')
-
-
-def open_input(path, topic: Optional[str] = None) -> InputSource:
-    """
-    Open any supported input for streaming.
-
-    Parameters
-    ----------
-    path : str or Path
-        rosbag2 directory (sqlite3 or MCAP, any metadata version, with or without
-        message definitions), ``.mcap``, ``.db3``, ROS 1 ``.bag``, or CSV
-        (``t,gyro_x,...,accel_z``, optional ``.gz``).
-    topic : str, optional
-        Imu topic of a bag; by default its only Imu topic.  Ignored for CSV.
-
-    Returns
-    -------
-    InputSource
-        Close it (or use it as a context manager) when done.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable path, not a bag or CSV, no (or several) Imu topics, wrong
-        message type, bad CSV columns or values: a one-line message.
-
-    """
-    path = Path(path)
-    _check_path(path)
-    if is_csv(path):
-        from imu_allan.io.csv_io import read_csv
-        if path.is_dir():
-            raise InputError(f'{path}: is a directory, not a CSV file')
-        data = read_csv(path, columns=list(AXES))
-        if data.t_s is None:
-            raise InputError(f'{path}: a t column (seconds) is needed for analyze')
-        stamp_ns = np.round(data.t_s * 1e9).astype(np.int64)
-
-        def csv_blocks():
-            for k in range(0, stamp_ns.size, CSV_BLOCK):
-                yield stamp_ns[k:k + CSV_BLOCK], data.samples[k:k + CSV_BLOCK]
-        return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
-    from imu_allan.io.bag_reader import open_imu
-    source = open_imu(path, topic)
-
-    def bag_blocks():
-        for block in source.blocks():
-            yield block.stamp_ns, block.samples
-    return InputSource(path, f'{path.name} {source.topic}', source.storage, source.topic,
-                       source.n_messages, bag_blocks, source.warnings, source.close)
-
-
-def stream_input(source: InputSource, config: SessionConfig,
-                 on_warning: Optional[Callable[[str], None]] = None,
-                 progress: Optional[Progress] = None,
-                 tap: Optional[Callable[[Session, np.ndarray], None]] = None) -> Session:
-    """
-    Feed every block of an input through a new pipeline Session (the node's object).
-
-    Parameters
-    ----------
-    source : InputSource
-        From :func:`open_input`.
-    config : SessionConfig
-        Input checks and accumulator settings.
-    on_warning : callable, optional
-        Gets each session warning as it happens.
-    progress : Progress, optional
-        Updated with the number of samples read.
-    tap : callable, optional
-        Called as tap(session, samples) after each block, samples (n, 6) as read.
-
-    Returns
-    -------
-    Session
-        Flushed; its warnings are the session's own (reader warnings stay in
-        ``source.warnings``).
-
-    """
-    session = Session(config, on_warning=on_warning)
-    done = 0
-    for stamp_ns, samples in _prefetch(source.blocks()):
-        session.add(stamp_ns, samples)
-        if tap is not None:
-            tap(session, samples)
-        done += stamp_ns.size
-        if progress is not None:
-            progress.update(done)
-    session.flush()
-    return session
-
-
-def _prefetch(blocks: Iterator, depth: int = 2) -> Iterator:
-    """
-    Yield the items of an iterator that a background thread reads ahead.
-
-    Decoding the next block (numpy, mostly outside the GIL) then overlaps with the
-    Session's work on the current one: on two cores reading costs little extra wall
-    time.  Exceptions of the reader are raised here, in order.
-    """
-    done = object()
-    slots: queue.Queue = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-
-    def produce():
-        try:
-            for item in blocks:
-                while not stop.is_set():
-                    try:
-                        slots.put((item, None), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            slots.put((done, None))
-        except BaseException as exc:  # noqa: B902 - handed over to the consumer
-            slots.put((done, exc))
-
-    worker = threading.Thread(target=produce, daemon=True, name='imu-allan-reader')
-    worker.start()
-    try:
-        while True:
-            item, exc = slots.get()
-            if exc is not None:
-                raise exc
-            if item is done:
-                return
-            yield item
-    finally:
-        stop.set()
-        worker.join()
-
-
-def raw_tap() -> tuple:
-    """
-    Make a ``stream_input`` tap that keeps a bounded raw copy for the effect search.
-
-    Returns
-    -------
-    tuple
-        (tap, keeper): the RawKeeper's rate is taken from the session when the analysis
-        needs it.
-
-    """
-    from imu_allan.core.evidence import RawKeeper
-    # Every sample from the first on; the rate comes from the session at analysis time.
-    keeper = RawKeeper(None, len(AXES))
-
-    def tap(session, samples) -> None:
-        keeper.add(samples[np.isfinite(samples).all(axis=1)])
-    return tap, keeper
 
 
 def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
@@ -569,7 +242,7 @@ def run(args) -> int:
     """Analyse every input; write reports; print a summary or one JSON document."""
     paths = [Path(p) for p in args.inputs]
     for p in paths:
-        _check_path(p)
+        check_path(p)
     config = session_config(args)
     several = len(paths) > 1
     stems = _unique_stems(paths)

@@ -14,10 +14,10 @@ import json
 from pathlib import Path
 import sys
 
-from imu_allan.cli.analyze import (add_input_options, open_input, Progress, raw_tap,
-                                   session_config, stream_input)
+from imu_allan.cli.analyze import add_input_options, session_config
 from imu_allan.core.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS
 from imu_allan.errors import InputError
+from imu_allan.io.inputs import open_input, Progress, raw_tap, stream_input
 from imu_allan.pipeline.session import SessionConfig
 
 
