@@ -256,6 +256,17 @@ def test_json_contract_and_every_output_file(tmp_path, rec, capsys):
     assert b'<svg' in (out_dir / 'adev.svg').read_bytes()[:2000]
 
 
+def test_kalibr_yaml_names_the_analysed_topic(tmp_path, rec, capsys):
+    stamps, samples = rec
+    bag = tmp_path / 'rec.mcap'
+    write_imu_bag(bag, stamps, samples, topic='/robot/imu_front')
+    out_dir = tmp_path / 'out'
+    code, _, err = _cli(['analyze', bag, '--out', out_dir, '--no-plot'], capsys)
+    assert code == 0, err
+    kalibr = yaml.safe_load((out_dir / 'imu.yaml').read_text())
+    assert kalibr['rostopic'] == '/robot/imu_front'
+
+
 def test_text_mode_two_different_runs_comparison_plot_and_table(tmp_path, rec, capsys):
     stamps, samples = rec
     _csv(tmp_path / 'run_a.csv', stamps, samples)

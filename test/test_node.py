@@ -247,6 +247,7 @@ def test_kalman_matrices_and_kalibr_yaml_are_labelled(rig):
     for key in ('accelerometer_noise_density', 'accelerometer_random_walk',
                 'gyroscope_noise_density', 'gyroscope_random_walk', 'update_rate'):
         assert key in text
+    assert 'rostopic: /imu\n' in text      # the topic the node subscribes to
 
 
 def test_late_subscriber_gets_the_last_result(rig, context):

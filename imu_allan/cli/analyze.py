@@ -109,8 +109,8 @@ def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
                 raise InputError(f'{path}: no Imu samples in the input')
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
-            result = analyze(session, source=source.label,
-                             raw=keeper)
+            result = analyze(session, source=source.label, raw=keeper,
+                             topic=source.topic or '')
         finally:
             if bar is not None:
                 bar.close()

@@ -54,6 +54,8 @@ class AnalysisResult:
         Six-axis bias model (paper eqs. 16-17) with continuous and discrete matrices.
     source : str
         What was analysed (file name, topic).
+    topic : str
+        The Imu topic the samples came from ('' for a CSV file): Kalibr's ``rostopic``.
 
     """
 
@@ -66,6 +68,7 @@ class AnalysisResult:
     fits: dict
     kalman: KalmanModel
     source: str = ''
+    topic: str = ''
 
     def models(self) -> dict:
         """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""
@@ -74,9 +77,10 @@ class AnalysisResult:
     def _sources(self) -> dict:
         return {a: (f if f is not None else AxisNoise()) for a, f in self.fits.items()}
 
-    def kalibr_yaml(self, rostopic: str = '/imu/data') -> str:
-        """Kalibr imu.yaml text (continuous densities; worst axis of each sensor)."""
-        return kalibr_yaml(self._sources(), self.rate_hz, rostopic=rostopic)
+    def kalibr_yaml(self, rostopic: str | None = None) -> str:
+        """Kalibr imu.yaml text; ``rostopic`` is the analysed topic unless given."""
+        return kalibr_yaml(self._sources(), self.rate_hz,
+                           rostopic=rostopic or self.topic or '/imu/data')
 
     def process_noise(self) -> tuple[np.ndarray, list]:
         """Discrete process noise Qd (12, 12) [unit^2] and its state order."""
@@ -191,7 +195,7 @@ class AnalysisResult:
         }
 
 
-def analyze(session, source: str = '', raw=None) -> AnalysisResult | None:
+def analyze(session, source: str = '', raw=None, topic: str = '') -> AnalysisResult | None:
     """
     Fit every axis of a session's current Allan curve, effect search included.
 
@@ -209,6 +213,8 @@ def analyze(session, source: str = '', raw=None) -> AnalysisResult | None:
         Block-averaged copy of the samples fed to the session: the periodogram and
         ramp evidence of the effect search.  Without it sinusoids and ramps are named
         from the Allan curve alone.
+    topic : str
+        The Imu topic of the samples (Kalibr's ``rostopic``); '' when unknown.
 
     Returns
     -------
@@ -242,7 +248,7 @@ def analyze(session, source: str = '', raw=None) -> AnalysisResult | None:
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
         n_samples=int(session.stats.n_used), warnings=tuple(session.warnings),
         hygiene=asdict(session.stats), curve=curve, fits=fits,
-        kalman=kalman_model(sources, session.rate_hz), source=source)
+        kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic)
 
 
 def _trust_problems(fit: AxisFit) -> list:

@@ -383,7 +383,8 @@ class ImuAllanNode(Node):
             return None
         # The raw copy feeds the effect search's periodogram and ramp evidence, so the
         # node publishes the model analyze and diagnose give for the same data.
-        result = analyze(view, source=self.subscription.topic_name, raw=raw)
+        result = analyze(view, source=self.subscription.topic_name, raw=raw,
+                         topic=self.subscription.topic_name)
         if result is None:
             return None
         self._last_result = result
@@ -575,10 +576,12 @@ class ImuAllanNode(Node):
         self._process()
         with self._lock:
             self.session.flush()
-            view = _SessionView(self.session)
-            if view.curve() is not None:
+            if self.session.curve() is not None:
                 self.session.save_state(self.output_dir / CHECKPOINT)
-        result = analyze(view, source=self.subscription.topic_name) \
+        view, raw = self._snapshot()
+        # The same model as the periodic fit: raw copy and topic included.
+        result = analyze(view, source=self.subscription.topic_name, raw=raw,
+                         topic=self.subscription.topic_name) \
             if view.curve() is not None else None
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
