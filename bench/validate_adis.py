@@ -50,7 +50,7 @@ def main() -> None:
     args = ap.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f'{DATA}: not found (../shared/realdata is needed)')
-    rows, follow, n_err = [], [], []
+    rows, follow, n_err, run_cpu = [], [], [], {}
     print('| run | axis | terms | inside | N / white(model) | N / white(0.1-2 s) | '
           'B / datasheet | T_B [s] | s |')
     print('|---|---|---|---|---|---|---|---|---|')
@@ -62,6 +62,7 @@ def main() -> None:
                             n_used, raw=keeper.samples[:, j], raw_rate_hz=keeper.kept_rate_hz,
                             unit=AXIS_UNITS[axis])
             cpu = time.process_time() - t0
+            run_cpu[run] = run_cpu.get(run, 0.0) + cpu
             fit = s.fit
             model = np.sqrt(fit.avar_at(curve.tau_s))
             adev = curve.adev[:, j]
@@ -87,6 +88,8 @@ def main() -> None:
                   f'{n / white_02:.3f} | {b_ratio:.2f} | {tb.value:.3g} ({tb.kind}) | '
                   f'{cpu:.1f} |', flush=True)
     print(f'\nmodel follows the curve (>= 85 % of taus) on {sum(follow)} of {len(follow)} axes')
+    print('search CPU s per six-axis run (target 15 s on one core): '
+          + ', '.join(f'run {r}: {c:.1f}' for r, c in run_cpu.items()))
     if n_err:
         print(f'gyro N vs white level 0.1-2 s: median error {100 * np.median(n_err):.1f} %, '
               f'max {100 * np.max(n_err):.1f} %')

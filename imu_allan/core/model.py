@@ -265,11 +265,16 @@ def _gcov_gauss_markov(u_s: np.ndarray, T: float) -> np.ndarray:
     # Integrated Ornstein-Uhlenbeck rate (autocovariance S_B T / 2 e^(-|u|/T)):
     # -(T^2/2) (|u| + T e^(-|u|/T)), written as -(T^3/2) (e^-x - 1 + x), x = |u|/T, since
     # constants vanish under the stencils; the series avoids cancellation for x << 1.
-    x = np.abs(u_s) / T
+    x = np.abs(np.atleast_1d(np.asarray(u_s, dtype=np.float64)))
+    x *= 1.0 / T
+    h = np.expm1(-x)
+    h += x
     small = x < 1e-3
-    h = np.where(small, x * x * (0.5 - x * (1.0 / 6.0 - x / 24.0)),
-                 np.expm1(-np.where(small, 0.0, x)) + x)
-    return -0.5 * T ** 3 * h
+    if small.any():
+        xs = x[small]
+        h[small] = xs * xs * (0.5 - xs * (1.0 / 6.0 - xs / 24.0))
+    h *= -0.5 * T ** 3
+    return h.reshape(np.shape(u_s))
 
 
 def _tail_gauss_markov(d: np.ndarray, m1: np.ndarray, m2: np.ndarray, dt: float,

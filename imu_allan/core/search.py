@@ -41,6 +41,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from scipy.stats import chi2
 
+from imu_allan.core.allan import _single_thread_blas
 from imu_allan.core.evidence import periodogram_peak, ramp_test
 from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
 from imu_allan.core.fit.result import AxisFit, Param
@@ -211,7 +212,8 @@ def _second_chance(fitter, slots_of, labels: list, sol, sigma, effects, penalty:
         if _n_params(slots) >= fitter.data.tau.size:
             continue
         new, _ = fitter.irls(slots, phi0=list(sol.phi) + [
-            tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)])
+            tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)],
+            grid_slots=_grid_slots(effect, slots))
         if new.coef[-1] <= 0:
             continue
         value = _neg2_loglik(fitter, new, _n_params(slots), penalty)
@@ -232,6 +234,15 @@ def _short_sinusoid(slot, tau: np.ndarray):
         return slot
     (lo, hi), = slot.bounds
     return replace(slot, bounds=((max(lo, 2.0 / tau.max()), hi),))
+
+
+def _grid_slots(effect: str, slots) -> list | None:
+    """Slots whose parameters a fit with an added effect (the last slot) grids anew."""
+    # Interchangeable Gauss-Markov terms keep their order (shortest T first), so a
+    # further one may need to take the other's place: grid them all.
+    family = effect == 'gauss_markov' and any(
+        x.term.name in ('gauss_markov', 'bias_instability') for x in slots[:-1])
+    return None if family else [len(slots) - 1]
 
 
 def _noise_terms(slots, coef, phi, scale: float) -> list:
@@ -283,6 +294,15 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
     for e in effects:
         if e not in EFFECT_TERM:
             raise InputError(f'unknown effect {e!r}; known: {", ".join(EFFECT_TERM)}')
+    # Tiny matrices: OpenBLAS threads only add overhead (see fit_axis).
+    with _single_thread_blas():
+        return _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit,
+                       effects, base_labels, keep_steps)
+
+
+def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effects,
+            base_labels, keep_steps) -> Search:
+    """Body of :func:`search_axis` (same arguments)."""
     run = _Run(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, tuple(effects))
     run.base(base_labels)
     run.ramp_first()
@@ -408,12 +428,8 @@ class _Run:
                 continue
             phi0 = list(self.sol.phi) + [tuple(math.sqrt(lo * hi)
                                                for lo, hi in slots[-1].bounds)]
-            # Interchangeable Gauss-Markov terms keep their order (shortest T first), so
-            # a further one may need to take the other's place: grid them all.
-            family = effect == 'gauss_markov' and any(
-                x.term.name in ('gauss_markov', 'bias_instability') for x in slots[:-1])
             new = _fit_fixed_w(self.fitter.data, slots, phi0,
-                               grid_slots=None if family else [len(self.labels)])
+                               grid_slots=_grid_slots(effect, slots))
             if new.coef[-1] <= 0:
                 continue
             drop = float(self.sol.j - new.j)

@@ -9,7 +9,7 @@ import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
-from scipy.optimize import minimize, minimize_scalar, nnls
+from scipy.optimize import minimize_scalar, nnls
 
 from imu_allan.core.fit.covariance import _shared_covariance
 from imu_allan.core.model import Term
@@ -70,13 +70,18 @@ def _design(slots: Sequence[_Slot], tau: np.ndarray, phi: Sequence[tuple]) -> np
 
 
 def _solve_linear(data: _Data, a: np.ndarray, fixed: np.ndarray | None = None):
-    """Non-negative GLS coefficients for a fixed design; returns (coef, chi-square)."""
+    """
+    Non-negative GLS coefficients for a fixed design.
+
+    Returns (coef, chi-square, whitened residual of shape (k,)).
+    """
     aw = data.whiten(a)
     yw = data.yw if fixed is None else data.yw - data.whiten(fixed)
     norm = np.sqrt((aw ** 2).sum(axis=0))
     norm[norm == 0] = 1.0
     coef, rnorm = nnls(aw / norm, yw, maxiter=50 * a.shape[1] + 50)
-    return coef / norm, rnorm ** 2
+    coef = coef / norm
+    return coef, rnorm ** 2, yw - aw @ coef
 
 
 class _Fix(NamedTuple):
@@ -137,44 +142,106 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
     # one of them (grid sweeps, profiles) reuses the others.
     columns: dict = {}
 
-    def design(phi):
-        cols = []
-        for s, nl in zip(slots, phi):
-            key = (s.label, nl)
-            col = columns.get(key)
-            if col is None:
-                col = s.term.shape(data.tau, *nl)
-                if len(columns) < 4096:
-                    columns[key] = col
-            cols.append(col)
-        return np.column_stack(cols)
+    def column(i, nl):
+        key = (i, nl)
+        col = columns.get(key)
+        if col is None:
+            col = slots[i].term.shape(data.tau, *nl)
+            if len(columns) < 4096:
+                columns[key] = col
+        return col
 
     def solve(phi):
-        a = design(phi)
+        a = np.column_stack([column(i, nl) for i, nl in enumerate(phi)])
         if fixed_level is None:
             return _solve_linear(data, a)
         i = fixed_level.slot
         c_i = slots[i].term.to_coef(fixed_level.value, *phi[i]) / data.scale
         rest = [k for k in range(len(slots)) if k != i]
-        coef_rest, j = _solve_linear(data, a[:, rest], fixed=a[:, i] * c_i)
+        coef_rest, j, resid = _solve_linear(data, a[:, rest], fixed=a[:, i] * c_i)
         coef = np.empty(len(slots))
         coef[rest], coef[i] = coef_rest, c_i
-        return coef, j
+        return coef, j, resid
 
     if not nl_index:
         phi = unpack(np.zeros(0))
-        coef, j = solve(phi)
+        coef, j, _ = solve(phi)
         return _Solution(coef, phi, j)
 
     families = _families(slots)
+    # Interchangeable terms fit the curve the same either way round, so the search
+    # evaluates them sorted (a smooth objective with a gradient).  A profile that holds
+    # one of them must keep their roles: there a quadratic penalty keeps their order.
+    held = fix is not None and any(fix.slot in fam for fam in families)
+    fam_dims = [] if held else [[nl_index.index((i, 0)) for i in fam] for fam in families]
+    dim_of = {ij: d for d, ij in enumerate(nl_index)}
+
+    def ordered(x):
+        x, perm = x.copy(), np.arange(x.size)
+        for dims in fam_dims:
+            o = np.argsort(x[dims], kind='stable')
+            x[dims], perm[dims] = x[dims][o], np.asarray(dims)[o]
+        return x, perm
 
     def objective(x):
-        phi = unpack(x)
+        phi = unpack(ordered(x)[0])
+        return solve(phi)[1] + (float(np.sum(order_rows(phi)[0] ** 2)) if held else 0.0)
+
+    def residual_jac(x):
+        # Variable projection (Golub & Pereyra 1973, Kaufman's Jacobian): the whitened
+        # residual r(x) = L^-1 (y - A(x) c(x)) at the optimal coefficients (NNLS), and
+        # dr/dx = -P (L^-1 d(A c)/dx) with c held, P the projection off the active
+        # columns.  The columns' derivatives in log(phi) by a forward difference; a
+        # fixed level's coefficient moves with its slot's nonlinear parameters (to_coef)
+        # and is differentiated with them.
+        xs, perm = ordered(x)
+        phi = unpack(xs)
+        coef, j, resid = solve(phi)
+        dm = np.zeros((data.tau.size, len(nl_index)))
+        for d, (i, jj) in enumerate(nl_index):
+            held_level = fixed_level is not None and i == fixed_level.slot
+            if coef[i] == 0.0 and not held_level:
+                continue
+            step = list(phi[i])
+            step[jj] *= _EXP_H
+            col = slots[i].term.shape(data.tau, *step)
+            if held_level:
+                c_step = slots[i].term.to_coef(fixed_level.value, *step) / data.scale
+                dm[:, d] = (col * c_step - column(i, phi[i]) * coef[i]) / _H
+            else:
+                dm[:, d] = (col - column(i, phi[i])) * (coef[i] / _H)
+        dmw = data.whiten(dm)
+        free = [i for i in range(len(slots)) if coef[i] > 0 and not (
+            fixed_level is not None and i == fixed_level.slot)]
+        if free:
+            q = np.linalg.qr(data.whiten(np.column_stack([column(i, phi[i]) for i in free])))[0]
+            dmw = dmw - q @ (q.T @ dmw)
+        jac = np.empty_like(dmw)
+        jac[:, perm] = -dmw
+        if held:
+            rows, jrows = order_rows(phi)
+            resid = np.concatenate([resid, rows])
+            jac = np.vstack([jac, jrows])
+        return resid, jac
+
+    def order_rows(phi):
+        # Penalty residuals sqrt(w) max(0, log T_a - log T_b) of neighbours out of order.
+        rows, jrows = [], []
+        w = math.sqrt(_ORDER_WEIGHT)
         for fam in families:
-            t = [phi[i][0] for i in fam]
-            if any(a > b for a, b in zip(t[:-1], t[1:])):
-                return 1e300
-        return solve(phi)[1]
+            for a, b in zip(fam[:-1], fam[1:]):
+                gap = max(math.log(phi[a][0] / phi[b][0]), 0.0)
+                jr = np.zeros(len(nl_index))
+                if gap > 0.0:
+                    for i, sign in ((a, w), (b, -w)):
+                        if (i, 0) in dim_of:
+                            jr[dim_of[(i, 0)]] = sign
+                rows.append(w * gap)
+                jrows.append(jr)
+        return np.array(rows), np.array(jrows).reshape(-1, len(nl_index))
+
+    def polish(x):
+        return ordered(_polish_lm(residual_jac, x, bounds))[0]
 
     if phi0 is not None:
         x = np.log([phi0[i][j] for i, j in nl_index])
@@ -186,9 +253,9 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
             lo, hi = max(x[0] - 1.5, bounds[0, 0]), min(x[0] + 1.5, bounds[0, 1])
             x[0] = _polish_1d(objective, lo, hi, x[0], objective(x))
         else:
-            x = _polish_nd(objective, x, bounds)
+            x = polish(x)
         phi = unpack(x)
-        coef, j = solve(phi)
+        coef, j, _ = solve(phi)
         return _Solution(coef, phi, j)
     # Coordinate grid sweeps, then a local polish.
     sweep = [d for d, (i, _) in enumerate(nl_index) if grid_slots is None or i in grid_slots]
@@ -206,12 +273,83 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
                 if hi > lo:
                     x[d] = _polish_1d(objective, lo, hi, x[d], vals[best])
     if len(nl_index) > 1:
-        x = _polish_nd(objective, x, bounds)
-    phi = unpack(x)
-    coef, j = solve(phi)
+        x = polish(x)
+    phi = unpack(ordered(x)[0])
+    coef, j, _ = solve(phi)
     if fix is None:
         coef, phi = _canonical(slots, coef, phi)
     return _Solution(coef, phi, j)
+
+
+#: First trial of a profile interval: 2 % from the estimate (then a quadratic guess).
+_FIRST_STEP = 0.02
+#: A profile still below its threshold 1e7 x away from the estimate is unbounded there.
+_MAX_REACH = math.log(1e7)
+#: Forward-difference step in log(phi) for the variable-projection gradient.
+_H = 1e-7
+#: Weight w of the order penalty on interchangeable terms held in a profile (chi-square
+#: per squared log-ratio: a swap by 0.1 % costs 1e-2).
+_ORDER_WEIGHT = 1e4
+_EXP_H = math.exp(_H)
+
+
+def _polish_lm(residual_jac, x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """
+    Levenberg-Marquardt from x within bounds (k, 2), projected; keep x unless it improves.
+
+    ``residual_jac(x)`` returns the residual vector r and its Jacobian; J = r^T r.
+    Parameters at a bound whose gradient pushes them out are held there (an active
+    set), so a solution on a bound (a T at the edge of its range) converges as fast as
+    an interior one.  The damping follows the gain ratio (Nielsen 1999, as in Madsen,
+    Nielsen & Tingleff, "Methods for non-linear least squares problems", 2004).  Stops
+    when an accepted step lowers J by less than _LM_FTOL (J + 1), or moves no parameter
+    by more than 1e-7 in log units.
+    """
+    lo, hi = bounds[:, 0], bounds[:, 1]
+    x = np.clip(x, lo, hi)
+    r, jac = residual_jac(x)
+    cost = float(r @ r)
+    lam, nu = None, 2.0
+    for _ in range(_LM_MAX_ITER):
+        grad = jac.T @ r
+        free = ~(((x <= lo) & (grad > 0)) | ((x >= hi) & (grad < 0)))
+        if not free.any():
+            break
+        jf = jac[:, free]
+        h = jf.T @ jf
+        if lam is None:
+            lam = 1e-3 * float(np.max(np.diag(h))) + 1e-300
+        d = np.zeros(x.size)
+        try:
+            d[free] = np.linalg.solve(h + lam * np.eye(h.shape[0]), -grad[free])
+        except np.linalg.LinAlgError:
+            lam, nu = lam * nu, nu * 2.0
+            continue
+        x_new = np.clip(x + d, lo, hi)
+        d = x_new - x
+        predicted = -float(2.0 * grad @ d + d @ (jac.T @ (jac @ d)))
+        r_new, jac_new = residual_jac(x_new)
+        cost_new = float(r_new @ r_new)
+        gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        if gain <= 0:
+            lam, nu = lam * nu, nu * 2.0
+            if np.max(np.abs(d)) < 1e-7:
+                break
+            continue
+        done = cost - cost_new < _LM_FTOL * (cost + 1.0) or np.max(np.abs(d)) < 1e-7
+        x, r, jac, cost = x_new, r_new, jac_new, cost_new
+        lam *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+        nu = 2.0
+        if done:
+            break
+    return x
+
+
+#: Relative drop of J below which a Levenberg-Marquardt polish stops (J is a chi-square:
+#: 1e-7 of it is far below what moves an interval end or a model choice).
+_LM_FTOL = 1e-7
+#: Most Levenberg-Marquardt iterations of one polish.
+_LM_MAX_ITER = 100
 
 
 def _polish_1d(objective, lo: float, hi: float, x0: float, f0: float) -> float:
@@ -219,14 +357,6 @@ def _polish_1d(objective, lo: float, hi: float, x0: float, f0: float) -> float:
     res = minimize_scalar(lambda v: objective(np.array([v])), bounds=(lo, hi),
                           method='bounded', options={'xatol': 1e-4})
     return float(res.x) if res.fun <= f0 else x0
-
-
-def _polish_nd(objective, x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-    """Nelder-Mead from x, clipped to bounds (k, 2); keep x unless it improves."""
-    # fatol in chi-square units: 1e-6 is far below what moves an interval or a choice.
-    res = minimize(objective, x, method='Nelder-Mead',
-                   options={'xatol': 1e-3, 'fatol': 1e-6, 'maxiter': 400})
-    return np.clip(res.x, bounds[:, 0], bounds[:, 1]) if res.fun <= objective(x) else x
 
 
 def _canonical(slots: Sequence[_Slot], coef: np.ndarray, phi: tuple) -> tuple:
@@ -272,13 +402,17 @@ def _profile_interval(data: _Data, slots: Sequence[_Slot], sol: _Solution, slot:
     def crossing(a: float, fa: float, b: float, fb: float) -> float:
         # Illinois regula falsi in log(v) (or v when the bracket touches 0), from the
         # bracket values already known: robust where the profile, found by local
-        # searches, is not exactly monotone, and ~5 evaluations to 0.2 %.
+        # searches, is not exactly monotone; it stops at 0.2 % of v, or where J is
+        # within 1 % of the threshold of its target (the end then moves by < 0.5 %
+        # of the half-width).
         logs = a > 0 and b > 0
         xa, xb = (math.log(a), math.log(b)) if logs else (a, b)
         side = 0
         for _ in range(12):
             xc = xb - fb * (xb - xa) / (fb - fa) if fb != fa else 0.5 * (xa + xb)
             fc = excess(math.exp(xc) if logs else xc)
+            if abs(fc) < 0.01 * threshold:
+                return math.exp(xc) if logs else xc
             if fc > 0:
                 xb, fb = xc, fc
                 if side == 1:
@@ -300,8 +434,9 @@ def _profile_interval(data: _Data, slots: Sequence[_Slot], sol: _Solution, slot:
         inner, f_inner = value, -threshold
         limit = hard[0] if direction < 0 else hard[1]
         end = limit
-        for _ in range(60):
-            outer = inner * 1.3 ** direction
+        reach = _FIRST_STEP  # distance |log(v / value)| of the next trial
+        while reach < _MAX_REACH:
+            outer = value * math.exp(direction * reach)
             if (direction < 0 and outer <= limit) or (direction > 0 and outer >= limit):
                 if math.isfinite(limit):
                     f_limit = excess(limit) if limit > 0 else excess(0.0)
@@ -313,6 +448,11 @@ def _profile_interval(data: _Data, slots: Sequence[_Slot], sol: _Solution, slot:
                 end = crossing(inner, f_inner, outer, f_outer)
                 break
             inner, f_inner = outer, f_outer
+            # The profile is about quadratic in log(v) near its minimum: aim just beyond
+            # the predicted crossing, at most 4x further out.
+            rise = f_outer + threshold
+            aim = reach * math.sqrt(threshold / rise) if rise > 0 else math.inf
+            reach = min(max(1.1 * aim, 1.2 * reach), 4.0 * reach)
         ends.append(float(end))
     return ends[0], ends[1]
 
@@ -398,7 +538,8 @@ class _Fitter:
         return out
 
     def irls(self, slots, phi0=None, sigma0: np.ndarray | None = None,
-             max_iter: int = 8, local: bool = False) -> tuple[_Solution, np.ndarray]:
+             max_iter: int = 8, local: bool = False,
+             grid_slots: Sequence[int] | None = None) -> tuple[_Solution, np.ndarray]:
         """
         Fit one model by iteratively re-weighted GLS; return the fit and Sigma at it.
 
@@ -420,13 +561,17 @@ class _Fitter:
         self.data.set_sigma(np.diag(2.0 * y ** 2 / self.edf0) if sigma0 is None else sigma0)
         # local: the nonlinear parameters start at a fitted model's (an effect search
         # step) and are polished, not searched again over their whole ranges.
-        sol = _fit_fixed_w(self.data, slots, phi0, local=local and phi0 is not None)
+        sol = _fit_fixed_w(self.data, slots, phi0, local=local and phi0 is not None,
+                           grid_slots=grid_slots)
         for it in range(max_iter):
             if not np.any(sol.coef > 0):
                 break
             sigma = self.sigma(slots, sol, expected=True)
             self.data.set_sigma(sigma)
-            new = _fit_fixed_w(self.data, slots, sol.phi, local=local)
+            # The first re-weighting may move the model to another basin (the paper's
+            # weights and the model's covariance differ most); later ones polish it.
+            new = _fit_fixed_w(self.data, slots, sol.phi, local=local or it > 0,
+                               grid_slots=grid_slots)
             before = _design(slots, self.data.tau, sol.phi) @ sol.coef
             after = _design(slots, self.data.tau, new.phi) @ new.coef
             sol = new
