@@ -563,10 +563,15 @@ class _Fitter:
         # step) and are polished, not searched again over their whole ranges.
         sol = _fit_fixed_w(self.data, slots, phi0, local=local and phi0 is not None,
                            grid_slots=grid_slots)
+        last_sigma, moves = None, [math.inf]
         for it in range(max_iter):
             if not np.any(sol.coef > 0):
                 break
             sigma = self.sigma(slots, sol, expected=True)
+            if last_sigma is not None and moves[-1] > 0.5 * moves[-2]:
+                # Not contracting (two models that pull each other's weights back and
+                # forth): relax, half the new Sigma and half the last one.
+                sigma = 0.5 * (sigma + last_sigma)
             self.data.set_sigma(sigma)
             # The first re-weighting may move the model to another basin (the paper's
             # weights and the model's covariance differ most); later ones polish it.
@@ -575,8 +580,11 @@ class _Fitter:
             before = _design(slots, self.data.tau, sol.phi) @ sol.coef
             after = _design(slots, self.data.tau, new.phi) @ new.coef
             sol = new
-            if np.all(np.abs(after - before) < 0.01 * np.sqrt(np.diag(sigma))):
+            moved = float(np.max(np.abs(after - before) / np.sqrt(np.diag(sigma))))
+            if moved < 0.01:
                 break
+            last_sigma = sigma
+            moves.append(moved)
         sigma = self.sigma(slots, sol) if np.any(sol.coef > 0) else np.diag(
             2.0 * y ** 2 / self.edf0)
         self.data.set_sigma(sigma)
