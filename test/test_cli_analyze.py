@@ -265,6 +265,18 @@ def test_kalibr_yaml_names_the_analysed_topic(tmp_path, rec, capsys):
     assert code == 0, err
     kalibr = yaml.safe_load((out_dir / 'imu.yaml').read_text())
     assert kalibr['rostopic'] == '/robot/imu_front'
+    assert all(v > 0 for k, v in kalibr.items() if k.endswith(('density', 'walk')))
+    # The consumers' files: robot_localization fuses the analysed topic, the driver
+    # scalars are N sqrt(rate), the VINS keys are Kalibr's densities.
+    ekf = yaml.safe_load((out_dir / 'ekf_imu.yaml').read_text())
+    assert ekf['ekf_filter_node']['ros__parameters']['imu0'] == '/robot/imu_front'
+    driver = yaml.safe_load((out_dir / 'imu_driver_noise.yaml').read_text())
+    result = json.loads((out_dir / 'result.json').read_text())
+    n_gyro = [result['axes'][a]['params']['N']['value'] for a in ('gyro_x', 'gyro_y', 'gyro_z')]
+    assert driver['worst']['angular_velocity_stdev'] == pytest.approx(
+        max(n_gyro) * RATE ** 0.5, rel=1e-5)
+    vins = yaml.safe_load((out_dir / 'vins_imu.yaml').read_text())
+    assert vins['gyr_n'] == pytest.approx(kalibr['gyroscope_noise_density'], rel=1e-5)
 
 
 def test_text_mode_two_different_runs_comparison_plot_and_table(tmp_path, rec, capsys):

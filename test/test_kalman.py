@@ -197,9 +197,35 @@ def test_kalibr_prefers_estimates_over_a_larger_bound():
     # No gyro axis has a K estimate: the largest bound is used, and the file says so.
     assert_allclose(doc['gyroscope_random_walk'], 3e-6, rtol=1e-6)
     assert 'gyroscope_random_walk: no axis has an estimate' in text
-    lean = yaml.safe_load(kalibr_yaml(gyros + accels, rate_hz=100.0, use_upper_bounds=False))
-    assert lean['gyroscope_random_walk'] == 0.0
+    # Without bounds no gyro axis gives K: the key is left out (Kalibr stops on it)
+    # rather than written as 0, which Kalibr's reader rejects.
+    text = kalibr_yaml(gyros + accels, rate_hz=100.0, use_upper_bounds=False)
+    lean = yaml.safe_load(text)
+    assert 'gyroscope_random_walk' not in lean
+    assert 'gyroscope_random_walk: not available on any axis; left out' in text
     assert_allclose(lean['accelerometer_random_walk'], 8.1e-6, rtol=1e-6)
+    assert all(v > 0 for k, v in lean.items() if k.endswith(('density', 'walk')))
+
+
+def test_kalibr_falls_back_to_the_bound_the_curve_sets():
+    # K not identified on any gyro axis (no estimate, no bound): the curve's own bound
+    # min sqrt(3 AVAR / tau) is written, never 0.
+    tau = np.geomspace(0.01, 1000.0, 12)
+    avar = 1e-8 / tau + 1e-12 * tau          # white N = 1e-4 plus a tiny walk
+    gyros = []
+    for n in (1.0e-4, 1.1e-4, 0.9e-4):
+        fit = _fit(n, 1.0, 'not_identified')
+        opt = dict(fit.optimised, K=Param(math.nan, (math.nan, math.nan), 'not_identified',
+                                          'rad/s^2/sqrt(Hz)'))
+        gyros.append(AxisFit(nominal=opt, optimised=opt, model=fit.model, terms=fit.terms,
+                             notes=(), tau_s=tau, avar_meas=avar))
+    accels = [_fit(6e-4, 8e-6)] * 3
+    text = kalibr_yaml(gyros + accels, rate_hz=100.0)
+    doc = yaml.safe_load(text)
+    assert_allclose(doc['gyroscope_random_walk'], np.sqrt(np.min(3.0 * avar / tau)),
+                    rtol=1e-6)
+    assert 'gyroscope_random_walk: no axis has an estimate or a bound' in text
+    assert all(v > 0 for k, v in doc.items() if k.endswith(('density', 'walk')))
 
 
 def test_robot_localization_covariance_is_n2_rate_and_clamped():

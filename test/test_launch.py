@@ -50,12 +50,16 @@ def test_launch_file_uses_the_installed_config_and_remaps_the_node_input():
     assert ast.literal_eval(pair.elts[0]) == 'imu'          # the node subscribes to 'imu'
     node_src = (REPO / 'imu_allan' / 'ros' / 'node.py').read_text()
     assert "Imu, 'imu', self._on_imu" in node_src
-    declared = {ast.literal_eval(n.args[0]) for n in ast.walk(ast.parse(text))
-                if isinstance(n, ast.Call) and getattr(n.func, 'id', None) ==
-                'DeclareLaunchArgument'}
+    # The arguments are (name, default, description) tuples fed to DeclareLaunchArgument.
+    table = next(n.value for n in ast.walk(ast.parse(text)) if isinstance(n, ast.Assign)
+                 and getattr(n.targets[0], 'id', None) == 'arguments')
+    declared = {ast.literal_eval(t.elts[0]) for t in table.elts}
     used = {ast.literal_eval(n.args[0]) for n in ast.walk(ast.parse(text))
             if isinstance(n, ast.Call) and getattr(n.func, 'id', None) == 'LaunchConfiguration'}
-    assert used <= declared and {'imu_topic', 'params_file'} <= declared
+    assert used <= declared
+    assert {'imu_topic', 'params_file', 'namespace', 'use_sim_time', 'resume',
+            'log_level'} <= declared
+    assert 'DeclareLaunchArgument(name, default_value=default' in text
 
 
 @pytest.mark.skipif(importlib.util.find_spec('launch_ros') is None,

@@ -28,6 +28,7 @@ import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import (DurabilityPolicy, QoSProfile, ReliabilityPolicy)  # noqa: E402
+import yaml  # noqa: E402
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402, I100
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -35,6 +36,7 @@ from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from imu_allan import AXES  # noqa: E402, I100
+from imu_allan.core.kalman import UNKNOWN_VARIANCE  # noqa: E402
 from imu_allan.core.noise_params import parse_params  # noqa: E402
 from imu_allan.core.simulate import simulate_imu  # noqa: E402
 from imu_allan.errors import InputError  # noqa: E402
@@ -325,6 +327,125 @@ def test_imu_with_covariance_is_republished_after_a_fit(rig):
     assert got[-1].header.stamp.sec * 10 ** 9 + got[-1].header.stamp.nanosec in set(t[4000:])
 
 
+def test_imu_with_covariance_relays_every_message_at_once(rig):
+    # A subscriber with robot_localization's QoS (best effort, keep last 10) gets every
+    # message at 200 Hz, from the first one on, within 50 ms; before any fit the
+    # covariances say "unknown" with a large variance, not the 1e-9 floor.
+    r = rig(publish_imu_with_covariance=True)
+    got = {}
+    r.peer.create_subscription(
+        Imu, f'{NODE}/imu_with_covariance',
+        lambda m: got.setdefault(m.header.stamp.sec * 10 ** 9 + m.header.stamp.nanosec,
+                                 (time.monotonic(), m)),
+        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    wait(lambda: r.node.pub_imu.get_subscription_count() > 0, 10, 'discovery of the relay')
+    pub = r.publisher()
+    t, y = _record(200.0, 3.0)
+    sent = {}
+    start = time.monotonic()
+    for k, row in enumerate(serialize_imu(t, y)):
+        while time.monotonic() < start + k / 200.0:
+            time.sleep(0.0005)
+        sent[int(t[k])] = time.monotonic()
+        pub.publish(row.tobytes())
+    wait(lambda: len(got) == len(sent), 10, 'every relayed message')
+    latency = np.array([got[k][0] - sent[k] for k in sent])
+    assert latency.max() <= 0.05, f'latency up to {latency.max() * 1e3:.1f} ms'
+    first = got[int(t[0])][1]
+    assert_allclose(np.array(first.angular_velocity_covariance).reshape(3, 3),
+                    np.diag([UNKNOWN_VARIANCE] * 3))
+    assert first.header.frame_id == 'imu_link'
+    assert_allclose(first.angular_velocity.x, y[0, 0])
+
+
+def test_imu_with_covariance_starts_from_an_initial_covariance_file(rig, context, tmp_path):
+    gyro, accel = np.diag([1e-6, 2e-6, 3e-6]).ravel(), np.diag([4e-4, 5e-4, 6e-4]).ravel()
+    path = tmp_path / 'result.json'
+    path.write_text(json.dumps({'imu_covariance': {
+        'angular_velocity_covariance': gyro.tolist(),
+        'linear_acceleration_covariance': accel.tolist()}}))
+    r = rig(publish_imu_with_covariance=True, initial_covariance_file=str(path))
+    got = []
+    r.peer.create_subscription(Imu, f'{NODE}/imu_with_covariance', got.append, QoSProfile(
+        depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+    wait(lambda: r.node.pub_imu.get_subscription_count() > 0, 10, 'discovery of the relay')
+    r.feed(*_record(200.0, 0.1))
+    wait(lambda: len(got) == 20, 10, 'the relayed messages')
+    assert_allclose(got[0].angular_velocity_covariance, gyro)
+    assert_allclose(got[0].linear_acceleration_covariance, accel)
+    assert r.node.relay.source == 'file'
+    path.write_text('{"imu_covariance": {"angular_velocity_covariance": [1, 2]}}')
+    with pytest.raises(InputError, match='initial_covariance_file'):
+        ImuAllanNode(context=context, parameter_overrides=[
+            Parameter('output_dir', value=str(tmp_path)),
+            Parameter('initial_covariance_file', value=str(path))])
+
+
+def test_diagnostics_at_1_hz_named_after_the_node(rig):
+    r = rig()
+    arrays = []
+    r.peer.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, 100)
+
+    def level(name):
+        return statuses(arrays[-1])[name][0] if arrays and name in statuses(arrays[-1]) \
+            else None
+    # No data yet: a WARN, not an OK.
+    wait(lambda: level('imu_allan: data') == 1, 10, 'a WARN without data')
+    assert 'no message yet on /imu' in statuses(arrays[-1])['imu_allan: data'][1]
+    r.feed(*_record(200.0, 20.0))
+    r.publish()
+    n0 = len(arrays)
+    time.sleep(2.6)
+    assert len(arrays) - n0 >= 2                 # about 1 Hz
+    last = statuses(arrays[-1])
+    names = {f'imu_allan: {a}' for a in AXES} | {
+        'imu_allan: data', 'imu_allan: progress', 'imu_allan: input'}
+    assert names <= set(last)                    # per-axis statuses persist after the fit
+    assert last['imu_allan: progress'][1].startswith('characterising:')
+    assert {s.hardware_id for s in arrays[-1].status} == {'imu_link'}   # the frame_id
+
+
+def test_two_nodes_in_two_namespaces_keep_apart(context, tmp_path, monkeypatch):
+    # Two IMUs on one robot: default output directories, topics and diagnostic names
+    # follow each node's namespace, so nothing collides.
+    monkeypatch.setenv('HOME', str(tmp_path))
+    nodes = [ImuAllanNode(context=context, namespace=ns, parameter_overrides=[
+        Parameter('min_duration_s', value=1.0), Parameter('checkpoint_period_s', value=0.0),
+        Parameter('process_period_s', value=0.05)]) for ns in ('/left', '/right')]
+    peer = rclpy.create_node('imu_allan_two_peer', context=context)
+    executor = create_executor('single', context=context)
+    for n in nodes + [peer]:
+        executor.add_node(n)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    try:
+        dirs = [n.output_dir for n in nodes]
+        assert dirs == [tmp_path / '.ros' / 'imu_allan' / ns / 'imu_allan'
+                        for ns in ('left', 'right')]
+        assert [n.subscription.topic_name for n in nodes] == ['/left/imu', '/right/imu']
+        names = [n._data_status().name for n in nodes]
+        assert names == ['left/imu_allan: data', 'right/imu_allan: data']
+        for n, seconds in zip(nodes, (10.0, 15.0)):
+            pub = peer.create_publisher(Imu, n.subscription.topic_name, QoSProfile(
+                depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
+            wait(lambda: pub.get_subscription_count() > 0, 10, 'discovery')
+            t, y = _record(200.0, seconds)
+            for k, row in enumerate(serialize_imu(t, y)):
+                if k % 100 == 0:
+                    wait(lambda: n.n_received >= k - WINDOW, 30, 'the node')
+                pub.publish(row.tobytes())
+            wait(lambda: n.n_received >= t.size, 30, 'every message received')
+        for n, expected in zip(nodes, (2000, 3000)):
+            n.save()
+            result = json.loads((n.output_dir / 'result.json').read_text())
+            assert result['n_samples'] == expected
+    finally:
+        executor.shutdown()
+        thread.join(5)
+        for n in nodes + [peer]:
+            n.destroy_node()
+
+
 # ------------------------------------------------------------------ hygiene
 def test_gap_is_reported(rig):
     r = rig()
@@ -463,6 +584,8 @@ def test_save_and_reset_services(rig, tmp_path):
                  'checkpoint.npz'):
         assert (out / name).is_file() and str(out / name) in res.message
     assert json.loads((out / 'result.json').read_text())['n_samples'] == 4000
+    ekf = yaml.safe_load((out / 'ekf_imu.yaml').read_text())
+    assert ekf['ekf_filter_node']['ros__parameters']['imu0'] == '/imu'   # relay off
     res = _call(r, 'reset')
     assert res.success and 'reset' in res.message
     assert r.node.session.stats.n_used == 0 and r.node.last_result is None

@@ -29,7 +29,7 @@ without taus keeps its b_GM state frozen (Phi = 1, Qd = 0) and a note says so.
 
 from dataclasses import dataclass
 import math
-from typing import Mapping, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -40,6 +40,10 @@ from imu_allan.errors import InputError
 
 #: robot_localization ignores (clamps) variances below this [unit^2].
 ROBOT_LOCALIZATION_MIN_VARIANCE = 1e-9
+#: Variance of an axis whose noise is not known (no fit, no N) [unit^2]: large, so a
+#: filter leans on its other inputs, where 0 or 1e-9 would be the most trust it allows
+#: (sensor_msgs/Imu: all zeros mean "unknown", and a consumer must assume something).
+UNKNOWN_VARIANCE = 1e4
 
 NOTES = """\
 How VIO / SLAM packages read IMU noise numbers (check your version; all of them expect
@@ -421,23 +425,98 @@ def _kinded(source, symbol: str, use_upper_bounds: bool) -> tuple[float, str]:
     return value, kind
 
 
+def _curve_bound(source, symbol: str) -> float:
+    """
+    Bound of N or K that the measured curve itself sets, 0.0 without a curve.
+
+    No term can exceed the whole measured AVAR at any tau: N^2 / tau <= AVAR(tau) and
+    K^2 tau / 3 <= AVAR(tau) (IEEE Std 952 C.1 slopes), so N <= min sqrt(AVAR tau) and
+    K <= min sqrt(3 AVAR / tau) over the fitted taus.
+    """
+    tau, avar = getattr(source, 'tau_s', None), getattr(source, 'avar_meas', None)
+    if tau is None or avar is None or not np.size(tau):
+        return 0.0
+    tau, avar = np.asarray(tau, dtype=np.float64), np.asarray(avar, dtype=np.float64)
+    level = avar * tau if symbol == 'N' else 3.0 * avar / tau
+    return float(np.sqrt(np.min(level)))
+
+
+class SensorValue(NamedTuple):
+    """
+    One value of N or K for a whole sensor (three axes), as Kalibr and VIO configs take.
+
+    Attributes
+    ----------
+    value : float or None
+        The value [unit of the symbol], None when no axis gives one.
+    kind : str
+        'estimate', 'upper_bound' (the axes' 95 % bounds), 'curve_bound' (the measured
+        curve's own bound: the record cannot separate the term) or 'absent'.
+    per_axis : dict of str to tuple
+        (value, kind) of each axis ('absent' with 0.0).
+
+    """
+
+    value: float | None
+    kind: str
+    per_axis: dict
+
+
+def sensor_value(sources, axes: Sequence[str], symbol: str, reduce: str = 'max',
+                 use_upper_bounds: bool = True) -> SensorValue:
+    """
+    Reduce N or K of three axes to one positive value for the sensor.
+
+    Only axes where the term was *estimated* enter the reduction: an upper bound (a term
+    the record was too short to see on that axis) can lie far above the values the other
+    axes measure (an accelerometer K bound of 1e-4 beside estimates of 8e-6), so it
+    would dominate 'max' without being a measurement.  Without any estimate (and with
+    ``use_upper_bounds``) the axes' 95 % bounds are used, then the bound the measured
+    curve sets (:func:`_curve_bound`); never 0, which Kalibr's and the VIO packages'
+    config readers reject.
+
+    Parameters
+    ----------
+    sources : mapping of str to AxisNoise or AxisFit
+        Per axis name.
+    axes : sequence of str
+        The sensor's three axes.
+    symbol : str
+        'N' or 'K'.
+    reduce : str
+        'max' (worst axis) or 'mean'.
+    use_upper_bounds : bool
+        Fall back to bounds when no axis has an estimate (True) or give None.
+
+    Returns
+    -------
+    SensorValue
+
+    """
+    per = {a: _kinded(sources[a], symbol, use_upper_bounds) for a in axes}
+    for kind in ('estimate', 'upper_bound'):
+        got = [v for v, k in per.values() if k == kind]
+        if got:
+            return SensorValue(_reduce(got, reduce), kind, per)
+    if use_upper_bounds:
+        got = [b for b in (_curve_bound(sources[a], symbol) for a in axes) if b > 0]
+        if got:
+            return SensorValue(_reduce(got, reduce), 'curve_bound', per)
+    return SensorValue(None, 'absent', per)
+
+
 def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/imu/data',
                 use_upper_bounds: bool = True) -> str:
     """
     Write a Kalibr imu.yaml (continuous densities: noise density = N, random walk = K).
 
-    Kalibr takes one value per sensor for all three axes.  Default ``reduce='max'``:
-    the worst axis, because under-stating any axis' noise makes the calibration (and
-    a filter tuned from it) over-confident on that axis, while over-stating only
-    down-weights it; ``'mean'`` gives the typical axis.  Per-axis values are written as
-    comments.
-
-    Only axes where the term was *estimated* enter the reduction: an upper bound (a
-    term the record was too short to see on that axis) can lie far above the values
-    the other axes measure (an accelerometer K bound of 1e-4 beside estimates of 8e-6),
-    so it would dominate 'max' without being a measurement.  A bound is used only when
-    no axis of the sensor has an estimate (with ``use_upper_bounds``), and a comment in
-    the file says so.
+    Kalibr takes one value per sensor for all three axes (:func:`sensor_value`).
+    Default ``reduce='max'``: the worst axis, because under-stating any axis' noise
+    makes the calibration (and a filter tuned from it) over-confident on that axis,
+    while over-stating only down-weights it; ``'mean'`` gives the typical axis.
+    Per-axis values are written as comments.  Every value written is positive: a key
+    no axis can give (``use_upper_bounds`` False, or a model without that term) is left
+    out with a comment, so Kalibr stops on it instead of using 0.
 
     Parameters
     ----------
@@ -448,9 +527,9 @@ def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/
     reduce : str
         'max' (worst axis) or 'mean'.
     rostopic : str
-        Value of Kalibr's rostopic key.
+        Value of Kalibr's rostopic key (the analysed topic).
     use_upper_bounds : bool
-        Fall back to upper bounds when no axis has an estimate (True) or write 0.
+        Fall back to bounds when no axis has an estimate, see :func:`sensor_value`.
 
     Returns
     -------
@@ -471,45 +550,42 @@ def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/
              f'# One value per sensor: the {how} of the per-axis estimates below',
              '# (axes where a term is only an upper bound are left out of it).',
              '# B and T_B (bias instability, Gauss-Markov) have no Kalibr key.']
-    out, remarks = {}, []
+    keys, remarks = [], []
     for sensor, axes, u_n, u_k in (('accelerometer', ACCEL_AXES, 'm/s^2/sqrt(Hz)',
                                     'm/s^3/sqrt(Hz)'),
                                    ('gyroscope', GYRO_AXES, 'rad/s/sqrt(Hz)',
                                     'rad/s^2/sqrt(Hz)')):
+        got = {sym: sensor_value(srcs, axes, sym, reduce, use_upper_bounds)
+               for sym in ('N', 'K')}
         lines.append(f'# {sensor} per axis:')
-        per = {a: {sym: _kinded(srcs[a], sym, use_upper_bounds) for sym in ('N', 'K')}
-               for a in axes}
         for a in axes:
             text = []
             for sym, u in (('N', u_n), ('K', u_k)):
-                value, kind = per[a][sym]
+                value, kind = got[sym].per_axis[a]
                 mark = {'estimate': '', 'upper_bound': ' (95 % upper bound)',
                         'absent': ' (not available)'}[kind]
                 text.append(f'{sym} = {value:.6e} {u}{mark}')
             lines.append(f'#   {a}: ' + ', '.join(text))
         for sym, key, u in (('N', f'{sensor}_noise_density', u_n),
                             ('K', f'{sensor}_random_walk', u_k)):
-            est = [per[a][sym][0] for a in axes if per[a][sym][1] == 'estimate']
-            bounds = [per[a][sym][0] for a in axes if per[a][sym][1] == 'upper_bound']
-            if est:
-                value = _reduce(est, reduce)
-                if len(est) < len(axes):
-                    remarks.append(f'# {key}: from the {len(est)} axes with an estimate; '
-                                   'the others only bound it')
-            elif bounds:
-                value = _reduce(bounds, reduce)
+            sv = got[sym]
+            n_est = sum(k == 'estimate' for _, k in sv.per_axis.values())
+            if sv.kind == 'estimate' and n_est < len(axes):
+                remarks.append(f'# {key}: from the {n_est} axes with an estimate; '
+                               'the others only bound it')
+            elif sv.kind == 'upper_bound':
                 remarks.append(f'# {key}: no axis has an estimate; this is the '
                                f'{reduce} of the 95 % upper bounds (the record is too '
                                'short to measure it)')
-            else:
-                value = 0.0
-                remarks.append(f'# {key}: not available on any axis (0 written)')
-            out[key] = (value, u)
+            elif sv.kind == 'curve_bound':
+                remarks.append(f'# {key}: no axis has an estimate or a bound; this is '
+                               'the bound the measured curve sets (conservative)')
+            elif sv.kind == 'absent':
+                remarks.append(f'# {key}: not available on any axis; left out (Kalibr '
+                               'needs a positive value: measure a longer record)')
+            keys.append((key, sv.value, u))
     lines += remarks
-    for key in ('accelerometer_noise_density', 'accelerometer_random_walk',
-                'gyroscope_noise_density', 'gyroscope_random_walk'):
-        value, u = out[key]
-        lines.append(f'{key}: {value:.6e}  # [{u}]')
+    lines += [f'{key}: {value:.6e}  # [{u}]' for key, value, u in keys if value is not None]
     lines.append(f'rostopic: {rostopic}')
     lines.append(f'update_rate: {float(rate_hz):g}  # [Hz]')
     return '\n'.join(lines) + '\n'
@@ -532,6 +608,8 @@ class ImuCovariance:
         The 9 row-major entries of the message field (diagonal).
     clamped : tuple of str
         Axes whose variance was raised to the 1e-9 floor.
+    unknown : tuple of str
+        Axes without a white-noise value, given :data:`UNKNOWN_VARIANCE`.
 
     """
 
@@ -540,6 +618,7 @@ class ImuCovariance:
     angular_velocity_covariance: tuple
     linear_acceleration_covariance: tuple
     clamped: tuple
+    unknown: tuple = ()
 
 
 def imu_covariance(sources, rate_hz: float) -> ImuCovariance:
@@ -550,7 +629,8 @@ def imu_covariance(sources, rate_hz: float) -> ImuCovariance:
     variance of each sample from the message: for white noise of density N sampled at
     rate f, var = N^2 f (the bias terms are not white and are left out).
     robot_localization clamps variances below 1e-9; this function clamps them the same
-    way and lists the clamped axes, so what is published is what gets used.
+    way and lists the clamped axes, so what is published is what gets used.  An axis
+    without N gets :data:`UNKNOWN_VARIANCE`, not the floor.
 
     Parameters
     ----------
@@ -568,10 +648,13 @@ def imu_covariance(sources, rate_hz: float) -> ImuCovariance:
     if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
     noises = {a: axis_noise_from(s)[0] for a, s in zip(AXES, _six(sources))}
-    var, clamped = {}, []
+    var, clamped, unknown = {}, [], []
     for a in AXES:
         v = noises[a].N ** 2 * float(rate_hz)
-        if v < ROBOT_LOCALIZATION_MIN_VARIANCE:
+        if not noises[a].N > 0:
+            unknown.append(a)
+            v = UNKNOWN_VARIANCE
+        elif v < ROBOT_LOCALIZATION_MIN_VARIANCE:
             clamped.append(a)
             v = ROBOT_LOCALIZATION_MIN_VARIANCE
         var[a] = v
@@ -585,4 +668,5 @@ def imu_covariance(sources, rate_hz: float) -> ImuCovariance:
         angular_velocity_variance=tuple(var[a] for a in GYRO_AXES),
         linear_acceleration_variance=tuple(var[a] for a in ACCEL_AXES),
         angular_velocity_covariance=field(GYRO_AXES),
-        linear_acceleration_covariance=field(ACCEL_AXES), clamped=tuple(clamped))
+        linear_acceleration_covariance=field(ACCEL_AXES), clamped=tuple(clamped),
+        unknown=tuple(unknown))

@@ -303,6 +303,60 @@ def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
             for a, n, ok in zip(starts.tolist(), lengths.tolist(), fits.tolist())]
 
 
+def _cdr_doubles_offset(raw: bytes) -> Tuple[int, bool] | None:
+    """(offset of orientation.x, big-endian) of one plain ROS 2 CDR Imu payload, or None."""
+    if len(raw) < 16 or raw[0] != 0 or raw[1] > 1:
+        return None
+    big = raw[1] == 0
+    frame_len = int.from_bytes(raw[12:16], 'big' if big else 'little')
+    offset = 4 + (12 + frame_len + 7) // 8 * 8
+    if frame_len < 1 or offset + _N_DOUBLES_BYTES > len(raw):
+        return None
+    return offset, big
+
+
+def imu_frame_id(raw: bytes) -> str | None:
+    """Return header.frame_id of one serialised ROS 2 Imu message, or None if unreadable."""
+    layout = _cdr_doubles_offset(raw)
+    if layout is None:
+        return None
+    big = layout[1]
+    frame_len = int.from_bytes(raw[12:16], 'big' if big else 'little')
+    return raw[16:16 + frame_len - 1].decode('utf-8', errors='replace')
+
+
+class CovariancePatch:
+    """
+    Write two fixed covariances into single serialised Imu messages (ROS 2 CDR).
+
+    The per-message path of the node's relay: the byte strings of both fields are
+    prepared once per covariance update, so a message costs a few slices (about a
+    microsecond), with the same result as :func:`set_imu_covariances_cdr`.
+
+    Parameters
+    ----------
+    angular_velocity_covariance, linear_acceleration_covariance : array_like
+        (9,) row-major 3x3 covariances [(rad/s)^2], [(m/s^2)^2].
+
+    """
+
+    def __init__(self, angular_velocity_covariance, linear_acceleration_covariance):
+        fields = [np.asarray(c, np.float64).reshape(9) for c in
+                  (angular_velocity_covariance, linear_acceleration_covariance)]
+        self._bytes = {big: [f.astype('>f8' if big else '<f8').tobytes() for f in fields]
+                       for big in (False, True)}
+
+    def __call__(self, raw: bytes) -> bytes | None:
+        """Return the patched copy of ``raw``, or None for an unusual layout."""
+        layout = _cdr_doubles_offset(raw)
+        if layout is None:
+            return None
+        at, big = layout
+        gyro, accel = self._bytes[big]
+        return b''.join((raw[:at + 128], gyro, raw[at + 200:at + 224], accel,
+                         raw[at + 296:]))
+
+
 def _join(payloads) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Concatenate byte strings; return (buffer uint8, (n,) starts, (n,) lengths)."""
     lengths = np.fromiter(map(len, payloads), np.int64, len(payloads))

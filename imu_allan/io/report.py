@@ -1,8 +1,9 @@
 """
 Write an analysis to disk.
 
-The result JSON, Kalibr file, Q/R, robot_localization values, the fitted model
-as a params YAML, a human summary and the ADEV plot.
+The result JSON, Kalibr file, Q/R, the Imu covariance fields, a robot_localization
+ekf.yaml fragment, driver parameters, the VINS keys, the fitted model as a params YAML,
+a human summary and the ADEV plot (docs/outputs.md).
 
 Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
 """
@@ -24,6 +25,9 @@ FILES = {
     'robot_localization': 'imu_covariance.yaml',
     'model': 'noise_model.yaml',
     'summary': 'summary.txt',
+    'ekf': 'ekf_imu.yaml',
+    'driver': 'imu_driver_noise.yaml',
+    'vins': 'vins_imu.yaml',
 }
 
 
@@ -63,7 +67,8 @@ def covariance_yaml(result: AnalysisResult) -> str:
     return header + yaml.safe_dump(result.imu_covariances(), sort_keys=False)
 
 
-def write_outputs(result: AnalysisResult, out_dir, plot: bool = True) -> list:
+def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
+                  imu_topic: str | None = None) -> list:
     """
     Write every output file of one analysis into ``out_dir``.
 
@@ -75,6 +80,9 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True) -> list:
         Directory (created when missing).
     plot : bool
         Also draw adev.png and adev.svg.
+    imu_topic : str, optional
+        The topic robot_localization should fuse (the node's republished topic);
+        default the analysed one.
 
     Returns
     -------
@@ -93,6 +101,9 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True) -> list:
         _atomic_write(out / FILES['model'],
                       yaml.safe_dump(dump_params(spec), sort_keys=False)),
         _atomic_write(out / FILES['summary'], summary_text(result)),
+        _atomic_write(out / FILES['ekf'], result.robot_localization_yaml(imu_topic)),
+        _atomic_write(out / FILES['driver'], result.driver_yaml()),
+        _atomic_write(out / FILES['vins'], result.vins_yaml()),
     ]
     if plot:
         from imu_allan.io.plot import plot_result

@@ -14,6 +14,7 @@ import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve
+from imu_allan.core.exports import driver_yaml, robot_localization_yaml, vins_yaml
 from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.kalman import imu_covariance, kalibr_yaml, kalman_model, KalmanModel
 from imu_allan.core.noise_params import AxisNoise
@@ -82,6 +83,19 @@ class AnalysisResult:
         return kalibr_yaml(self._sources(), self.rate_hz,
                            rostopic=rostopic or self.topic or '/imu/data')
 
+    def robot_localization_yaml(self, imu_topic: str | None = None) -> str:
+        """robot_localization ekf.yaml fragment fusing ``imu_topic`` (default: analysed)."""
+        return robot_localization_yaml(self._sources(), self.rate_hz,
+                                       imu_topic or self.topic or '/imu/data')
+
+    def driver_yaml(self) -> str:
+        """Per-sample stdev and variance per axis and worst axis, for driver parameters."""
+        return driver_yaml(self._sources(), self.rate_hz)
+
+    def vins_yaml(self) -> str:
+        """VINS-Mono / VINS-Fusion acc_n, gyr_n, acc_w, gyr_w."""
+        return vins_yaml(self._sources(), self.rate_hz)
+
     def process_noise(self) -> tuple[np.ndarray, list]:
         """Discrete process noise Qd (12, 12) [unit^2] and its state order."""
         return self.kalman.Qd, list(self.kalman.state_labels)
@@ -95,7 +109,7 @@ class AnalysisResult:
         cov = imu_covariance(self._sources(), self.rate_hz)
         return {'angular_velocity_covariance': list(cov.angular_velocity_covariance),
                 'linear_acceleration_covariance': list(cov.linear_acceleration_covariance),
-                'clamped_to_1e-9': list(cov.clamped)}
+                'clamped_to_1e-9': list(cov.clamped), 'unknown': list(cov.unknown)}
 
     def axis_status(self, axis: str) -> tuple[str, str, list]:
         """

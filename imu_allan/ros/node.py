@@ -2,14 +2,16 @@
 imu_allan_node: live six-axis IMU noise characterisation beside a stationary robot.
 
 Thin by design, so that 1 kHz input costs little CPU: the subscription is raw (no
-deserialisation) and its callback only appends the serialized message to a buffer; a
-timer decodes the buffer in one vectorised step (:func:`~imu_allan.io.imu_cdr.
-decode_imu_cdr`) and feeds the pipeline :class:`~imu_allan.pipeline.Session` that the
-offline mode uses too.  The fit (seconds of CPU) runs on a worker thread on a snapshot
-of the Allan curve, so the executor keeps taking messages while it runs.  Other timers
-report progress and checkpoint.  ``main`` spins the node with rclpy's EventsExecutor
-(measured in bench/bench_node.py: several times cheaper per message than the
-SingleThreadedExecutor, which it falls back to when unavailable).
+deserialisation) and its callback only appends the serialized message to a buffer (and,
+with ``publish_imu_with_covariance``, relays it at once with the current covariances
+written into its bytes, :mod:`imu_allan.ros.relay`); a timer decodes the buffer in one
+vectorised step (:func:`~imu_allan.io.imu_cdr.decode_imu_cdr`) and feeds the pipeline
+:class:`~imu_allan.pipeline.Session` that the offline mode uses too.  The fit (seconds
+of CPU) runs on a worker thread on a snapshot of the Allan curve, so the executor keeps
+taking messages while it runs.  Other timers report progress, publish /diagnostics at
+1 Hz and checkpoint.  ``main`` spins the node with rclpy's EventsExecutor (measured in
+bench/bench_node.py: several times cheaper per message than the SingleThreadedExecutor,
+which it falls back to when unavailable).
 """
 
 from collections import deque
@@ -39,17 +41,22 @@ from std_srvs.srv import Trigger
 from imu_allan import AXES
 from imu_allan.core.diagnose import diagnose_session, RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.io.imu_cdr import decode_imu_cdr, set_imu_covariances_cdr
+from imu_allan.io.imu_cdr import decode_imu_cdr, imu_frame_id
 from imu_allan.io.report import write_outputs
 from imu_allan.pipeline.analysis import analyze, CONFIDENCE
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.params import BY_NAME, PARAMS, session_config
+from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 
 CHECKPOINT = 'checkpoint.npz'
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
 _SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messages',
                    'output_dir', 'resume', 'publish_imu_with_covariance',
-                   'diagnose_raw_samples'}
+                   'initial_covariance_file', 'diagnose_raw_samples'}
+#: Period of the /diagnostics statuses (the aggregator marks a status stale after 5 s).
+DIAGNOSTICS_PERIOD_S = 1.0
+#: No message for this long is reported as a WARN on /diagnostics.
+NO_DATA_WARN_S = 2.0
 #: Samples a resumed session waits for before it compares their rate with the checkpoint.
 _RESUME_CHECK_SAMPLES = 50
 #: The timer hands the pipeline at least this many messages (or whatever is there after
@@ -133,7 +140,18 @@ class ImuAllanNode(Node):
                 self.destroy_node()
                 raise InputError(f'invalid parameter: {why}')
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.output_dir = Path(os.path.expanduser(self.values['output_dir']))
+        # Statuses, files and checkpoints are named after the node, so two nodes (two
+        # IMUs, two namespaces) never collide.
+        self.diag_prefix = self.get_fully_qualified_name().lstrip('/')
+        self.output_dir = Path(os.path.expanduser(
+            self.values['output_dir'] or os.path.join('~/.ros/imu_allan', self.diag_prefix)))
+        try:
+            initial = (load_covariance_file(self.values['initial_covariance_file'])
+                       if self.values['initial_covariance_file'] else None)
+        except InputError:
+            self.destroy_node()
+            raise
+        self.relay = CovarianceRelay(initial)
         # _lock guards the session; _process_lock keeps blocks in stamp order when
         # _process runs from the timer and from publish_now/save on another thread.
         self._lock = threading.Lock()
@@ -143,6 +161,10 @@ class ImuAllanNode(Node):
         self.n_buffer_dropped = 0
         self.n_fits = 0
         self._last_result = None
+        self._axis_statuses: list = []
+        self._frame_id = ''
+        self._last_rx = None
+        self._started = time.monotonic()
         self._fit_thread: threading.Thread | None = None
         self._diagnose_thread: threading.Thread | None = None
         self._progress_mark = (time.monotonic(), 0.0)
@@ -179,6 +201,7 @@ class ImuAllanNode(Node):
         self.create_service(Trigger, '~/save', self._on_save)
         self.create_service(Trigger, '~/diagnose', self._on_diagnose)
         self._make_timers()
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics)
         self.get_logger().info(
             f'listening on {self.subscription.topic_name} '
             f'({self.values["qos_reliability"]}, depth {self.values["qos_depth"]}); '
@@ -258,9 +281,18 @@ class ImuAllanNode(Node):
 
     # ----------------------------------------------------------- callbacks
     def _on_imu(self, raw: bytes) -> None:
-        # The only per-message Python work: count and append.
+        # The only per-message Python work: count, append and (if asked) relay the
+        # message at once with the current covariances (a byte patch, ~1 us).
         self.n_received += 1
+        self._last_rx = time.monotonic()
         self._buffer.append(raw)
+        if self.pub_imu is not None:
+            patched = self.relay.patch(raw)
+            if patched is None:  # an unusual layout: through a Python message
+                patched = deserialize_message(raw, Imu)
+                patched.angular_velocity_covariance = self.relay.fields[0]
+                patched.linear_acceleration_covariance = self.relay.fields[1]
+            self.pub_imu.publish(patched)
 
     def _take_buffer(self) -> list:
         n = len(self._buffer)
@@ -288,6 +320,7 @@ class ImuAllanNode(Node):
         raws = self._take_buffer()
         if not raws:
             return
+        self._frame_id = imu_frame_id(raws[-1]) or self._frame_id
         try:
             stamp_ns, samples = decode_imu_cdr(raws)
         except InputError as exc:
@@ -299,8 +332,6 @@ class ImuAllanNode(Node):
             if stamp_ns.size:
                 self.session.add(stamp_ns, samples)
                 self._keep_raw(samples)
-        if self.pub_imu is not None and self._last_result is not None:
-            self._republish(raws)
 
     def _keep_raw(self, samples: np.ndarray) -> None:
         rows = self.values['diagnose_raw_samples']
@@ -333,18 +364,6 @@ class ImuAllanNode(Node):
             self.get_logger().info(f'resume confirmed: incoming rate {rate:.3f} Hz matches '
                                    f'the checkpoint ({saved:.3f} Hz); continuing')
         return t, y
-
-    def _republish(self, raws: list) -> None:
-        cov = self._last_result.imu_covariances()
-        gyro = cov['angular_velocity_covariance']
-        accel = cov['linear_acceleration_covariance']
-        for raw, patched in zip(raws, set_imu_covariances_cdr(raws, gyro, accel)):
-            if patched is None:  # an unusual layout: through a Python message
-                msg = deserialize_message(raw, Imu)
-                msg.angular_velocity_covariance = gyro
-                msg.linear_acceleration_covariance = accel
-                patched = msg
-            self.pub_imu.publish(patched)
 
     @property
     def last_result(self):
@@ -388,25 +407,33 @@ class ImuAllanNode(Node):
         if result is None:
             return None
         self._last_result = result
+        self.relay.update(result.imu_covariances())
         self.n_fits += 1
-        array = DiagnosticArray(status=self._statuses(result) + [self._input_status(view)])
+        self._axis_statuses = self._statuses(result)
+        array = DiagnosticArray(status=self._axis_statuses + [self._input_status(view)])
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_params.publish(array)
-        self.pub_diag.publish(array)
         self.pub_q.publish(_matrix_msg(*result.process_noise()))
         self.pub_r.publish(_matrix_msg(*result.measurement_noise()))
         self.pub_kalibr.publish(String(data=result.kalibr_yaml()))
         self.get_logger().info('published: ' + '; '.join(result.summary_lines()))
         return result
 
+    @property
+    def hardware_id(self) -> str:
+        """hardware_id of the statuses: the parameter, else the messages' frame_id."""
+        return self.values['hardware_id'] or self._frame_id
+
+    def _status(self, what: str, level, message: str, values: list) -> DiagnosticStatus:
+        return DiagnosticStatus(name=f'{self.diag_prefix}: {what}', level=level,
+                                message=message, hardware_id=self.hardware_id,
+                                values=[KeyValue(key=k, value=v) for k, v in values])
+
     def _statuses(self, result) -> list:
         out = []
         for axis in AXES:
             level, message, values = result.axis_status(axis)
-            out.append(DiagnosticStatus(
-                name=f'imu_allan: {axis}', hardware_id=self.values['hardware_id'],
-                level=_LEVELS[level], message=message,
-                values=[KeyValue(key=k, value=v) for k, v in values]))
+            out.append(self._status(axis, _LEVELS[level], message, values))
         return out
 
     def _input_status(self, session) -> DiagnosticStatus:
@@ -418,38 +445,66 @@ class ImuAllanNode(Node):
                    ('warnings', ' | '.join(session.warnings))]
         message = (' | '.join(session.warnings) if session.warnings
                    else 'input clean: no gaps, bad stamps, bad values or motion')
-        return DiagnosticStatus(
-            name='imu_allan: input', hardware_id=self.values['hardware_id'],
-            level=DiagnosticStatus.WARN if session.warnings else DiagnosticStatus.OK,
-            message=message, values=[KeyValue(key=k, value=v) for k, v in values])
+        return self._status(
+            'input', DiagnosticStatus.WARN if session.warnings else DiagnosticStatus.OK,
+            message, values)
 
-    def _progress(self) -> None:
+    def _progress_status(self, log: bool = False) -> DiagnosticStatus:
+        """Return the progress status: collection before min_duration_s, then the fits."""
         s = self.session
         target = self.values['min_duration_s']
+        values = [('samples', str(s.stats.n_used)), ('rate_hz', f'{s.rate_hz:.4f}'),
+                  ('duration_s', f'{s.duration_s:.1f}'), ('fits', str(self.n_fits)),
+                  ('warnings', ' | '.join(s.warnings))]
         if s.duration_s >= target:
-            return
-        pct = 100.0 * s.duration_s / target
-        now = time.monotonic()
-        wall0, dur0 = self._progress_mark
-        self._progress_mark = (now, s.duration_s)
-        speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
-        eta = (target - s.duration_s) / speed if speed > 0 else math.inf
-        eta_text = f'{eta / 60:.1f} min' if math.isfinite(eta) else 'unknown (no data now)'
-        text = (f'collecting: {pct:.1f}% of {target:.0f} s, {s.stats.n_used} samples at '
-                f'{s.rate_hz:.2f} Hz, ETA {eta_text}')
+            text = (f'characterising: {s.duration_s:.0f} s, {s.stats.n_used} samples at '
+                    f'{s.rate_hz:.2f} Hz, {self.n_fits} fits published')
+            values.append(('percent', '100.00'))
+        else:
+            pct = 100.0 * s.duration_s / target
+            now = time.monotonic()
+            wall0, dur0 = self._progress_mark
+            if log:
+                self._progress_mark = (now, s.duration_s)
+            speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
+            eta = (target - s.duration_s) / speed if speed > 0 else math.inf
+            eta_text = (f'{eta / 60:.1f} min' if math.isfinite(eta)
+                        else 'unknown (no data now)')
+            text = (f'collecting: {pct:.1f}% of {target:.0f} s, {s.stats.n_used} samples at '
+                    f'{s.rate_hz:.2f} Hz, ETA {eta_text}')
+            values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
         if self.n_buffer_dropped:
             text += f', {self.n_buffer_dropped} messages dropped by a full buffer'
-        self.get_logger().info(text)
-        values = [('percent', f'{pct:.2f}'), ('samples', str(s.stats.n_used)),
-                  ('rate_hz', f'{s.rate_hz:.4f}'), ('duration_s', f'{s.duration_s:.1f}'),
-                  ('eta_s', f'{eta:.0f}'), ('warnings', ' | '.join(s.warnings))]
-        status = DiagnosticStatus(
-            name='imu_allan: progress', hardware_id=self.values['hardware_id'],
-            level=DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK,
-            message=text, values=[KeyValue(key=k, value=v) for k, v in values])
-        array = DiagnosticArray(status=[status, self._input_status(s)])
+        level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
+        return self._status('progress', level, text, values)
+
+    def _data_status(self) -> DiagnosticStatus:
+        """WARN while no message arrives on the input topic."""
+        topic = self.subscription.topic_name
+        since = time.monotonic() - (self._last_rx or self._started)
+        if since > NO_DATA_WARN_S:
+            what = 'no message yet' if self._last_rx is None else 'no message'
+            return self._status('data', DiagnosticStatus.WARN,
+                                f'{what} on {topic} for {since:.0f} s',
+                                [('topic', topic), ('received', str(self.n_received))])
+        return self._status('data', DiagnosticStatus.OK, f'receiving {topic}',
+                            [('topic', topic), ('received', str(self.n_received))])
+
+    def _on_diagnostics(self) -> None:
+        # 1 Hz, within the aggregator's 5 s stale timeout; the last fit's per-axis
+        # statuses persist between fits.
+        array = DiagnosticArray(status=[self._data_status(), self._progress_status()]
+                                + self._axis_statuses + [self._input_status(self.session)])
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
+
+    def _progress(self) -> None:
+        if self.session.duration_s >= self.values['min_duration_s']:
+            return
+        status = self._progress_status(log=True)
+        self.get_logger().info(status.message)
+        array = DiagnosticArray(status=[status, self._input_status(self.session)])
+        array.header.stamp = self.get_clock().now().to_msg()
         self.pub_params.publish(array)
 
     def _checkpoint(self) -> None:
@@ -465,6 +520,7 @@ class ImuAllanNode(Node):
             self.session = self._new_session(resume=False)
             self._resume_hold = None
             self._last_result = None
+            self._axis_statuses = []
         response.success = True
         response.message = 'accumulator reset: a new characterisation starts now'
         self.get_logger().info(response.message)
@@ -586,7 +642,10 @@ class ImuAllanNode(Node):
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
         self._last_result = result
-        return write_outputs(result, self.output_dir) + [self.output_dir / CHECKPOINT]
+        self.relay.update(result.imu_covariances())
+        imu_topic = self.pub_imu.topic_name if self.pub_imu is not None else None
+        return write_outputs(result, self.output_dir, imu_topic=imu_topic) + [
+            self.output_dir / CHECKPOINT]
 
 
 def _matrix_msg(matrix: np.ndarray, labels: list) -> Float64MultiArray:

@@ -76,14 +76,18 @@ PARAMS: tuple[Param, ...] = (
           'Reliability of the Imu subscription (sensor-data QoS is best effort)'),
     Param('max_buffer_messages', int, 1000000, 'messages', (100, 100000000),
           'Messages held between timer ticks; beyond it the oldest are dropped and counted'),
-    Param('output_dir', str, '~/.ros/imu_allan', '', (),
-          'Where ~/save, shutdown and checkpoints write their files'),
+    Param('output_dir', str, '', '', (),
+          "Where ~/save, shutdown and checkpoints write their files; '' is"
+          ' ~/.ros/imu_allan/<namespace>/<node name>, one per node'),
     Param('checkpoint_period_s', float, 60.0, 's', (0.0, 86400.0),
           'Period of the atomic accumulator checkpoint; 0 disables it'),
     Param('resume', bool, False, '', (),
           'Continue from the checkpoint in output_dir when rate and axes match'),
     Param('publish_imu_with_covariance', bool, False, '', (),
-          'Republish the Imu messages on ~/imu_with_covariance with fitted covariances'),
+          'Republish each Imu message on ~/imu_with_covariance with the fitted covariances'),
+    Param('initial_covariance_file', str, '', '', (),
+          'result.json or imu_covariance.yaml of an earlier run: ~/imu_with_covariance'
+          " starts from its covariances ('' starts from a large variance)"),
     Param('diagnose_raw_samples', int, 262144, 'samples', (0, 16777216),
           'Rows kept for the ~/diagnose periodogram (pairs averaged as the record grows;'
           ' 48 bytes each); 0 keeps none'),
@@ -109,8 +113,8 @@ PARAMS: tuple[Param, ...] = (
           'warn keeps the samples, pause drops them until still, restart starts over'),
     Param('settle_s', float, _S.settle_s, 's', (0.0, 3600.0),
           'Stillness needed after motion before samples count again'),
-    Param('hardware_id', str, 'imu', '', (),
-          'hardware_id of the diagnostic statuses'),
+    Param('hardware_id', str, '', '', (),
+          "hardware_id of the diagnostic statuses; '' takes the frame_id of the messages"),
 )
 
 BY_NAME = {p.name: p for p in PARAMS}

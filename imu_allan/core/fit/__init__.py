@@ -17,8 +17,9 @@ Optimised (generalised least squares on the Allan variance, GMWM-style):
   :data:`imu_allan.core.model.TERMS`; linear in the coefficients c_j (S_N = N^2, S_B,
   S_K = K^2, ...) for fixed nonlinear parameters phi (T_B, sinusoid frequency), as in
   the paper's section 3.2 (Maia, Silva, De Lima, Meneses).  The c_j are solved by
-  non-negative least squares, phi by a grid and a bounded 1-D (or Nelder-Mead)
-  search (variable projection).  Interchangeable terms are ordered (the first
+  non-negative least squares, phi by a grid and then a bounded 1-D search or a
+  projected Levenberg-Marquardt on the variable-projection residual (Golub & Pereyra
+  1973, Kaufman's Jacobian).  Interchangeable terms are ordered (the first
   Gauss-Markov label has the shortest T).
 * Weights: the full covariance matrix Sigma of the Allan estimates at all fitted tau,
   computed exactly (for Gaussian terms) from the model: the overlapping estimator is a

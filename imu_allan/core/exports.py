@@ -1,0 +1,270 @@
+"""
+Outputs in the shapes their consumers read: robot_localization, IMU drivers, VIO configs.
+
+Each function takes the six per-axis sources of :func:`imu_allan.core.kalman.kalman_model`
+(AxisNoise or AxisFit) and returns YAML text whose keys are the consumer's own:
+
+* :func:`robot_localization_yaml`: an ``ekf.yaml`` fragment (robot_localization reads
+  IMU noise from each message's covariance fields; the Allan result does not enter its
+  ``process_noise_covariance``, which is a motion model without bias states);
+* :func:`driver_yaml`: per-axis and worst-axis standard deviations and variances per
+  sample, N sqrt(rate) and N^2 rate, for driver parameters (phidgets_spatial and mavros
+  ``angular_velocity_stdev`` / ``linear_acceleration_stdev``, microstrain
+  ``imu_angular_cov`` / ``imu_linear_cov``, realsense2_camera ``angular_velocity_cov``
+  / ``linear_accel_cov``);
+* :func:`vins_yaml`: the VINS-Mono / VINS-Fusion keys acc_n, gyr_n, acc_w, gyr_w
+  (continuous densities, worst axis; OpenVINS reads Kalibr's keys, see
+  :func:`imu_allan.core.kalman.kalibr_yaml`).
+
+Only numpy and the package core are imported: the node and the CLI write these files.
+"""
+
+import math
+from typing import NamedTuple
+
+from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
+from imu_allan.core.kalman import _six, imu_covariance, sensor_value
+from imu_allan.errors import InputError
+
+#: robot_localization's imu0_config order (15 booleans): x y z, roll pitch yaw, vx vy vz,
+#: vroll vpitch vyaw, ax ay az.  An IMU gives angular velocity and linear acceleration;
+#: its orientation is the driver's own filter output, which an Allan analysis does not
+#: characterise.
+IMU0_CONFIG = (False, False, False, False, False, False, False, False, False,
+               True, True, True, True, True, True)
+#: Mahalanobis rejection threshold suggested for the IMU (in standard deviations):
+#: a 3-D Gaussian innovation exceeds it with probability ~1e-6 (sqrt of the chi-square
+#: 1 - 1e-6 quantile with 3 degrees of freedom).
+REJECTION_SIGMAS = 5.7
+
+
+class DriverNoise(NamedTuple):
+    """
+    Per-sample noise for driver parameters.
+
+    Attributes
+    ----------
+    rate_hz : float
+        Sample rate the values hold for [Hz].
+    stdev : dict of str to float or None
+        Per axis, N sqrt(rate_hz) [rad/s or m/s^2]; None where N is unknown.
+    variance : dict of str to float or None
+        Per axis, N^2 rate_hz [rad^2/s^2 or m^2/s^4].
+    worst : dict of str to float or None
+        'angular_velocity_stdev', 'linear_acceleration_stdev' and the two variances:
+        the largest known axis of each sensor.
+
+    """
+
+    rate_hz: float
+    stdev: dict
+    variance: dict
+    worst: dict
+
+
+def driver_noise(sources, rate_hz: float) -> DriverNoise:
+    """
+    Return the white-noise standard deviation and variance of one sample per axis.
+
+    A sample at rate f of white noise with density N has variance N^2 f (the bias
+    terms are not white and have no slot in these parameters).  Drivers take one value
+    per sensor: the worst axis, since under-stating an axis makes a filter
+    over-confident on it.
+
+    Parameters
+    ----------
+    sources : mapping or sequence
+        Six AxisNoise / AxisFit, see :func:`imu_allan.core.kalman.kalman_model`.
+    rate_hz : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    DriverNoise
+
+    """
+    cov = imu_covariance(sources, rate_hz)
+    variances = dict(zip(GYRO_AXES, cov.angular_velocity_variance))
+    variances.update(zip(ACCEL_AXES, cov.linear_acceleration_variance))
+    var = {a: (None if a in cov.unknown else float(variances[a])) for a in AXES}
+    std = {a: (None if v is None else math.sqrt(v)) for a, v in var.items()}
+    worst = {}
+    for field, axes in (('angular_velocity', GYRO_AXES), ('linear_acceleration', ACCEL_AXES)):
+        known = [var[a] for a in axes if var[a] is not None]
+        worst[f'{field}_variance'] = max(known) if known else None
+        worst[f'{field}_stdev'] = math.sqrt(max(known)) if known else None
+    return DriverNoise(float(rate_hz), std, var, worst)
+
+
+def _num(value) -> str:
+    return 'null' if value is None else f'{value:.6e}'
+
+
+def driver_yaml(sources, rate_hz: float) -> str:
+    """
+    Return the driver scalars as YAML (per axis and worst axis, stdev and variance).
+
+    Parameters
+    ----------
+    sources : mapping or sequence
+        Six AxisNoise / AxisFit.
+    rate_hz : float
+        Sample rate [Hz]; the values hold for this rate only.
+
+    Returns
+    -------
+    str
+        YAML text: ``rate_hz``, ``worst`` (angular_velocity_stdev [rad/s],
+        linear_acceleration_stdev [m/s^2] and the variances) and ``per_axis``.
+
+    """
+    d = driver_noise(sources, rate_hz)
+    lines = ['# IMU driver noise parameters (imu_allan): white noise of one sample at',
+             '# rate_hz, stdev = N * sqrt(rate_hz), variance = N^2 * rate_hz.  Valid only at',
+             '# this output rate.  Paste the worst-axis value into the driver:',
+             '#   phidgets_spatial, mavros (imu plugin): angular_velocity_stdev,',
+             '#     linear_acceleration_stdev',
+             '#   realsense2_camera: angular_velocity_cov, linear_accel_cov (variances)',
+             '#   microstrain_inertial_driver: imu_angular_cov, imu_linear_cov (9 entries,',
+             '#     variance on the diagonal)',
+             '# null: not known on that axis (no white-noise value).',
+             f'rate_hz: {d.rate_hz:g}',
+             'worst:']
+    units = {'angular_velocity_stdev': 'rad/s', 'linear_acceleration_stdev': 'm/s^2',
+             'angular_velocity_variance': 'rad^2/s^2',
+             'linear_acceleration_variance': 'm^2/s^4'}
+    for key in ('angular_velocity_stdev', 'linear_acceleration_stdev',
+                'angular_velocity_variance', 'linear_acceleration_variance'):
+        lines.append(f'  {key}: {_num(d.worst[key])}  # [{units[key]}]')
+    lines.append('per_axis:')
+    for a in AXES:
+        u = 'rad/s' if a in GYRO_AXES else 'm/s^2'
+        lines.append(f'  {a}: {{stdev: {_num(d.stdev[a])}, variance: {_num(d.variance[a])}}}'
+                     f'  # [{u}], [({u})^2]')
+    return '\n'.join(lines) + '\n'
+
+
+def robot_localization_yaml(sources, rate_hz: float, imu_topic: str,
+                            node_name: str = 'ekf_filter_node') -> str:
+    """
+    Return an ekf.yaml fragment for robot_localization that fuses this IMU.
+
+    robot_localization takes IMU noise from each message's covariance fields, not from
+    its parameters, so ``imu_topic`` should be a topic that carries the Allan
+    variances (the node's ``~/imu_with_covariance``, or the driver once its covariance
+    parameters are set from :func:`driver_yaml`).  The fragment fuses angular velocity
+    and linear acceleration (:data:`IMU0_CONFIG`), removes gravity from the
+    acceleration (a static IMU reads +g), and suggests Mahalanobis rejection thresholds
+    (:data:`REJECTION_SIGMAS`).
+
+    Parameters
+    ----------
+    sources : mapping or sequence
+        Six AxisNoise / AxisFit.
+    rate_hz : float
+        Sample rate [Hz].
+    imu_topic : str
+        The Imu topic to fuse (a name, not empty).
+    node_name : str
+        The EKF node's name (the YAML's top-level key).
+
+    Returns
+    -------
+    str
+        YAML text: ``<node_name>: ros__parameters:`` with imu0, imu0_config (15
+        booleans), imu0_differential, imu0_relative, imu0_queue_size,
+        imu0_remove_gravitational_acceleration and the two rejection thresholds.
+
+    Raises
+    ------
+    InputError
+        An empty topic or node name.
+
+    """
+    if not imu_topic or not node_name:
+        raise InputError('the robot_localization fragment needs an IMU topic and a node name')
+    d = driver_noise(sources, rate_hz)
+
+    def sd(key):
+        v = d.worst[key]
+        return 'unknown' if v is None else f'{v:.3e}'
+
+    flags = ', '.join('true' if f else 'false' for f in IMU0_CONFIG)
+    # At least two messages per filter step of a 50 Hz filter, and never fewer than 10.
+    queue = max(10, int(math.ceil(2.0 * rate_hz / 50.0)))
+    lines = [
+        '# robot_localization fragment (imu_allan): merge into your ekf.yaml.',
+        '# What the Allan analysis sets: the IMU noise robot_localization uses comes from',
+        "# each message's covariance fields; fuse a topic that carries them (the node's",
+        '# ~/imu_with_covariance, or the driver once its covariance parameters are set).',
+        f'# Worst-axis stdev per sample at {rate_hz:g} Hz: angular velocity '
+        f'{sd("angular_velocity_stdev")} rad/s,',
+        f'# linear acceleration {sd("linear_acceleration_stdev")} m/s^2.',
+        '# What it does not set: process_noise_covariance (a motion model of the robot',
+        '# without IMU bias states: tune it for your vehicle), the biases themselves',
+        '# (robot_localization has no bias states: B, T_B and K have no slot), and the',
+        '# orientation (the driver filter output, not characterised here).  Allan values',
+        '# come from a still sensor: in motion, vibration adds noise, so inflate them if',
+        '# the filter rejects good data.',
+        f'{node_name}:',
+        '  ros__parameters:',
+        f'    imu0: {imu_topic}',
+        '    # x, y, z, roll, pitch, yaw, vx, vy, vz, vroll, vpitch, vyaw, ax, ay, az',
+        f'    imu0_config: [{flags}]',
+        '    imu0_differential: false',
+        '    imu0_relative: false',
+        f'    imu0_queue_size: {queue}',
+        '    imu0_remove_gravitational_acceleration: true',
+        '    # Mahalanobis distance [standard deviations]: a 3-D innovation exceeds it with',
+        '    # probability ~1e-6 when the covariances are right.',
+        f'    imu0_angular_velocity_rejection_threshold: {REJECTION_SIGMAS}',
+        f'    imu0_linear_acceleration_rejection_threshold: {REJECTION_SIGMAS}',
+    ]
+    return '\n'.join(lines) + '\n'
+
+
+def vins_yaml(sources, rate_hz: float, reduce: str = 'max') -> str:
+    """
+    Return the VINS-Mono / VINS-Fusion IMU noise keys (acc_n, gyr_n, acc_w, gyr_w).
+
+    The values are the continuous-time densities Kalibr uses (N and K, one per sensor,
+    :func:`imu_allan.core.kalman.sensor_value`), which is how they are usually filled
+    in.  VINS' pre-integration uses them as per-sample values (see
+    :data:`imu_allan.core.kalman.NOTES`), and its shipped examples are larger than the
+    Allan densities by factors of 10-50: start from these and inflate.  A value no axis
+    gives is left out with a comment.
+
+    Parameters
+    ----------
+    sources : mapping or sequence
+        Six AxisNoise / AxisFit.
+    rate_hz : float
+        Sample rate [Hz] (a comment: VINS takes no rate key).
+    reduce : str
+        'max' (worst axis) or 'mean'.
+
+    Returns
+    -------
+    str
+        YAML text with acc_n [m/s^2/sqrt(Hz)], gyr_n [rad/s/sqrt(Hz)], acc_w
+        [m/s^3/sqrt(Hz)] and gyr_w [rad/s^2/sqrt(Hz)].
+
+    """
+    srcs = dict(zip(AXES, _six(sources)))
+    lines = ['# VINS-Mono / VINS-Fusion IMU noise (imu_allan): continuous densities of the',
+             f'# {"worst axis" if reduce == "max" else "mean of the axes"} '
+             f'at {rate_hz:g} Hz.  VINS uses them as per-sample values and its examples',
+             '# are 10-50x larger: start here and inflate until the estimator is consistent.',
+             '# OpenVINS reads the Kalibr keys instead (imu.yaml).']
+    for key, axes, sym, unit in (('acc_n', ACCEL_AXES, 'N', 'm/s^2/sqrt(Hz)'),
+                                 ('gyr_n', GYRO_AXES, 'N', 'rad/s/sqrt(Hz)'),
+                                 ('acc_w', ACCEL_AXES, 'K', 'm/s^3/sqrt(Hz)'),
+                                 ('gyr_w', GYRO_AXES, 'K', 'rad/s^2/sqrt(Hz)')):
+        sv = sensor_value(srcs, axes, sym, reduce)
+        if sv.value is None:
+            lines.append(f'# {key}: not available on any axis (left out)')
+            continue
+        note = {'estimate': '', 'upper_bound': ', 95 % upper bound',
+                'curve_bound': ", the measured curve's bound"}[sv.kind]
+        lines.append(f'{key}: {sv.value:.6e}  # [{unit}{note}]')
+    return '\n'.join(lines) + '\n'

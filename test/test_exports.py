@@ -1,0 +1,84 @@
+"""Tests of imu_allan.core.exports: robot_localization, driver and VINS outputs."""
+
+import math
+
+from numpy.testing import assert_allclose
+import pytest
+import yaml
+
+from imu_allan import AXES
+from imu_allan.core.exports import (driver_noise, driver_yaml, IMU0_CONFIG,
+                                    robot_localization_yaml, vins_yaml)
+from imu_allan.core.noise_params import AxisNoise
+from imu_allan.errors import InputError
+
+RATE_HZ = 200.0
+N = {'gyro_x': 1.0e-4, 'gyro_y': 1.5e-4, 'gyro_z': 1.2e-4,
+     'accel_x': 6.0e-4, 'accel_y': 8.0e-4, 'accel_z': 7.0e-4}
+K = {'gyro_x': 2e-6, 'gyro_y': 3e-6, 'gyro_z': 2.5e-6,
+     'accel_x': 1e-5, 'accel_y': 1.2e-5, 'accel_z': 9e-6}
+
+
+def _sources(**override):
+    out = {a: AxisNoise(N=N[a], B=1e-5, T_B=50.0, K=K[a]) for a in AXES}
+    out.update(override)
+    return out
+
+
+def test_ekf_fragment_has_the_keys_robot_localization_reads():
+    text = robot_localization_yaml(_sources(), RATE_HZ, '/robot/imu_allan/imu_with_covariance')
+    doc = yaml.safe_load(text)
+    params = doc['ekf_filter_node']['ros__parameters']
+    assert params['imu0'] == '/robot/imu_allan/imu_with_covariance'
+    config = params['imu0_config']
+    assert len(config) == 15 and all(isinstance(v, bool) for v in config)
+    assert tuple(config) == IMU0_CONFIG
+    assert config[9:15] == [True] * 6 and not any(config[:9])  # rates and accelerations
+    assert params['imu0_remove_gravitational_acceleration'] is True
+    assert params['imu0_differential'] is False
+    assert params['imu0_queue_size'] >= 10
+    for key in ('imu0_angular_velocity_rejection_threshold',
+                'imu0_linear_acceleration_rejection_threshold'):
+        assert params[key] > 0
+    # The comment states what the Allan values set, with the worst-axis stdev.
+    assert f'{1.5e-4 * math.sqrt(RATE_HZ):.3e} rad/s' in text
+    assert 'process_noise_covariance' in text
+    with pytest.raises(InputError):
+        robot_localization_yaml(_sources(), RATE_HZ, '')
+
+
+def test_driver_scalars_are_n_sqrt_rate_and_the_worst_axis():
+    d = driver_noise(_sources(), RATE_HZ)
+    for a in AXES:
+        assert_allclose(d.stdev[a], N[a] * math.sqrt(RATE_HZ), rtol=1e-12)
+        assert_allclose(d.variance[a], N[a] ** 2 * RATE_HZ, rtol=1e-12)
+    assert_allclose(d.worst['angular_velocity_stdev'], 1.5e-4 * math.sqrt(RATE_HZ), rtol=1e-12)
+    assert_allclose(d.worst['linear_acceleration_variance'], 8e-4 ** 2 * RATE_HZ, rtol=1e-12)
+    doc = yaml.safe_load(driver_yaml(_sources(), RATE_HZ))
+    assert doc['rate_hz'] == RATE_HZ
+    assert_allclose(doc['worst']['linear_acceleration_stdev'], 8e-4 * math.sqrt(RATE_HZ),
+                    rtol=1e-6)
+    assert_allclose(doc['per_axis']['gyro_z']['variance'], 1.2e-4 ** 2 * RATE_HZ, rtol=1e-6)
+
+
+def test_an_axis_without_white_noise_is_unknown_not_trusted():
+    # gyro_y without N: null in the driver file and left out of the worst axis.
+    d = driver_noise(_sources(gyro_y=AxisNoise()), RATE_HZ)
+    assert d.stdev['gyro_y'] is None and d.variance['gyro_y'] is None
+    assert_allclose(d.worst['angular_velocity_stdev'], 1.2e-4 * math.sqrt(RATE_HZ), rtol=1e-12)
+    doc = yaml.safe_load(driver_yaml(_sources(gyro_y=AxisNoise()), RATE_HZ))
+    assert doc['per_axis']['gyro_y']['stdev'] is None
+
+
+def test_vins_block_holds_the_worst_densities():
+    doc = yaml.safe_load(vins_yaml(_sources(), RATE_HZ))
+    assert_allclose(doc['acc_n'], 8e-4, rtol=1e-6)
+    assert_allclose(doc['gyr_n'], 1.5e-4, rtol=1e-6)
+    assert_allclose(doc['acc_w'], 1.2e-5, rtol=1e-6)
+    assert_allclose(doc['gyr_w'], 3e-6, rtol=1e-6)
+    # A model without a random walk on any gyro axis: gyr_w is left out, never 0.
+    no_k = {a: AxisNoise(N=N[a]) for a in ('gyro_x', 'gyro_y', 'gyro_z')}
+    text = vins_yaml(_sources(**no_k), RATE_HZ)
+    doc = yaml.safe_load(text)
+    assert 'gyr_w' not in doc and '# gyr_w: not available' in text
+    assert all(v > 0 for v in doc.values())
