@@ -203,3 +203,16 @@ def test_base_name_and_noise_from_terms_round_trip():
     assert noise == AxisNoise(N=1e-3, B=2e-4, T_B=9.0, K=1e-5, Q=1e-6, R=1e-8,
                               gauss_markov=(GaussMarkov(1e-4, 2.0),),
                               sinusoids=(Sinusoid(1e-4, 0.1),))
+
+
+def test_quantiles_from_scipy_special_equal_scipy_stats():
+    # core.quantiles replaces scipy.stats (a second of start-up) with scipy.special.
+    from scipy.stats import chi2, f
+
+    from imu_allan.core.quantiles import chi2_ppf, chi2_sf, f_ppf
+    edf = np.array([0.5, 1.0, 2.7, 10.0, 1e3, 1e6])
+    for q in (0.025, 0.5, 0.95, 0.975):
+        assert_allclose(chi2_ppf(q, edf), chi2.ppf(q, edf), rtol=1e-12)
+    x = np.array([0.1, 3.0, 20.0])
+    assert_allclose(chi2_sf(x, 7), chi2.sf(x, 7), rtol=1e-12)
+    assert_allclose(f_ppf(0.95, 1, [3, 17, 200]), f.ppf(0.95, 1, [3, 17, 200]), rtol=1e-12)

@@ -35,8 +35,8 @@ import threading
 from typing import NamedTuple, Optional, Sequence, Union
 
 import numpy as np
-from scipy import stats
 
+from imu_allan.core.quantiles import chi2_ppf
 from imu_allan.errors import InputError
 
 #: Estimators of :func:`allan_curve`.
@@ -1090,8 +1090,8 @@ def confidence_bounds(avar, edf, confidence: float) -> tuple[np.ndarray, np.ndar
                                     np.asarray(edf, dtype=np.float64))
     ok = np.isfinite(edf) & (edf > 0)
     e = np.where(ok, edf, 1.0)
-    chi_hi = stats.chi2.ppf(0.5 * (1.0 + confidence), e)
-    chi_lo = stats.chi2.ppf(0.5 * (1.0 - confidence), e)
+    chi_hi = chi2_ppf(0.5 * (1.0 + confidence), e)
+    chi_lo = chi2_ppf(0.5 * (1.0 - confidence), e)
     with np.errstate(all='ignore'):
         lo = np.sqrt(e * avar / chi_hi)
         hi = np.sqrt(e * avar / chi_lo)

@@ -10,11 +10,11 @@ Judging a fitted model against its own curve (used by the effect search).
 import math
 
 import numpy as np
-from scipy.stats import chi2
 
 from imu_allan.core.fit.axis import _slot
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design
+from imu_allan.core.quantiles import chi2_ppf, chi2_sf
 
 #: A model whose chi-square p-value is at least this explains the curve: no search.
 P_CONSISTENT = 1e-3
@@ -50,10 +50,10 @@ def follows_curve(avar: np.ndarray, edf: np.ndarray, model: np.ndarray, chi2_val
         True when the model explains the curve.
 
     """
-    if dof > 0 and chi2.sf(chi2_value, dof) >= P_CONSISTENT:
+    if dof > 0 and chi2_sf(chi2_value, dof) >= P_CONSISTENT:
         return True
     e = np.maximum(edf, 1e-3)
-    lo, hi = avar * e / chi2.ppf(0.975, e), avar * e / chi2.ppf(0.025, e)
+    lo, hi = avar * e / chi2_ppf(0.975, e), avar * e / chi2_ppf(0.025, e)
     inside = ((model >= lo) & (model <= hi)) | (np.abs(np.sqrt(model / avar) - 1.0) <= 0.05)
     return bool(np.mean(inside) >= FOLLOW_SHARE)
 
@@ -98,8 +98,8 @@ def white_region(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray,
     level = np.sqrt(avar[sel] * tau[sel])
     n_value = float(np.median(level))
     e = np.maximum(edf[sel], 1.0)
-    lo = level * np.sqrt(e / chi2.ppf(0.975, e))
-    hi = level * np.sqrt(e / chi2.ppf(0.025, e))
+    lo = level * np.sqrt(e / chi2_ppf(0.975, e))
+    hi = level * np.sqrt(e / chi2_ppf(0.025, e))
     return n_value, (float(min(np.median(lo), level.min())),
                      float(max(np.median(hi), level.max())))
 

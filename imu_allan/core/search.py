@@ -39,7 +39,6 @@ import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
-from scipy.stats import chi2
 
 from imu_allan.core.allan import _single_thread_blas
 from imu_allan.core.evidence import periodogram_peak, ramp_test
@@ -49,6 +48,7 @@ from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
 from imu_allan.core.judge import (follows_curve, P_CONSISTENT, shows_quantization,
                                   white_region, white_share)
 from imu_allan.core.model import base_name, TERMS
+from imu_allan.core.quantiles import chi2_sf
 from imu_allan.errors import InputError
 
 #: Effects the search may add, in the order they are tried (ties keep the first).
@@ -369,7 +369,7 @@ class _Run:
     def rejected(self) -> bool:
         """Whether the chi-square rejects the current model."""
         dof = self.k - _n_params(self.slots_of(self.labels))
-        return dof > 0 and chi2.sf(self.sol.j, dof) < P_CONSISTENT
+        return dof > 0 and chi2_sf(self.sol.j, dof) < P_CONSISTENT
 
     def base(self, base_labels) -> None:
         """Fit the paper's model, through the sensor's filter where the curve shows one."""
@@ -516,7 +516,7 @@ class _Run:
             self.drop_steps(unheld, 'the final fit holds it at zero')
         # Where the final model explains the curve, its profile intervals are plain
         # likelihood-ratio intervals: an effect whose level may be zero is not named.
-        if fit.dof > 0 and chi2.sf(fit.chi2, fit.dof) >= P_CONSISTENT:
+        if fit.dof > 0 and chi2_sf(fit.chi2, fit.dof) >= P_CONSISTENT:
             dropped = [st for st in self.steps if not _level_above_zero(fit, st.label)]
             if dropped:
                 self.drop_steps(dropped, 'its level may be zero at 95 %')

@@ -12,8 +12,6 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtr
-from scipy.stats import chi2
-from scipy.stats import f as fdist
 
 from imu_allan.core.allan import _single_thread_blas, AllanCurve
 from imu_allan.core.fit.nominal import nominal_fit
@@ -21,6 +19,7 @@ from imu_allan.core.fit.result import _unit, AxisFit, Param
 from imu_allan.core.fit.solver import (_design, _fit_fixed_w, _Fitter, _profile_interval, _Slot,
                                        _Solution)
 from imu_allan.core.model import base_name, GM_PEAK_TAU, noise_from_terms, TERMS
+from imu_allan.core.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.errors import InputError
 
 #: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
@@ -286,9 +285,9 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     # that is itself estimated.
     dispersion = chi2_value / dof if dof > 0 else 0.0
     if dispersion > 1.0:
-        threshold = fdist.ppf(0.95, 1, dof) * dispersion
+        threshold = f_ppf(0.95, 1, dof) * dispersion
     else:
-        threshold = chi2.ppf(0.95, 1)
+        threshold = chi2_ppf(0.95, 1)
 
     optimised: dict[str, Param] = {}
     values: dict[str, dict] = {}
@@ -351,7 +350,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                                    _unit(units.get(sym, 'u'), unit))
             if base not in [base_name(x) for x in candidates]:
                 notes.append(f'{sym}: not modelled (term {base} not among the candidates)')
-    if dof > 0 and chi2.sf(chi2_value, dof) < 1e-3:
+    if dof > 0 and chi2_sf(chi2_value, dof) < 1e-3:
         notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
                      f'{dof} dof): a missing effect? (imu-allan diagnose)')
     order = ['N', 'B', 'T_B', 'K']
@@ -453,7 +452,7 @@ def _one_sided_bound(c_obs: float, v0: float, v1: float, v2: float) -> float:
         return max(c_obs, 0.0) + Z95_ONE_SIDED * math.sqrt(v0)
     nu = 2.0 / v2
     u = (np.arange(256) + 0.5) / 256.0
-    x = chi2.ppf(u, nu) / nu
+    x = chi2_ppf(u, nu) / nu
 
     def prob(c0: float) -> float:
         s_e = math.sqrt(max(v0 + 2.0 * c0 * v1, 1e-300))

@@ -7,16 +7,16 @@ Part of :mod:`imu_allan.core.fit` (see its docstring for the method).
 import math
 
 import numpy as np
-from scipy.stats import chi2
 
 from imu_allan.core.fit.result import _unit, Param
 from imu_allan.core.model import FLICKER_AVAR, GM_PEAK_TAU
+from imu_allan.core.quantiles import chi2_ppf
 
 
 def _chi2_factors(edf: float) -> tuple[float, float]:
     """Multipliers (lo, hi) of an ADEV estimate for a 95 % chi-square interval."""
     edf = max(float(edf), 1e-3)
-    return (math.sqrt(edf / chi2.ppf(0.975, edf)), math.sqrt(edf / chi2.ppf(0.025, edf)))
+    return (math.sqrt(edf / chi2_ppf(0.975, edf)), math.sqrt(edf / chi2_ppf(0.025, edf)))
 
 
 def nominal_fit(tau_s: np.ndarray, avar: np.ndarray, edf: np.ndarray,

@@ -9,10 +9,10 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy.stats import chi2
 
 from imu_allan.core.model import base_name, TERMS
 from imu_allan.core.noise_params import AxisNoise
+from imu_allan.core.quantiles import chi2_sf
 
 #: Kinds of a reported parameter.
 KINDS = ('estimate', 'upper_bound', 'lower_bound', 'not_identified')
@@ -152,7 +152,7 @@ class AxisFit:
             ``params`` is the optimised fit (DESIGN.md result contract).
 
         """
-        p_value = float(chi2.sf(self.chi2, self.dof)) if self.dof > 0 else None
+        p_value = float(chi2_sf(self.chi2, self.dof)) if self.dof > 0 else None
         return {'params': {k: v.to_json() for k, v in self.optimised.items()},
                 'nominal': {k: v.to_json() for k, v in self.nominal.items()},
                 'terms': list(self.terms), 'notes': list(self.notes),
