@@ -448,13 +448,13 @@ def test_single_db3_file_is_read_directly(shared_dir):
 
 def _sqlite_both_ways(db3: Path, topic: str):
     """Read a topic with the page reader (asserting it was used) and with SQL."""
-    from imu_allan.io import bag_reader
+    from imu_allan.io.bags import rosbag2_sqlite
 
     with open_imu(db3, topic) as source:
         backend = source._backend
         own = next(t for t in backend.topics() if t.name == source.topic)
-        located = bag_reader._SqlitePages(db3, backend.conn).locate(backend.ids[own.name],
-                                                                    backend.count(own))
+        pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
+        located = pages.locate(backend.ids[own.name], backend.count(own))
         assert located[1].size == backend.count(own)
         fast = source.read_all()
     with open_imu(db3, topic) as source:
@@ -506,7 +506,7 @@ def test_sqlite_page_reader_matches_sql(tmp_path, page_size):
 def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
     import sqlite3
 
-    from imu_allan.io import bag_reader
+    from imu_allan.io.bags import rosbag2_sqlite
 
     stamps, samples = _recording(500, seed=15)
     # Messages larger than a page: the topic itself spills to overflow pages.
@@ -514,8 +514,8 @@ def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
     write_imu_bag(db3, stamps, samples, frame_id='f' * 5000)
     with open_imu(db3) as source:
         backend = source._backend
-        pages = bag_reader._SqlitePages(db3, backend.conn)
-        with pytest.raises(bag_reader._NotPlain, match='overflow'):
+        pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
+        with pytest.raises(rosbag2_sqlite._NotPlain, match='overflow'):
             pages.locate(list(backend.ids['/imu/data']), 500)
         _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
     # A write-ahead log next to the file: SQL reads it (committed rows live in the log).
@@ -527,8 +527,8 @@ def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
     conn.execute('DELETE FROM messages WHERE id > 400')
     conn.commit()
     try:
-        with pytest.raises(bag_reader._NotPlain, match='wal'):
-            bag_reader._SqlitePages(db3, conn)
+        with pytest.raises(rosbag2_sqlite._NotPlain, match='wal'):
+            rosbag2_sqlite._SqlitePages(db3, conn)
         with open_imu(db3) as source:
             assert source.read_all().stamp_ns.size == 400
     finally:

@@ -189,6 +189,7 @@ class Session:
         self._ref_std: np.ndarray | None = None
         self._win_t: list[np.ndarray] = []
         self._win_y: list[np.ndarray] = []
+        self._pending: list[np.ndarray] = []   # still samples on their way to the accumulator
         self._moving = False
         self._in_motion = False
         self._still_since_ns: int | None = None
@@ -370,6 +371,33 @@ class Session:
                 self._off_period_ns = None
         self._refine_rate()
 
+    def _ordinary_windows(self, steps: np.ndarray) -> np.ndarray:
+        """
+        Which whole windows of ``steps`` a clock judgement would only note the jitter of.
+
+        Such a window is regular by :func:`_judge_steps`' fast test (every step within
+        25 % of the shortest, none beyond the irregular gap) and on the nominal rate,
+        outside irregular mode: judging it changes nothing but the jitter sums.  Shape
+        (len(steps) // _CLOCK_WINDOW,), bool.
+        """
+        k = steps.size // _CLOCK_WINDOW
+        if k == 0 or self.stats.irregular_stamps or self.rate_hz <= 0:
+            return np.zeros(0, bool)
+        w = steps[:k * _CLOCK_WINDOW].reshape(k, _CLOCK_WINDOW).astype(np.float64)
+        lo, hi, mean = w.min(axis=1), w.max(axis=1), w.mean(axis=1)
+        return ((lo > 0) & (hi <= (1 + _MAX_JITTER) * lo)
+                & (hi <= self.config.irregular_gap_s * _NS)
+                & (np.abs(_NS / self.rate_hz / mean - 1) <= self.config.rate_tolerance))
+
+    def _note_ordinary(self, steps: np.ndarray) -> None:
+        """Note the jitter of whole ordinary windows (see :meth:`_ordinary_windows`)."""
+        w = steps.reshape(-1, _CLOCK_WINDOW).astype(np.float64)
+        jitter = w.std(axis=1) / w.mean(axis=1)
+        self._jitter_sq += float(np.sum(jitter ** 2)) * _CLOCK_WINDOW
+        self._jitter_n += steps.size
+        self.stats.jitter_rel = math.sqrt(self._jitter_sq / self._jitter_n)
+        self._off_period_ns = None
+
     def _start_accumulator(self) -> None:
         kwargs = {'exact_max_m': self.config.exact_max_m} if self.config.exact_max_m else {}
         self.acc = AllanAccumulator(N_AXES, self.rate_hz, **kwargs)
@@ -398,7 +426,21 @@ class Session:
                                  max(first_step - done, 0))
             done = pos
 
+        # Once the buffer is empty, the windows are aligned with the block; the
+        # ordinary ones (regular, on the nominal rate) are then judged together.
+        aligned, ordinary = None, np.zeros(0, bool)
         while not judged and pos < n:
+            start = max(pos, first_step)
+            if not self._step_buf:
+                if aligned is None:
+                    aligned, ordinary = start, self._ordinary_windows(steps[start:])
+                i = (start - aligned) // _CLOCK_WINDOW
+                if i < ordinary.size and ordinary[i]:
+                    rest = ordinary[i:]
+                    run = rest.size if rest.all() else int(np.argmin(rest))
+                    self._note_ordinary(steps[start:start + run * _CLOCK_WINDOW])
+                    pos = start + run * _CLOCK_WINDOW
+                    continue
             room = _CLOCK_WINDOW - sum(s.size for s in self._step_buf)
             end = min(n, max(pos, first_step) + room)
             self._step_buf.append(steps[max(pos, first_step):end])
@@ -487,8 +529,13 @@ class Session:
         win = max(int(round(self.config.motion_window_s * self.rate_hz)), 2)
         n_full = (y.shape[0] // win) * win
         self._win_t, self._win_y = [t[n_full:]], [y[n_full:]]
-        for k in range(0, n_full, win):
-            self._judge_window(t[k:k + win], y[k:k + win])
+        if n_full:
+            # The statistics of all whole windows at once; the decisions stay in order.
+            blocks = y[:n_full].reshape(-1, win, N_AXES)
+            means, stds = blocks.mean(axis=1), blocks.std(axis=1)
+            for i, k in enumerate(range(0, n_full, win)):
+                self._judge_window(t[k:k + win], y[k:k + win], means[i], stds[i])
+        self._drain()
 
     def _flush_motion(self, break_after: bool = False) -> None:
         """Accumulate the held partial window as still (end of data or a segment break)."""
@@ -496,12 +543,14 @@ class Session:
             t, y = np.concatenate(self._win_t), np.concatenate(self._win_y)
             if not self._moving:
                 self._use(t, y)
+        self._drain()
         self._win_t, self._win_y = [], []
         if break_after and self.acc is not None:
             self.acc.break_segment()
 
-    def _judge_window(self, t: np.ndarray, y: np.ndarray) -> None:
-        moving = self._window_moving(y)
+    def _judge_window(self, t: np.ndarray, y: np.ndarray, mean: np.ndarray,
+                      std: np.ndarray) -> None:
+        moving = self._window_moving(mean, std)
         if moving and not self._in_motion:
             self.stats.n_motion_events += 1
         self._in_motion = moving
@@ -514,6 +563,7 @@ class Session:
             self.stats.n_motion_dropped += t.size
             if not self._moving:
                 self._moving = True
+                self._drain()
                 self.acc.break_segment()
                 if policy == 'restart':
                     self.stats.n_restarts += 1
@@ -532,12 +582,19 @@ class Session:
         self._use(t, y)
 
     def _use(self, t: np.ndarray, y: np.ndarray) -> None:
-        self.acc.add(y)
+        # Held until _drain: consecutive still windows reach the accumulator in one call.
+        self._pending.append(y)
         self.stats.n_used += t.size
 
-    def _window_moving(self, w: np.ndarray) -> bool:
-        mean = w.mean(axis=0)
-        std = w.std(axis=0)
+    def _drain(self) -> None:
+        """Pass the samples :meth:`_use` holds to the accumulator (one call)."""
+        if self._pending:
+            self.acc.add(self._pending[0] if len(self._pending) == 1
+                         else np.concatenate(self._pending))
+            self._pending = []
+
+    def _window_moving(self, mean: np.ndarray, std: np.ndarray) -> bool:
+        """Whether one motion window moved, from its per-axis mean and std (6,) each."""
         thr = np.array([self.config.motion_gyro_rad_s] * 3 + [self.config.motion_accel_m_s2] * 3)
         if self._ref_mean is None:
             # Quantised sensors can show zero spread: floor the reference noise.

@@ -1,0 +1,116 @@
+"""
+What every storage reader shares: block and topic types, the decoded-piece builder.
+
+Part of :mod:`imu_allan.io.bag_reader` (see its docstring for the layouts and speed).
+"""
+
+import os
+from pathlib import Path
+from typing import Callable, Iterator, List, NamedTuple, Optional, Union
+
+import numpy as np
+
+from imu_allan.io.imu_cdr import _join, decode_imu_payloads
+
+#: Messages per ImuBlock unless asked otherwise.
+DEFAULT_BLOCK_SIZE = 65536
+
+_FETCH_ROWS = 32768
+_MCAP_MAGIC = b'\x89MCAP0\r\n'
+
+PathLike = Union[str, os.PathLike]
+
+
+class TopicInfo(NamedTuple):
+    """One topic of a bag: name, message type, message count (None when unknown)."""
+
+    topic: str
+    msgtype: str
+    n_messages: Optional[int]
+
+
+class ImuBlock(NamedTuple):
+    """
+    A block of consecutive Imu messages.
+
+    Attributes
+    ----------
+    stamp_ns : numpy.ndarray
+        (n,) int64 header.stamp [ns since the epoch]: the sensor's clock.
+    recv_ns : numpy.ndarray
+        (n,) int64 time the bag recorded each message [ns since the epoch].
+    samples : numpy.ndarray
+        (n, 6) float64 in AXES order: angular_velocity x, y, z [rad/s], then
+        linear_acceleration x, y, z [m/s^2].
+
+    """
+
+    stamp_ns: np.ndarray
+    recv_ns: np.ndarray
+    samples: np.ndarray
+
+
+class _Topic(NamedTuple):
+    """Internal topic record; encoding is 'cdr', 'ros1' or what the bag names."""
+
+    name: str
+    msgtype: str
+    n_messages: Optional[int]
+    encoding: str
+
+
+class _Piece(NamedTuple):
+    """Decoded messages of one fetch or chunk, plus how many were dropped."""
+
+    recv_ns: np.ndarray
+    stamp_ns: np.ndarray
+    samples: np.ndarray
+    n_bad: int
+
+
+# --------------------------------------------------------------------------------------
+# Vectorised decoding
+# --------------------------------------------------------------------------------------
+
+
+#: Header of an MCAP Message record: opcode, record length, channel id, log_time.
+def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns: np.ndarray,
+                encoding: str, decompress: Optional[Callable[[bytes], bytes]]) -> _Piece:
+    """Decode payloads into a _Piece, dropping undecodable ones."""
+    if decompress is not None:
+        # rosbag2 'message' compression: every payload is its own zstd frame.
+        payloads = [decompress(u8[s:s + n].tobytes())
+                    for s, n in zip(starts.tolist(), lengths.tolist())]
+        u8, starts, lengths = _join(payloads)
+    stamp_ns, samples, ok = decode_imu_payloads(u8, starts, lengths, encoding)
+    n_bad = int(ok.size - np.count_nonzero(ok))
+    if n_bad:
+        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad)
+    return _Piece(recv_ns, stamp_ns, samples, 0)
+
+
+class _Backend:
+    """Common interface of the storage readers."""
+
+    storage = ''
+
+    def __init__(self, path: Path, warnings: List[str],
+                 decompress: Optional[Callable[[bytes], bytes]] = None) -> None:
+        self.path = path
+        self.warnings = warnings
+        self.decompress = decompress  # per-message decompression of rosbag2, or None
+
+    def topics(self) -> List[_Topic]:
+        """Return every topic with its type, count (or None) and encoding."""
+        raise NotImplementedError
+
+    def count(self, topic: _Topic) -> int:
+        """Return the number of messages of a topic (may read the bag)."""
+        return 0 if topic.n_messages is None else topic.n_messages
+
+    def pieces(self, topic: _Topic) -> Iterator[_Piece]:
+        """Yield decoded Imu messages of a topic in the bag's order."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release files."""

@@ -1,0 +1,206 @@
+"""
+Opening an input: a file by its signature, a rosbag2 directory by its metadata.
+
+Part of :mod:`imu_allan.io.bag_reader`.
+"""
+
+from pathlib import Path, PurePath
+import re
+import tempfile
+from typing import Callable, Dict, Iterator, List, Optional, Tuple
+
+import yaml
+import zstandard
+
+from imu_allan.errors import InputError
+from imu_allan.io.bags.base import _Backend, _MCAP_MAGIC, _Piece, _Topic, PathLike
+from imu_allan.io.bags.mcap_storage import _McapBackend
+from imu_allan.io.bags.ros1 import _Ros1Backend
+from imu_allan.io.bags.rosbag2_sqlite import _SqliteBackend
+
+_SQLITE_MAGIC = b'SQLite format 3\x00'
+_ROS1_MAGIC = b'#ROSBAG V2.0\n'
+_ZSTD_MAGIC = b'\x28\xb5\x2f\xfd'
+
+
+def _zstd_decompress(data: bytes) -> bytes:
+    """Decompress one zstd frame (rosbag2 message compression)."""
+    return zstandard.ZstdDecompressor().decompress(data, max_output_size=1 << 30)
+
+
+def _sniff(path: Path) -> bytes:
+    try:
+        with open(path, 'rb') as stream:
+            return stream.read(16)
+    except OSError as err:
+        raise InputError(f'{path}: cannot read ({err.strerror})') from None
+
+
+def _open_file(path: Path, warnings: List[str],
+               decompress: Optional[Callable[[bytes], bytes]] = None) -> _Backend:
+    """Open one storage file, recognised by its signature rather than its suffix."""
+    head = _sniff(path)
+    if not head:
+        raise InputError(f'{path}: empty file (0 bytes)')
+    if head.startswith(_MCAP_MAGIC):
+        return _McapBackend(path, warnings, decompress)
+    if head.startswith(_SQLITE_MAGIC):
+        return _SqliteBackend(path, warnings, decompress)
+    if head.startswith(_ROS1_MAGIC):
+        return _Ros1Backend(path, warnings)
+    if head.startswith(b'#ROSBAG V'):
+        raise InputError(f'{path}: ROS 1 bag format {head[9:12].decode(errors="replace")} is '
+                         'not supported (only 2.0; migrate it with `rosbag fix`)')
+    if head.startswith(_ZSTD_MAGIC):
+        raise InputError(f'{path}: zstd-compressed file; open the rosbag2 directory that '
+                         'holds it (its metadata.yaml names the compression)')
+    raise InputError(f'{path}: not a bag (no MCAP, sqlite3 or ROS 1 bag signature)')
+
+
+def _natural_key(path: Path) -> list:
+    return [int(t) if t.isdigit() else t for t in re.split(r'(\d+)', path.name)]
+
+
+class _Rosbag2DirBackend(_Backend):
+    """A rosbag2 directory: metadata.yaml (any version) plus storage files."""
+
+    def __init__(self, path: Path, warnings: List[str]) -> None:
+        super().__init__(path, warnings)
+        self.tmp: Optional[tempfile.TemporaryDirectory] = None
+        self.parts: List[_Backend] = []
+        info = self._metadata()
+        files, decompress = self._files(info)
+        try:
+            for file in files:
+                self.parts.append(_open_file(file, warnings, decompress))
+        except BaseException:
+            self.close()
+            raise
+        self.storage = self.parts[0].storage
+        self._topics = self._merge_topics(info)
+
+    def _metadata(self) -> Optional[dict]:
+        meta = self.path / 'metadata.yaml'
+        if not meta.exists():
+            self.warnings.append(f'{self.path}: no metadata.yaml; reading the storage files '
+                                 'directly')
+            return None
+        try:
+            info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
+            if not isinstance(info, dict):
+                raise TypeError('not a mapping')
+            return info
+        except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as err:
+            reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+            self.warnings.append(f'{meta}: unparsable ({reason}); reading the storage files '
+                                 'directly')
+            return None
+
+    def _files(self, info: Optional[dict]) -> Tuple[List[Path], Optional[Callable]]:
+        """Return the storage files in order and the per-message decompressor, if any."""
+        decompress = None
+        listed: List[Path] = []
+        if info is not None:
+            mode = str(info.get('compression_mode') or '').lower()
+            fmt = str(info.get('compression_format') or '').lower()
+            if mode not in ('', 'none') and fmt != 'zstd':
+                raise InputError(f'{self.path}: compression format {fmt!r} is not supported '
+                                 '(only zstd)')
+            for name in info.get('relative_file_paths') or []:
+                # Old bags store 'bagname/bagname_0.db3'; the file sits in the directory.
+                candidates = [self.path / PurePath(name).name, self.path / name]
+                found = next((c for c in candidates if c.is_file()), None)
+                if found is None:
+                    self.warnings.append(f'{self.path}: listed storage file {name} is missing')
+                else:
+                    listed.append(found)
+            if mode == 'file':
+                listed = [self._unpack(f) if f.suffix == '.zstd' else f for f in listed]
+            elif mode == 'message':
+                decompress = _zstd_decompress
+        if not listed:
+            listed = sorted((f for f in self.path.iterdir()
+                             if f.suffix in ('.mcap', '.db3') and f.is_file()), key=_natural_key)
+            if info is not None and listed:
+                self.warnings.append(f'{self.path}: metadata.yaml names no readable storage '
+                                     f'file; reading {", ".join(f.name for f in listed)}')
+        if not listed:
+            raise InputError(f'{self.path}: no rosbag2 storage files (.db3 or .mcap) found')
+        return listed, decompress
+
+    def _unpack(self, packed: Path) -> Path:
+        """Decompress a file-compressed storage file into a private temporary directory."""
+        if self.tmp is None:
+            self.tmp = tempfile.TemporaryDirectory(prefix='imu_allan_bag_')
+        target = Path(self.tmp.name) / packed.stem
+        try:
+            with open(packed, 'rb') as src, open(target, 'wb') as dst:
+                zstandard.ZstdDecompressor().copy_stream(src, dst)
+        except (OSError, zstandard.ZstdError) as err:
+            raise InputError(f'{packed}: cannot decompress ({err})') from None
+        return target
+
+    def _merge_topics(self, info: Optional[dict]) -> Dict[str, _Topic]:
+        merged: Dict[str, _Topic] = {}
+        for part in self.parts:
+            for topic in part.topics():
+                old = merged.get(topic.name)
+                if old is None:
+                    merged[topic.name] = topic
+                else:
+                    both = (None if old.n_messages is None or topic.n_messages is None
+                            else old.n_messages + topic.n_messages)
+                    merged[topic.name] = old._replace(n_messages=both)
+        try:
+            entries = (info or {}).get('topics_with_message_count') or []
+            counts = {x['topic_metadata']['name']: int(x['message_count']) for x in entries}
+        except (KeyError, TypeError, ValueError):
+            counts = {}
+        for name, count in counts.items():
+            # metadata.yaml counts the whole bag: it wins over what the files say.
+            if name in merged:
+                merged[name] = merged[name]._replace(n_messages=count)
+        return merged
+
+    def topics(self) -> List[_Topic]:
+        """Return the topics of all storage files."""
+        return list(self._topics.values())
+
+    def count(self, topic: _Topic) -> int:
+        """Count a topic's messages over all files."""
+        if topic.n_messages is not None:
+            return topic.n_messages
+        total = 0
+        for part in self.parts:
+            own = next((t for t in part.topics() if t.name == topic.name), None)
+            total += part.count(own) if own is not None else 0
+        return total
+
+    def pieces(self, topic: _Topic) -> Iterator[_Piece]:
+        """Yield the topic's messages file after file (split bags)."""
+        for part in self.parts:
+            own = next((t for t in part.topics() if t.name == topic.name), None)
+            if own is not None:
+                yield from part.pieces(own)
+
+    def close(self) -> None:
+        """Close every file and remove decompressed copies."""
+        for part in self.parts:
+            part.close()
+        if self.tmp is not None:
+            self.tmp.cleanup()
+
+
+def _open_backend(path: PathLike, warnings: List[str]) -> _Backend:
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f'{path}: no such file or directory')
+    if path.is_dir():
+        if not ((path / 'metadata.yaml').exists() or any(
+                f.suffix in ('.mcap', '.db3', '.zstd') for f in path.iterdir())):
+            raise InputError(f'{path}: directory without metadata.yaml or .db3/.mcap files: '
+                             'not a rosbag2 bag')
+        return _Rosbag2DirBackend(path, warnings)
+    if path.name == 'metadata.yaml':
+        return _Rosbag2DirBackend(path.parent, warnings)
+    return _open_file(path, warnings)
