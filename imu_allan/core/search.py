@@ -40,7 +40,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from imu_allan.core.allan import _single_thread_blas
+from imu_allan.core.allan.blas import _single_thread_blas
 from imu_allan.core.evidence import periodogram_peak, ramp_test
 from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
 from imu_allan.core.fit.result import AxisFit, Param

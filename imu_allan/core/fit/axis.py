@@ -13,7 +13,8 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtr
 
-from imu_allan.core.allan import _single_thread_blas, AllanCurve
+from imu_allan.core.allan import AllanCurve
+from imu_allan.core.allan.blas import _single_thread_blas
 from imu_allan.core.fit.nominal import nominal_fit
 from imu_allan.core.fit.result import _unit, AxisFit, Param
 from imu_allan.core.fit.solver import (_design, _fit_fixed_w, _Fitter, _profile_interval, _Slot,
