@@ -44,3 +44,11 @@ def test_every_command_is_listed_in_the_top_level_help():
                          capture_output=True, text=True, timeout=120)
     for command in ('adev', 'analyze', 'simulate', 'csv-to-bag', 'diagnose', 'demo'):
         assert command in out.stdout
+
+
+def test_demo_finds_its_default_parameter_file():
+    # make demo runs without --params: from a clone the file is the repository's config.
+    from imu_allan.cli.demo import _params_file
+
+    path = _params_file(None)
+    assert path.is_file() and path.name == 'xsens_mti7.yaml'

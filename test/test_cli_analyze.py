@@ -236,9 +236,11 @@ def test_json_contract_and_every_output_file(tmp_path, rec, capsys):
         for sym in ('N', 'B', 'K', 'T_B'):
             p = entry['params'][sym]
             assert {'value', 'ci95'} <= p.keys() and len(p['ci95']) == 2
-    # N of the simulated white noise is recovered (MTi-7: 0.007 deg/s/rtHz, 60 ug/rtHz).
-    assert doc['axes']['gyro_x']['params']['N']['value'] == pytest.approx(1.2217e-4, rel=0.1)
-    assert doc['axes']['accel_x']['params']['N']['value'] == pytest.approx(5.884e-4, rel=0.1)
+    # N of the simulated white noise is recovered (the config's MTi-7 values).
+    spec = load_params(REPO / 'config' / 'xsens_mti7.yaml')
+    for axis in ('gyro_x', 'accel_x'):
+        assert doc['axes'][axis]['params']['N']['value'] == pytest.approx(
+            spec.axes[axis].N, rel=0.1)
     names = {Path(f).name for f in doc['files']}
     assert {'result.json', 'imu.yaml', 'kalman_qr.yaml', 'imu_covariance.yaml', 'adev.png',
             'adev.svg'} <= names

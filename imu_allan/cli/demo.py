@@ -14,8 +14,9 @@ import time
 import numpy as np
 
 from imu_allan import AXES
+from imu_allan.errors import InputError
 
-DEFAULT_PARAMS = Path(__file__).resolve().parent.parent / 'config' / 'xsens_mti7.yaml'
+DEFAULT_PARAMS = Path(__file__).resolve().parents[2] / 'config' / 'xsens_mti7.yaml'
 START_NS = 1_700_000_000 * 10 ** 9
 
 
@@ -42,8 +43,12 @@ def _params_file(path: Path | None) -> Path:
         return path
     if DEFAULT_PARAMS.exists():
         return DEFAULT_PARAMS
-    from ament_index_python.packages import get_package_share_directory
-    return Path(get_package_share_directory('imu_allan')) / 'config' / 'xsens_mti7.yaml'
+    # An installed package: the config is in its share directory.
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        return Path(get_package_share_directory('imu_allan')) / 'config' / 'xsens_mti7.yaml'
+    except (ImportError, LookupError, OSError) as exc:
+        raise InputError(f'no default parameter file ({exc}); give one with --params') from None
 
 
 def publish_main(argv=None) -> int:
