@@ -116,11 +116,13 @@ def run(args) -> int:
     stamps = START_NS + np.round(t_s * 1e9).astype(np.int64)
     payloads = serialize_imu(stamps, samples, frame_id='imu_link')
     n = payloads.shape[0]
+    t_b = [a.T_B for a in spec.axes.values() if a.T_B] or [0.0]
     print(f'demo: simulated {spec.name}: {n:,} messages ({args.duration / 3600:.2f} h at '
           f'{args.rate:g} Hz) in {time.monotonic() - t0:.1f} s.\n'
           f'demo: why {args.duration / 3600:.2f} h at {args.rate:g} Hz: T_B of this model is '
-          f'30-60 s and the random walk K shows only beyond ~1000 s, so the record must '
-          f'span hours; N needs no high rate, and {args.rate:g} Hz keeps the message count '
+          f'{min(t_b):.0f}-{max(t_b):.0f} s and the random walk K shows only beyond ~1000 s, '
+          f'so the record must span hours; N needs no high rate, and {args.rate:g} Hz keeps '
+          'the message count '
           f'low enough to send through real topics at {args.speed:,.0f} msg/s '
           f'({args.speed / args.rate:.0f}x real time).', file=sys.stderr)
 
