@@ -37,6 +37,9 @@ bench: venv
 	$(PY) bench/bench_analyze.py
 	$(PY) bench/bench_node.py
 	$(PY) bench/validate_fit.py --seeds 50 --workers 2
+	$(PY) bench/reproduce_paper.py
+	$(PY) bench/search_power.py --seeds 4
+	$(PY) bench/validate_adis.py
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache
