@@ -40,7 +40,7 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
                    help='what to do with samples where the IMU moved')
 
 
-def session_config(args) -> SessionConfig:
+def session_config_from_args(args) -> SessionConfig:
     """Return the SessionConfig of the options added by :func:`add_input_options`."""
     return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
 
@@ -243,7 +243,7 @@ def run(args) -> int:
     paths = [Path(p) for p in args.inputs]
     for p in paths:
         check_path(p)
-    config = session_config(args)
+    config = session_config_from_args(args)
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]

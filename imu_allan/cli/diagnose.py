@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 import sys
 
-from imu_allan.cli.analyze import add_input_options, session_config
+from imu_allan.cli.analyze import add_input_options, session_config_from_args
 from imu_allan.core.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS
 from imu_allan.errors import InputError
 from imu_allan.io.inputs import open_input, Progress, raw_tap, stream_input
@@ -91,7 +91,7 @@ def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_mo
     return result
 
 
-def write_outputs(result, out: Path, plot: bool = True) -> list:
+def write_diagnosis_files(result, out: Path, plot: bool = True) -> list:
     """Write diagnose.json, diagnose_table.md and the per-axis figures; return the paths."""
     out.mkdir(parents=True, exist_ok=True)
     files = []
@@ -120,13 +120,13 @@ def run(args) -> int:
         raise InputError(f'--replicas must be >= 1, got {args.replicas}')
     if not args.input.exists():
         raise InputError(f'{args.input}: no such file or directory')
-    config = session_config(args)
+    config = session_config_from_args(args)
     result = diagnose_input(args.input, args.topic, config, base, args.replicas, args.seed,
                             quiet=args.format == 'json')
     if all(d is None for d in result.axes.values()):
         raise InputError(f'{args.input}: no axis could be diagnosed (frozen, constant or too '
                          f'short: {result.n_samples} samples)')
-    files = write_outputs(result, args.out, plot=not args.no_plot)
+    files = write_diagnosis_files(result, args.out, plot=not args.no_plot)
     if args.format == 'json':
         doc = result.to_json()
         doc['files'] = [str(f) for f in files]

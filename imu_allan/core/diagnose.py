@@ -765,7 +765,7 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     return replace(diag, summary=summary_line(diag))
 
 
-def _describe(f: Finding) -> str:
+def _finding_text(f: Finding) -> str:
     p, u = f.params, f.units
     if f.effect == 'sinusoid':
         return (f'sinusoid at {p["f0_hz"]:.2g} Hz (period {1.0 / p["f0_hz"]:.3g} s, '
@@ -801,7 +801,7 @@ def summary_line(d: AxisDiagnosis) -> str:
     """
     gaps = f'gap {d.gap_before:.2g} -> {d.gap_after:.2g}'
     if d.missing:
-        what = ' + '.join(_describe(f) for f in d.missing)
+        what = ' + '.join(_finding_text(f) for f in d.missing)
         tail = '' if d.consistent else ' (still inconsistent)'
         return f'{d.axis}: missing {what}; {gaps}{tail}'
     if d.consistent:
