@@ -102,6 +102,195 @@ def _families(slots: Sequence[_Slot]) -> list:
     return [g for g in groups.values() if len(g) > 1]
 
 
+class _Problem:
+    """
+    One model at fixed weights: its nonlinear parameters x (log phi) and their bounds.
+
+    Evaluates the GLS chi-square at the optimal NNLS coefficients for any x (variable
+    projection), its residual and Jacobian for :func:`_polish_lm`, and keeps the
+    columns already computed.  Interchangeable terms fit the curve the same either way
+    round, so x is evaluated sorted within each family (a smooth objective); a profile
+    that holds one of them must keep their roles, and there a quadratic penalty keeps
+    their order (``held``).  See :func:`_fit_fixed_w` for ``fix``.
+    """
+
+    def __init__(self, data: _Data, slots: Sequence[_Slot], phi0, fix: _Fix | None):
+        self.data, self.slots, self.phi0 = data, slots, phi0
+        self.fixed_nl: dict = {}
+        self.fixed_level = None
+        if fix is not None:
+            term = slots[fix.slot].term
+            if fix.symbol in term.nonlinear:
+                self.fixed_nl[(fix.slot, term.nonlinear.index(fix.symbol))] = fix.value
+            else:
+                self.fixed_level = fix
+        nl_all = [(i, j) for i, s in enumerate(slots) for j in range(len(s.bounds))]
+        self.nl_index = [ij for ij in nl_all if ij not in self.fixed_nl]
+        self.bounds = np.log(np.array([slots[i].bounds[j] for i, j in self.nl_index])
+                             ).reshape(-1, 2)
+        # Columns depend only on their own slot's nonlinear parameters: a search that
+        # moves one of them (grid sweeps, profiles) reuses the others.
+        self.columns: dict = {}
+        self.families = _families(slots)
+        self.held = fix is not None and any(fix.slot in fam for fam in self.families)
+        self.fam_dims = [] if self.held or not self.nl_index else [
+            [self.nl_index.index((i, 0)) for i in fam] for fam in self.families]
+        self.dim_of = {ij: d for d, ij in enumerate(self.nl_index)}
+
+    def start(self) -> np.ndarray:
+        """Return the starting x: phi0's values, else the middle of the bounds."""
+        if self.phi0 is not None:
+            x = np.log([self.phi0[i][j] for i, j in self.nl_index])
+        else:
+            x = self.bounds.mean(axis=1)
+        return np.clip(x, self.bounds[:, 0], self.bounds[:, 1])
+
+    def unpack(self, x) -> tuple:
+        """Return phi (per slot, a tuple of nonlinear values) for x."""
+        vals = [list(p) for p in (self.phi0 if self.phi0 is not None else
+                                  [[0.0] * len(s.bounds) for s in self.slots])]
+        b = self.bounds
+        for (i, j), v in zip(self.nl_index, np.exp(np.clip(x, b[:, 0], b[:, 1]))):
+            vals[i][j] = float(v)
+        for (i, j), v in self.fixed_nl.items():
+            vals[i][j] = float(v)
+        return tuple(tuple(v) for v in vals)
+
+    def column(self, i: int, nl: tuple) -> np.ndarray:
+        """Return slot i's AVAR shape (k,) at nonlinear values nl (cached)."""
+        key = (i, nl)
+        col = self.columns.get(key)
+        if col is None:
+            col = self.slots[i].term.shape(self.data.tau, *nl)
+            if len(self.columns) < 4096:
+                self.columns[key] = col
+        return col
+
+    def solve(self, phi) -> tuple:
+        """Return (coef, chi-square, whitened residual) at phi; a fixed level stays fixed."""
+        a = np.column_stack([self.column(i, nl) for i, nl in enumerate(phi)])
+        fl = self.fixed_level
+        if fl is None:
+            return _solve_linear(self.data, a)
+        i = fl.slot
+        c_i = self.slots[i].term.to_coef(fl.value, *phi[i]) / self.data.scale
+        rest = [k for k in range(len(self.slots)) if k != i]
+        coef_rest, j, resid = _solve_linear(self.data, a[:, rest], fixed=a[:, i] * c_i)
+        coef = np.empty(len(self.slots))
+        coef[rest], coef[i] = coef_rest, c_i
+        return coef, j, resid
+
+    def ordered(self, x) -> tuple:
+        """Return x sorted within each family and the permutation that did it."""
+        x, perm = x.copy(), np.arange(x.size)
+        for dims in self.fam_dims:
+            o = np.argsort(x[dims], kind='stable')
+            x[dims], perm[dims] = x[dims][o], np.asarray(dims)[o]
+        return x, perm
+
+    def objective(self, x) -> float:
+        """Return the GLS chi-square at x (plus the order penalty of a held family)."""
+        phi = self.unpack(self.ordered(x)[0])
+        pen = float(np.sum(self.order_rows(phi)[0] ** 2)) if self.held else 0.0
+        return self.solve(phi)[1] + pen
+
+    def residual_jac(self, x) -> tuple:
+        """
+        Return the whitened residual r(x) and its Jacobian (variable projection).
+
+        Golub & Pereyra (1973) with Kaufman's Jacobian: r(x) = L^-1 (y - A(x) c(x)) at
+        the optimal coefficients (NNLS), and dr/dx = -P (L^-1 d(A c)/dx) with c held, P
+        the projection off the active columns.  The columns' derivatives in log(phi)
+        by a forward difference; a fixed level's coefficient moves with its slot's
+        nonlinear parameters (to_coef) and is differentiated with them.
+        """
+        data, slots, fl = self.data, self.slots, self.fixed_level
+        xs, perm = self.ordered(x)
+        phi = self.unpack(xs)
+        coef, _, resid = self.solve(phi)
+        dm = np.zeros((data.tau.size, len(self.nl_index)))
+        for d, (i, jj) in enumerate(self.nl_index):
+            held_level = fl is not None and i == fl.slot
+            if coef[i] == 0.0 and not held_level:
+                continue
+            step = list(phi[i])
+            step[jj] *= _EXP_H
+            col = slots[i].term.shape(data.tau, *step)
+            if held_level:
+                c_step = slots[i].term.to_coef(fl.value, *step) / data.scale
+                dm[:, d] = (col * c_step - self.column(i, phi[i]) * coef[i]) / _H
+            else:
+                dm[:, d] = (col - self.column(i, phi[i])) * (coef[i] / _H)
+        dmw = data.whiten(dm)
+        free = [i for i in range(len(slots))
+                if coef[i] > 0 and not (fl is not None and i == fl.slot)]
+        if free:
+            active = np.column_stack([self.column(i, phi[i]) for i in free])
+            q = np.linalg.qr(data.whiten(active))[0]
+            dmw = dmw - q @ (q.T @ dmw)
+        jac = np.empty_like(dmw)
+        jac[:, perm] = -dmw
+        if self.held:
+            rows, jrows = self.order_rows(phi)
+            resid = np.concatenate([resid, rows])
+            jac = np.vstack([jac, jrows])
+        return resid, jac
+
+    def order_rows(self, phi) -> tuple:
+        """Penalty residuals sqrt(w) max(0, log T_a - log T_b) of neighbours out of order."""
+        rows, jrows = [], []
+        w = math.sqrt(_ORDER_WEIGHT)
+        for fam in self.families:
+            for a, b in zip(fam[:-1], fam[1:]):
+                gap = max(math.log(phi[a][0] / phi[b][0]), 0.0)
+                jr = np.zeros(len(self.nl_index))
+                if gap > 0.0:
+                    for i, sign in ((a, w), (b, -w)):
+                        if (i, 0) in self.dim_of:
+                            jr[self.dim_of[(i, 0)]] = sign
+                rows.append(w * gap)
+                jrows.append(jr)
+        return np.array(rows), np.array(jrows).reshape(-1, len(self.nl_index))
+
+    def polish(self, x) -> np.ndarray:
+        """Return x after a Levenberg-Marquardt polish, sorted within families."""
+        return self.ordered(_polish_lm(self.residual_jac, x, self.bounds))[0]
+
+    def polish_1d(self, x, half_width: float = 1.5) -> np.ndarray:
+        """Return x (one parameter) after a bounded 1-D search within half_width of it."""
+        b = self.bounds
+        lo, hi = max(x[0] - half_width, b[0, 0]), min(x[0] + half_width, b[0, 1])
+        x = x.copy()
+        x[0] = _polish_1d(self.objective, lo, hi, x[0], self.objective(x))
+        return x
+
+    def grid(self, x, grid_slots) -> np.ndarray:
+        """Coordinate sweeps over 41-point grids (twice when several parameters move)."""
+        n_nl = len(self.nl_index)
+        sweep = [d for d, (i, _) in enumerate(self.nl_index)
+                 if grid_slots is None or i in grid_slots]
+        for _ in range(1 if n_nl == 1 or grid_slots is not None else 2):
+            for d in sweep:
+                grid = np.linspace(self.bounds[d, 0], self.bounds[d, 1], 41)
+                vals = []
+                for g in grid:
+                    x[d] = g
+                    vals.append(self.objective(x))
+                best = int(np.argmin(vals))
+                x[d] = grid[best]
+                if n_nl == 1:
+                    lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
+                    if hi > lo:
+                        x[d] = _polish_1d(self.objective, lo, hi, x[d], vals[best])
+        return x
+
+    def solution(self, x) -> _Solution:
+        """Return the solution at x."""
+        phi = self.unpack(self.ordered(x)[0])
+        coef, j, _ = self.solve(phi)
+        return _Solution(coef, phi, j)
+
+
 def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | None = None,
                  fix: _Fix | None = None, local: bool = False,
                  grid_slots: Sequence[int] | None = None) -> _Solution:
@@ -115,170 +304,24 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
     label, shortest T), so a profile cannot swap their roles.  ``local`` skips the grid
     and searches near ``phi0`` only (profiles move in small steps).  ``grid_slots``
     limits the grid sweeps to those slots' parameters (a term added to a fitted model:
-    the others start where they are and move in the polish).
+    the others start where they are and move in the polish).  The search itself is
+    :class:`_Problem`: grid sweeps, then a 1-D bounded search or Levenberg-Marquardt.
     """
-    fixed_nl = {}
-    fixed_level = None
-    if fix is not None:
-        term = slots[fix.slot].term
-        if fix.symbol in term.nonlinear:
-            fixed_nl[(fix.slot, term.nonlinear.index(fix.symbol))] = fix.value
-        else:
-            fixed_level = fix
-    nl_all = [(i, j) for i, s in enumerate(slots) for j in range(len(s.bounds))]
-    nl_index = [ij for ij in nl_all if ij not in fixed_nl]
-    bounds = np.log(np.array([slots[i].bounds[j] for i, j in nl_index])).reshape(-1, 2)
-
-    def unpack(x):
-        vals = [list(p) for p in (phi0 if phi0 is not None else
-                                  [[0.0] * len(s.bounds) for s in slots])]
-        for (i, j), v in zip(nl_index, np.exp(np.clip(x, bounds[:, 0], bounds[:, 1]))):
-            vals[i][j] = float(v)
-        for (i, j), v in fixed_nl.items():
-            vals[i][j] = float(v)
-        return tuple(tuple(v) for v in vals)
-
-    # Columns depend only on their own slot's nonlinear parameters: a search that moves
-    # one of them (grid sweeps, profiles) reuses the others.
-    columns: dict = {}
-
-    def column(i, nl):
-        key = (i, nl)
-        col = columns.get(key)
-        if col is None:
-            col = slots[i].term.shape(data.tau, *nl)
-            if len(columns) < 4096:
-                columns[key] = col
-        return col
-
-    def solve(phi):
-        a = np.column_stack([column(i, nl) for i, nl in enumerate(phi)])
-        if fixed_level is None:
-            return _solve_linear(data, a)
-        i = fixed_level.slot
-        c_i = slots[i].term.to_coef(fixed_level.value, *phi[i]) / data.scale
-        rest = [k for k in range(len(slots)) if k != i]
-        coef_rest, j, resid = _solve_linear(data, a[:, rest], fixed=a[:, i] * c_i)
-        coef = np.empty(len(slots))
-        coef[rest], coef[i] = coef_rest, c_i
-        return coef, j, resid
-
-    if not nl_index:
-        phi = unpack(np.zeros(0))
-        coef, j, _ = solve(phi)
-        return _Solution(coef, phi, j)
-
-    families = _families(slots)
-    # Interchangeable terms fit the curve the same either way round, so the search
-    # evaluates them sorted (a smooth objective with a gradient).  A profile that holds
-    # one of them must keep their roles: there a quadratic penalty keeps their order.
-    held = fix is not None and any(fix.slot in fam for fam in families)
-    fam_dims = [] if held else [[nl_index.index((i, 0)) for i in fam] for fam in families]
-    dim_of = {ij: d for d, ij in enumerate(nl_index)}
-
-    def ordered(x):
-        x, perm = x.copy(), np.arange(x.size)
-        for dims in fam_dims:
-            o = np.argsort(x[dims], kind='stable')
-            x[dims], perm[dims] = x[dims][o], np.asarray(dims)[o]
-        return x, perm
-
-    def objective(x):
-        phi = unpack(ordered(x)[0])
-        return solve(phi)[1] + (float(np.sum(order_rows(phi)[0] ** 2)) if held else 0.0)
-
-    def residual_jac(x):
-        # Variable projection (Golub & Pereyra 1973, Kaufman's Jacobian): the whitened
-        # residual r(x) = L^-1 (y - A(x) c(x)) at the optimal coefficients (NNLS), and
-        # dr/dx = -P (L^-1 d(A c)/dx) with c held, P the projection off the active
-        # columns.  The columns' derivatives in log(phi) by a forward difference; a
-        # fixed level's coefficient moves with its slot's nonlinear parameters (to_coef)
-        # and is differentiated with them.
-        xs, perm = ordered(x)
-        phi = unpack(xs)
-        coef, j, resid = solve(phi)
-        dm = np.zeros((data.tau.size, len(nl_index)))
-        for d, (i, jj) in enumerate(nl_index):
-            held_level = fixed_level is not None and i == fixed_level.slot
-            if coef[i] == 0.0 and not held_level:
-                continue
-            step = list(phi[i])
-            step[jj] *= _EXP_H
-            col = slots[i].term.shape(data.tau, *step)
-            if held_level:
-                c_step = slots[i].term.to_coef(fixed_level.value, *step) / data.scale
-                dm[:, d] = (col * c_step - column(i, phi[i]) * coef[i]) / _H
-            else:
-                dm[:, d] = (col - column(i, phi[i])) * (coef[i] / _H)
-        dmw = data.whiten(dm)
-        free = [i for i in range(len(slots)) if coef[i] > 0 and not (
-            fixed_level is not None and i == fixed_level.slot)]
-        if free:
-            q = np.linalg.qr(data.whiten(np.column_stack([column(i, phi[i]) for i in free])))[0]
-            dmw = dmw - q @ (q.T @ dmw)
-        jac = np.empty_like(dmw)
-        jac[:, perm] = -dmw
-        if held:
-            rows, jrows = order_rows(phi)
-            resid = np.concatenate([resid, rows])
-            jac = np.vstack([jac, jrows])
-        return resid, jac
-
-    def order_rows(phi):
-        # Penalty residuals sqrt(w) max(0, log T_a - log T_b) of neighbours out of order.
-        rows, jrows = [], []
-        w = math.sqrt(_ORDER_WEIGHT)
-        for fam in families:
-            for a, b in zip(fam[:-1], fam[1:]):
-                gap = max(math.log(phi[a][0] / phi[b][0]), 0.0)
-                jr = np.zeros(len(nl_index))
-                if gap > 0.0:
-                    for i, sign in ((a, w), (b, -w)):
-                        if (i, 0) in dim_of:
-                            jr[dim_of[(i, 0)]] = sign
-                rows.append(w * gap)
-                jrows.append(jr)
-        return np.array(rows), np.array(jrows).reshape(-1, len(nl_index))
-
-    def polish(x):
-        return ordered(_polish_lm(residual_jac, x, bounds))[0]
-
-    if phi0 is not None:
-        x = np.log([phi0[i][j] for i, j in nl_index])
-    else:
-        x = bounds.mean(axis=1)
-    x = np.clip(x, bounds[:, 0], bounds[:, 1])
+    problem = _Problem(data, slots, phi0, fix)
+    if not problem.nl_index:
+        return problem.solution(np.zeros(0))
+    x = problem.start()
+    one = len(problem.nl_index) == 1
     if local and phi0 is not None:
-        if len(nl_index) == 1:
-            lo, hi = max(x[0] - 1.5, bounds[0, 0]), min(x[0] + 1.5, bounds[0, 1])
-            x[0] = _polish_1d(objective, lo, hi, x[0], objective(x))
-        else:
-            x = polish(x)
-        phi = unpack(x)
-        coef, j, _ = solve(phi)
-        return _Solution(coef, phi, j)
-    # Coordinate grid sweeps, then a local polish.
-    sweep = [d for d, (i, _) in enumerate(nl_index) if grid_slots is None or i in grid_slots]
-    for _ in range(1 if len(nl_index) == 1 or grid_slots is not None else 2):
-        for d in sweep:
-            grid = np.linspace(bounds[d, 0], bounds[d, 1], 41)
-            vals = []
-            for g in grid:
-                x[d] = g
-                vals.append(objective(x))
-            best = int(np.argmin(vals))
-            x[d] = grid[best]
-            if len(nl_index) == 1:
-                lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
-                if hi > lo:
-                    x[d] = _polish_1d(objective, lo, hi, x[d], vals[best])
-    if len(nl_index) > 1:
-        x = polish(x)
-    phi = unpack(ordered(x)[0])
-    coef, j, _ = solve(phi)
+        return problem.solution(problem.polish_1d(x) if one else problem.polish(x))
+    x = problem.grid(x, grid_slots)
+    if not one:
+        x = problem.polish(x)
+    sol = problem.solution(x)
     if fix is None:
-        coef, phi = _canonical(slots, coef, phi)
-    return _Solution(coef, phi, j)
+        coef, phi = _canonical(slots, sol.coef, sol.phi)
+        sol = _Solution(coef, phi, sol.j)
+    return sol
 
 
 #: First trial of a profile interval: 2 % from the estimate (then a quadratic guess).
