@@ -48,7 +48,7 @@ SYMBOLS = ('N', 'B', 'K', 'T_B')
 
 
 def _noise(params: dict) -> AxisNoise:
-    """AxisNoise from read-off or fitted parameters (NaN or missing count as absent)."""
+    """Return the AxisNoise of read-off or fitted parameters (NaN or missing: absent)."""
     def v(sym):
         p = params.get(sym)
         x = float(p.value) if p is not None else float('nan')
