@@ -16,26 +16,25 @@ which it falls back to when unavailable).
 
 from collections import deque
 import copy
-import math
 import os
 from pathlib import Path
 import sys
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from imu_allan import AXES
@@ -47,6 +46,8 @@ from imu_allan.pipeline.analysis import analyze, CONFIDENCE
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.params import BY_NAME, PARAMS, session_config
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
+from imu_allan.ros.reports import _matrix_msg, _Reports
+from imu_allan.ros.spin import create_executor, spin_until_shutdown
 
 CHECKPOINT = 'checkpoint.npz'
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
@@ -55,16 +56,12 @@ _SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messag
                    'initial_covariance_file', 'diagnose_raw_samples'}
 #: Period of the /diagnostics statuses (the aggregator marks a status stale after 5 s).
 DIAGNOSTICS_PERIOD_S = 1.0
-#: No message for this long is reported as a WARN on /diagnostics.
-NO_DATA_WARN_S = 2.0
 #: Samples a resumed session waits for before it compares their rate with the checkpoint.
 _RESUME_CHECK_SAMPLES = 50
 #: The timer hands the pipeline at least this many messages (or whatever is there after
 #: _MAX_HOLD_S): its rate-change check needs 50 stamp steps in one block.
 _MIN_BLOCK = 64
 _MAX_HOLD_S = 2.0
-_LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
-           'error': DiagnosticStatus.ERROR}
 
 
 def _descriptor(p) -> ParameterDescriptor:
@@ -109,7 +106,7 @@ class _SessionView:
         return self._curve
 
 
-class ImuAllanNode(Node):
+class ImuAllanNode(_Reports, Node):
     """
     Subscribe to sensor_msgs/Imu, characterise its noise, publish the results.
 
@@ -419,94 +416,6 @@ class ImuAllanNode(Node):
         self.get_logger().info('published: ' + '; '.join(result.summary_lines()))
         return result
 
-    @property
-    def hardware_id(self) -> str:
-        """hardware_id of the statuses: the parameter, else the messages' frame_id."""
-        return self.values['hardware_id'] or self._frame_id
-
-    def _status(self, what: str, level, message: str, values: list) -> DiagnosticStatus:
-        return DiagnosticStatus(name=f'{self.diag_prefix}: {what}', level=level,
-                                message=message, hardware_id=self.hardware_id,
-                                values=[KeyValue(key=k, value=v) for k, v in values])
-
-    def _statuses(self, result) -> list:
-        out = []
-        for axis in AXES:
-            level, message, values = result.axis_status(axis)
-            out.append(self._status(axis, _LEVELS[level], message, values))
-        return out
-
-    def _input_status(self, session) -> DiagnosticStatus:
-        """One status with the input-hygiene counters and the warnings, if any."""
-        stats = session.stats
-        values = [(k, str(v) if not isinstance(v, list) else ','.join(v))
-                  for k, v in vars(stats).items()]
-        values += [('n_buffer_dropped', str(self.n_buffer_dropped)),
-                   ('warnings', ' | '.join(session.warnings))]
-        message = (' | '.join(session.warnings) if session.warnings
-                   else 'input clean: no gaps, bad stamps, bad values or motion')
-        return self._status(
-            'input', DiagnosticStatus.WARN if session.warnings else DiagnosticStatus.OK,
-            message, values)
-
-    def _progress_status(self, log: bool = False) -> DiagnosticStatus:
-        """Return the progress status: collection before min_duration_s, then the fits."""
-        s = self.session
-        target = self.values['min_duration_s']
-        values = [('samples', str(s.stats.n_used)), ('rate_hz', f'{s.rate_hz:.4f}'),
-                  ('duration_s', f'{s.duration_s:.1f}'), ('fits', str(self.n_fits)),
-                  ('warnings', ' | '.join(s.warnings))]
-        if s.duration_s >= target:
-            text = (f'characterising: {s.duration_s:.0f} s, {s.stats.n_used} samples at '
-                    f'{s.rate_hz:.2f} Hz, {self.n_fits} fits published')
-            values.append(('percent', '100.00'))
-        else:
-            pct = 100.0 * s.duration_s / target
-            now = time.monotonic()
-            wall0, dur0 = self._progress_mark
-            if log:
-                self._progress_mark = (now, s.duration_s)
-            speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
-            eta = (target - s.duration_s) / speed if speed > 0 else math.inf
-            eta_text = (f'{eta / 60:.1f} min' if math.isfinite(eta)
-                        else 'unknown (no data now)')
-            text = (f'collecting: {pct:.1f}% of {target:.0f} s, {s.stats.n_used} samples at '
-                    f'{s.rate_hz:.2f} Hz, ETA {eta_text}')
-            values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
-        if self.n_buffer_dropped:
-            text += f', {self.n_buffer_dropped} messages dropped by a full buffer'
-        level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
-        return self._status('progress', level, text, values)
-
-    def _data_status(self) -> DiagnosticStatus:
-        """WARN while no message arrives on the input topic."""
-        topic = self.subscription.topic_name
-        since = time.monotonic() - (self._last_rx or self._started)
-        if since > NO_DATA_WARN_S:
-            what = 'no message yet' if self._last_rx is None else 'no message'
-            return self._status('data', DiagnosticStatus.WARN,
-                                f'{what} on {topic} for {since:.0f} s',
-                                [('topic', topic), ('received', str(self.n_received))])
-        return self._status('data', DiagnosticStatus.OK, f'receiving {topic}',
-                            [('topic', topic), ('received', str(self.n_received))])
-
-    def _on_diagnostics(self) -> None:
-        # 1 Hz, within the aggregator's 5 s stale timeout; the last fit's per-axis
-        # statuses persist between fits.
-        array = DiagnosticArray(status=[self._data_status(), self._progress_status()]
-                                + self._axis_statuses + [self._input_status(self.session)])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(array)
-
-    def _progress(self) -> None:
-        if self.session.duration_s >= self.values['min_duration_s']:
-            return
-        status = self._progress_status(log=True)
-        self.get_logger().info(status.message)
-        array = DiagnosticArray(status=[status, self._input_status(self.session)])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self.pub_params.publish(array)
-
     def _checkpoint(self) -> None:
         with self._lock:
             try:
@@ -646,72 +555,6 @@ class ImuAllanNode(Node):
         imu_topic = self.pub_imu.topic_name if self.pub_imu is not None else None
         return write_outputs(result, self.output_dir, imu_topic=imu_topic) + [
             self.output_dir / CHECKPOINT]
-
-
-def _matrix_msg(matrix: np.ndarray, labels: list) -> Float64MultiArray:
-    """Float64MultiArray of a square matrix; the state order is in the dimension labels."""
-    n = matrix.shape[0]
-    order = ','.join(labels)
-    msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=f'rows:{order}', size=n, stride=n * n),
-                      MultiArrayDimension(label=f'cols:{order}', size=n, stride=n)]
-    msg.data = [float(x) for x in matrix.ravel()]
-    return msg
-
-
-def create_executor(kind: str = 'events', context=None):
-    """
-    Return the executor the node spins with.
-
-    Parameters
-    ----------
-    kind : str
-        'events' (rclpy.experimental.EventsExecutor, the default: the cheapest per
-        message), 'single' (SingleThreadedExecutor) or 'multi' (MultiThreadedExecutor
-        with two threads; kept for benchmarks).
-    context : rclpy.context.Context, optional
-        Context of the executor.
-
-    Returns
-    -------
-    Executor
-        The executor; 'events' falls back to 'single' where it is unavailable.
-
-    """
-    if kind == 'events':
-        try:
-            from rclpy.experimental import EventsExecutor
-        except ImportError:
-            kind = 'single'
-        else:
-            return EventsExecutor(context=context)
-    if kind == 'multi':
-        from rclpy.executors import MultiThreadedExecutor
-        return MultiThreadedExecutor(num_threads=2, context=context)
-    return SingleThreadedExecutor(context=context)
-
-
-def spin_until_shutdown(executor, context=None) -> None:
-    """
-    Spin until the context shuts down (Ctrl-C, SIGTERM or rclpy.shutdown).
-
-    rclpy's EventsExecutor.spin() runs in C++ and never returns to Python, so neither
-    a Ctrl-C nor a shutdown stops it; short spin_once calls let Python see both.
-
-    Parameters
-    ----------
-    executor : Executor
-        The executor with the node added.
-    context : rclpy.context.Context, optional
-        The context to watch (the default context when None).
-
-    """
-    context = context or rclpy.get_default_context()
-    try:
-        while context.ok():
-            executor.spin_once(timeout_sec=0.25)
-    except ExternalShutdownException:
-        pass
 
 
 def main(args=None) -> int:
