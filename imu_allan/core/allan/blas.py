@@ -41,9 +41,7 @@ def _openblas_thread_apis() -> list:
 
 _BLAS_LOCK = threading.Lock()
 
-
 _BLAS_LIBS: dict = {}
-
 
 _BLAS_STATE: dict = {'depth': 0, 'saved': []}
 

@@ -28,10 +28,8 @@ _GH_TABLE2 = {
     -4: (None, None, (1.302, 0.535)),
 }
 
-
 # Greenhall & Riley 2003, table 3: (b0, b1) of sz(0) ~ b0 + b1 ln m for alpha = 1.
 _GH_TABLE3 = ((6.0, 4.0), (15.23, 12.0), (47.8, 40.0))
-
 
 _GH_J_MAX = 100
 

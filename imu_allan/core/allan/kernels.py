@@ -25,28 +25,22 @@ from imu_allan.errors import InputError
 # _single_thread_blas): its threads cost more than they give on tile-sized dots.
 _TILE_ELEMS = 65536
 
-
 # Widest column strip of the blocked kernel, in samples.
 _STRIP_COLS = 4096
-
 
 # Largest cancellation ratio accepted from the fast octave kernels (see _octave_sums):
 # with dot products good to a few 1e-16 the result keeps about 1e-10 relative.
 _CANCEL_LIMIT = 1e5
 
-
 # Octave levels done by the moving-sum pyramid; the rest by the Gram kernel.
 _PYRAMID_LEVELS = 18
-
 
 # Rows K of the Gram kernel below which it starts: it costs about K / 2
 # multiply-adds per sample, each halving of K one pass over memory.
 _GRAM_MAX_ROWS = 128
 
-
 # Elements per column strip of the Gram kernel's running sums.
 _GRAM_TILE = 1 << 20
-
 
 # Most worker threads (one axis each) used by allan_curve.
 _MAX_THREADS = 8

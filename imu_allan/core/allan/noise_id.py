@@ -17,23 +17,18 @@ from imu_allan.core.allan.taus import _check_method, _DIFF_ORDER
 #: (Riley & Greenhall 2004 recommend at least 30).
 MIN_ACF_POINTS = 30
 
-
 #: Fewest cluster averages for the B1 ratio; with 2 or 3 averages B1 carries no
 #: information (it is 1 for every noise type at N = 2).
 MIN_B1_POINTS = 4
 
-
 # Lowest alpha for which each variance converges (alpha + 2 d > 1).
 _ALPHA_MIN = {'overlapping': -2, 'nonoverlapping': -2, 'hadamard': -4}
-
 
 # Most cluster averages fed to the lag-1 autocorrelation test (see _identify_axis).
 _ACF_MAX_POINTS = 1 << 16
 
-
 # Marker of an alpha that the data could not decide (too few clusters).
 _ALPHA_UNKNOWN = -99
-
 
 # Boundaries on the local slope mu of log AVAR against log tau between neighbouring
 # alphas 2 | 1 | 0 | -1 | -2 | -3 | -4.  White PM falls as tau^-2; flicker PM as

@@ -15,14 +15,11 @@ from imu_allan.errors import InputError
 #: Estimators of :func:`allan_curve`.
 METHODS = ('overlapping', 'nonoverlapping', 'hadamard')
 
-
 #: Named tau sets of :func:`tau_grid`.
 TAU_KINDS = ('octave', 'dense', 'all')
 
-
 #: Log-spaced points per decade of the 'dense' tau set.
 DENSE_PER_DECADE = 10
-
 
 # Order of the phase difference (d in Greenhall's notation) of each method.
 _DIFF_ORDER = {'overlapping': 2, 'nonoverlapping': 2, 'hadamard': 3}
