@@ -19,7 +19,6 @@ from pathlib import Path
 import statistics
 import sys
 import time
-from typing import Optional
 
 import numpy as np
 
@@ -65,8 +64,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def analyze_input(path: Path, topic: Optional[str], config: SessionConfig,
-                  quiet: bool = False, progress: Optional[bool] = None):
+def analyze_input(path: Path, topic: str | None, config: SessionConfig,
+                  quiet: bool = False, progress: bool | None = None):
     """
     Stream one input through a Session and fit it.
 

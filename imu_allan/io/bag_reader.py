@@ -24,7 +24,7 @@ a warning.
 """
 
 from pathlib import Path
-from typing import Iterator, List, Optional, Tuple
+from typing import Iterator
 
 import numpy as np
 
@@ -44,7 +44,7 @@ def _is_imu(topic: _Topic) -> bool:
     return topic.msgtype in IMU_MSGTYPES
 
 
-def _describe(topics: List[_Topic]) -> str:
+def _describe(topics: list[_Topic]) -> str:
     """List topics for an error message: '/a (type, 10 messages), ...'."""
     parts = []
     for topic in topics[:_MAX_LISTED]:
@@ -56,7 +56,7 @@ def _describe(topics: List[_Topic]) -> str:
     return ', '.join(parts) if parts else 'none'
 
 
-def list_topics(path: PathLike) -> List[TopicInfo]:
+def list_topics(path: PathLike) -> list[TopicInfo]:
     """
     List every topic of a bag with its type and message count.
 
@@ -83,7 +83,7 @@ def list_topics(path: PathLike) -> List[TopicInfo]:
         backend.close()
 
 
-def list_imu_topics(path: PathLike) -> List[TopicInfo]:
+def list_imu_topics(path: PathLike) -> list[TopicInfo]:
     """
     List the sensor_msgs/Imu topics of a bag.
 
@@ -134,7 +134,7 @@ class ImuSource:
     """
 
     def __init__(self, path: Path, backend: _Backend, topic: _Topic,
-                 warnings: List[str]) -> None:
+                 warnings: list[str]) -> None:
         self.path = path
         self.topic = topic.name
         self.msgtype = topic.msgtype
@@ -165,7 +165,7 @@ class ImuSource:
         """
         if block_size < 1:
             raise ValueError('block_size must be positive')
-        pending: List[_Piece] = []
+        pending: list[_Piece] = []
         n_pending = n_total = n_bad = n_zero = 0
         for piece in self._backend.pieces(self._topic):
             n_bad += piece.n_bad
@@ -211,7 +211,7 @@ class ImuSource:
         self.close()
 
 
-def _split(pieces: List[_Piece], n: int) -> Tuple[ImuBlock, Optional[_Piece]]:
+def _split(pieces: list[_Piece], n: int) -> tuple[ImuBlock, _Piece | None]:
     """Concatenate pieces and cut the first n messages off as a block."""
     if len(pieces) == 1:
         joined = pieces[0]
@@ -225,7 +225,7 @@ def _split(pieces: List[_Piece], n: int) -> Tuple[ImuBlock, Optional[_Piece]]:
     return block, _Piece(joined.recv_ns[n:], joined.stamp_ns[n:], joined.samples[n:], 0)
 
 
-def open_imu(path: PathLike, topic: Optional[str] = None) -> ImuSource:
+def open_imu(path: PathLike, topic: str | None = None) -> ImuSource:
     """
     Open the sensor_msgs/Imu topic of a bag for reading.
 
@@ -249,7 +249,7 @@ def open_imu(path: PathLike, topic: Optional[str] = None) -> ImuSource:
         and no ``topic``, or ``topic`` is missing or not of type Imu.
 
     """
-    warnings: List[str] = []
+    warnings: list[str] = []
     backend = _open_backend(path, warnings)
     try:
         chosen = _choose_topic(Path(path), backend, topic)
@@ -259,7 +259,7 @@ def open_imu(path: PathLike, topic: Optional[str] = None) -> ImuSource:
     return ImuSource(Path(path), backend, chosen, warnings)
 
 
-def _choose_topic(path: Path, backend: _Backend, name: Optional[str]) -> _Topic:
+def _choose_topic(path: Path, backend: _Backend, name: str | None) -> _Topic:
     topics = backend.topics()
     if not topics:
         raise InputError(f'{path}: empty bag (no topics)')

@@ -22,7 +22,7 @@ from pathlib import Path
 import shutil
 import sqlite3
 import struct
-from typing import Optional, Sequence, Union
+from typing import Sequence
 import zlib
 
 from mcap.data_stream import RecordBuilder
@@ -65,7 +65,7 @@ CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,
                       timestamp INTEGER NOT NULL, data BLOB NOT NULL);
 """
 
-PathLike = Union[str, os.PathLike]
+PathLike = str | os.PathLike
 
 
 def _align8(offset: int) -> int:
@@ -230,7 +230,7 @@ def serialize_imu(stamps_ns: np.ndarray, samples: np.ndarray, frame_id: str = 'i
     return serializer(stamps_ns, samples)
 
 
-def _resolve_storage(path: Path, storage: Optional[str]) -> tuple:
+def _resolve_storage(path: Path, storage: str | None) -> tuple:
     """Return (storage, is_directory) for an output path."""
     suffix = path.suffix.lower()
     by_suffix = {'.mcap': 'mcap', '.db3': 'sqlite3', '.bag': 'ros1'}.get(suffix)
@@ -470,7 +470,7 @@ def _write_ros1(bag_path: Path, topic: str, batches) -> None:
 
 def write_imu_bag(path: PathLike, stamps_ns: np.ndarray, samples: np.ndarray,
                   topic: str = '/imu/data', frame_id: str = 'imu_link',
-                  storage: Optional[str] = None, covariances: Optional[Sequence] = None,
+                  storage: str | None = None, covariances: Sequence | None = None,
                   latency_ns: int = DEFAULT_LATENCY_NS) -> None:
     """
     Write an Imu recording as a bag; storage follows the path.
@@ -552,9 +552,9 @@ def write_imu_bag(path: PathLike, stamps_ns: np.ndarray, samples: np.ndarray,
 
 
 def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
-               frame_id: str = 'imu_link', storage: Optional[str] = None,
-               columns: Optional[Sequence[str]] = None, rate_hz: Optional[float] = None,
-               start_ns: int = 0, covariances: Optional[Sequence] = None) -> int:
+               frame_id: str = 'imu_link', storage: str | None = None,
+               columns: Sequence[str] | None = None, rate_hz: float | None = None,
+               start_ns: int = 0, covariances: Sequence | None = None) -> int:
     """
     Convert a CSV log (DESIGN.md CSV contract) into an Imu bag.
 

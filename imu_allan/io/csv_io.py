@@ -16,7 +16,7 @@ that fails does a line-by-line pass run, to name the first bad row.  A 1,000,000
 import gzip
 import io
 from pathlib import Path
-from typing import NamedTuple, Optional, Sequence, Union
+from typing import NamedTuple, Sequence
 import warnings
 import zlib
 
@@ -28,7 +28,7 @@ from imu_allan.errors import InputError
 #: Names accepted for the time column [s].
 TIME_COLUMNS = ('t', 'time', 't_s')
 
-PathLike = Union[str, Path]
+PathLike = str | Path
 
 
 class CsvData(NamedTuple):
@@ -48,7 +48,7 @@ class CsvData(NamedTuple):
 
     """
 
-    t_s: Optional[np.ndarray]
+    t_s: np.ndarray | None
     samples: np.ndarray
     columns: tuple
     rate_hz: float
@@ -69,7 +69,7 @@ def _read_bytes(path: Path) -> bytes:
     return raw
 
 
-def _split_header(raw: bytes, path: Path) -> tuple[Optional[list], bytes, int]:
+def _split_header(raw: bytes, path: Path) -> tuple[list | None, bytes, int]:
     """
     Separate leading comment/blank lines and an optional header from the data.
 
@@ -115,7 +115,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _parse_fast(data: bytes, n_cols: int) -> Optional[np.ndarray]:
+def _parse_fast(data: bytes, n_cols: int) -> np.ndarray | None:
     """
     Parse the data rows in one C-level call; None when anything is off.
 
@@ -176,8 +176,8 @@ def _line_of_row(data: bytes, row: int, first_line: int) -> int:
     return first_line + row
 
 
-def read_csv(path: PathLike, columns: Optional[Sequence[str]] = None,
-             rate_hz: Optional[float] = None) -> CsvData:
+def read_csv(path: PathLike, columns: Sequence[str] | None = None,
+             rate_hz: float | None = None) -> CsvData:
     """
     Read an IMU (or any numeric) record from a CSV file, optionally gzip-compressed.
 

@@ -11,7 +11,6 @@ tests.  Only payloads that fit neither layout go through rosbags' own deserialis
 imported on demand.
 """
 
-from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -106,7 +105,7 @@ def _fields_dtype(doubles_offset: int, big: bool, ros1: bool, itemsize: int,
                      'offsets': offsets, 'itemsize': itemsize})
 
 
-def _fallback_decode(payload: bytes, ros1: bool) -> Optional[Tuple[int, list]]:
+def _fallback_decode(payload: bytes, ros1: bool) -> tuple[int, list] | None:
     """Decode one odd payload with rosbags; return (stamp_ns, six values) or None."""
     from rosbags.typesys import get_typestore, Stores
 
@@ -123,7 +122,7 @@ def _fallback_decode(payload: bytes, ros1: bool) -> Optional[Tuple[int, list]]:
 
 
 def _imu_layout(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
-                ros1: bool) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                ros1: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Where the doubles of each serialised Imu message start, and in which byte order.
 
@@ -158,7 +157,7 @@ def _imu_layout(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
 
 
 def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
-                        encoding: str = 'cdr') -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        encoding: str = 'cdr') -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Decode many serialised sensor_msgs/Imu payloads held in one byte buffer.
 
@@ -228,7 +227,7 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     return stamp_ns, samples, ok
 
 
-def decode_imu_cdr(payloads) -> Tuple[np.ndarray, np.ndarray]:
+def decode_imu_cdr(payloads) -> tuple[np.ndarray, np.ndarray]:
     """
     Decode a list of serialised ROS 2 sensor_msgs/msg/Imu messages (CDR) at once.
 
@@ -260,7 +259,7 @@ def decode_imu_cdr(payloads) -> Tuple[np.ndarray, np.ndarray]:
 
 
 def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
-                            linear_acceleration_covariance) -> List[Optional[bytes]]:
+                            linear_acceleration_covariance) -> list[bytes | None]:
     """
     Copy serialised ROS 2 sensor_msgs/msg/Imu messages (CDR) with new covariances.
 
@@ -303,7 +302,7 @@ def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
             for a, n, ok in zip(starts.tolist(), lengths.tolist(), fits.tolist())]
 
 
-def _cdr_doubles_offset(raw: bytes) -> Tuple[int, bool] | None:
+def _cdr_doubles_offset(raw: bytes) -> tuple[int, bool] | None:
     """(offset of orientation.x, big-endian) of one plain ROS 2 CDR Imu payload, or None."""
     if len(raw) < 16 or raw[0] != 0 or raw[1] > 1:
         return None
@@ -357,7 +356,7 @@ class CovariancePatch:
                          raw[at + 296:]))
 
 
-def _join(payloads) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _join(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Concatenate byte strings; return (buffer uint8, (n,) starts, (n,) lengths)."""
     lengths = np.fromiter(map(len, payloads), np.int64, len(payloads))
     starts = np.zeros(lengths.size, np.int64)

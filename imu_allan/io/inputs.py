@@ -15,7 +15,7 @@ import stat
 import sys
 import threading
 import time
-from typing import Callable, Iterator, Optional
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -55,7 +55,7 @@ class Progress:
     tty_interval_s = 0.2
     log_interval_s = 5.0
 
-    def __init__(self, label: str, total: Optional[int] = None, unit: str = 'messages'):
+    def __init__(self, label: str, total: int | None = None, unit: str = 'messages'):
         self.label, self.total, self.unit = label, total, unit
         self.stage = 'reading'
         self.done = 0
@@ -66,7 +66,7 @@ class Progress:
         self._thread = threading.Thread(target=self._loop, daemon=True)
         self._thread.start()
 
-    def update(self, done: int, stage: Optional[str] = None) -> None:
+    def update(self, done: int, stage: str | None = None) -> None:
         """Record progress: items done so far, and optionally a new stage name."""
         self.done = done
         if stage is not None:
@@ -146,8 +146,8 @@ class InputSource:
 
     """
 
-    def __init__(self, path: Path, label: str, kind: str, topic: Optional[str],
-                 n_messages: Optional[int], blocks: Callable[[], Iterator],
+    def __init__(self, path: Path, label: str, kind: str, topic: str | None,
+                 n_messages: int | None, blocks: Callable[[], Iterator],
                  warnings: list, close: Callable[[], None] = lambda: None):
         self.path, self.label, self.kind, self.topic = path, label, kind, topic
         self.n_messages, self.warnings = n_messages, warnings
@@ -196,7 +196,7 @@ def check_path(path: Path) -> None:
         raise InputError(f'{path}: permission denied')
 
 
-def open_input(path, topic: Optional[str] = None) -> InputSource:
+def open_input(path, topic: str | None = None) -> InputSource:
     """
     Open any supported input for streaming.
 
@@ -247,9 +247,9 @@ def open_input(path, topic: Optional[str] = None) -> InputSource:
 
 
 def stream_input(source: InputSource, config: SessionConfig,
-                 on_warning: Optional[Callable[[str], None]] = None,
-                 progress: Optional[Progress] = None,
-                 tap: Optional[Callable[[Session, np.ndarray], None]] = None) -> Session:
+                 on_warning: Callable[[str], None] | None = None,
+                 progress: Progress | None = None,
+                 tap: Callable[[Session, np.ndarray], None] | None = None) -> Session:
     """
     Feed every block of an input through a new pipeline Session (the node's object).
 

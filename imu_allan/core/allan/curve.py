@@ -5,7 +5,7 @@ Part of :mod:`imu_allan.core.allan`.
 """
 
 import math
-from typing import NamedTuple, Optional, Sequence, Union
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -66,9 +66,9 @@ class AllanCurve(NamedTuple):
 
 
 def allan_curve(y: np.ndarray, rate_hz: float,
-                taus: Union[str, Sequence[float], np.ndarray] = 'octave',
+                taus: str | Sequence[float] | np.ndarray = 'octave',
                 method: str = 'overlapping', confidence: float = 0.683,
-                alpha: Optional[Union[int, np.ndarray]] = None) -> AllanCurve:
+                alpha: int | np.ndarray | None = None) -> AllanCurve:
     """
     Allan (or Hadamard) curve with noise-aware confidence bounds for every axis.
 

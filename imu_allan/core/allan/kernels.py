@@ -10,7 +10,6 @@ Part of :mod:`imu_allan.core.allan`.
 from concurrent.futures import ThreadPoolExecutor
 import math
 import os
-from typing import Optional
 
 import numpy as np
 
@@ -140,7 +139,7 @@ def _diff_sumsq(x: np.ndarray, m: int, order: int) -> float:
 
 
 def _octave_sums(col: np.ndarray, mean: float, levels: int,
-                 blocks: Optional[list]) -> tuple[np.ndarray, np.ndarray]:
+                 blocks: list | None) -> tuple[np.ndarray, np.ndarray]:
     """
     Overlapping Allan sums of squares at m = 1, 2, 4, ... 2^(levels-1), one axis.
 
@@ -195,7 +194,7 @@ def _octave_sums(col: np.ndarray, mean: float, levels: int,
 
 
 def _pyramid_sums(col: np.ndarray, mean: float, levels: int, sums: np.ndarray,
-                  big: np.ndarray, blocks: Optional[list], keep_top: bool) -> None:
+                  big: np.ndarray, blocks: list | None, keep_top: bool) -> None:
     """
     Small octave levels from a pyramid of moving sums, fused in cache-sized tiles.
 
@@ -247,7 +246,7 @@ def _pyramid_sums(col: np.ndarray, mean: float, levels: int, sums: np.ndarray,
 
 
 def _double_in_place(buf: np.ndarray, j: int, sums: np.ndarray, big: np.ndarray,
-                     blocks: Optional[list]) -> None:
+                     blocks: list | None) -> None:
     """
     Octave level m = 2^j from the moving sums S_m in buf, leaving S_2m there.
 
@@ -332,7 +331,7 @@ def _is_octave(m: np.ndarray) -> bool:
 
 
 def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarray,
-               method: str, identify: bool) -> tuple[np.ndarray, Optional[np.ndarray]]:
+               method: str, identify: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """
     Return the sums of squared phase differences and maybe alpha of axis a, (k,) each.
 

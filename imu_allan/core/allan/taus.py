@@ -5,7 +5,7 @@ Part of :mod:`imu_allan.core.allan`.
 """
 
 import math
-from typing import Sequence, Union
+from typing import Sequence
 
 import numpy as np
 
@@ -94,7 +94,7 @@ def tau_grid(n_samples: int, kind: str, method: str = 'overlapping') -> np.ndarr
                      'tau values in seconds')
 
 
-def cluster_sizes(taus: Union[str, Sequence[float], np.ndarray], n_samples: int,
+def cluster_sizes(taus: str | Sequence[float] | np.ndarray, n_samples: int,
                   rate_hz: float, method: str = 'overlapping') -> np.ndarray:
     """
     Cluster sizes for a named tau set or for explicit tau values.

@@ -6,7 +6,7 @@ Part of :mod:`imu_allan.io.bag_reader` (see its docstring for the layouts and sp
 
 import os
 from pathlib import Path
-from typing import Callable, Iterator, List, NamedTuple, Optional, Union
+from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
@@ -18,7 +18,7 @@ DEFAULT_BLOCK_SIZE = 65536
 _FETCH_ROWS = 32768
 _MCAP_MAGIC = b'\x89MCAP0\r\n'
 
-PathLike = Union[str, os.PathLike]
+PathLike = str | os.PathLike
 
 
 class TopicInfo(NamedTuple):
@@ -26,7 +26,7 @@ class TopicInfo(NamedTuple):
 
     topic: str
     msgtype: str
-    n_messages: Optional[int]
+    n_messages: int | None
 
 
 class ImuBlock(NamedTuple):
@@ -55,7 +55,7 @@ class _Topic(NamedTuple):
 
     name: str
     msgtype: str
-    n_messages: Optional[int]
+    n_messages: int | None
     encoding: str
 
 
@@ -75,7 +75,7 @@ class _Piece(NamedTuple):
 
 #: Header of an MCAP Message record: opcode, record length, channel id, log_time.
 def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns: np.ndarray,
-                encoding: str, decompress: Optional[Callable[[bytes], bytes]]) -> _Piece:
+                encoding: str, decompress: Callable[[bytes], bytes] | None) -> _Piece:
     """Decode payloads into a _Piece, dropping undecodable ones."""
     if decompress is not None:
         # rosbag2 'message' compression: every payload is its own zstd frame.
@@ -94,13 +94,13 @@ class _Backend:
 
     storage = ''
 
-    def __init__(self, path: Path, warnings: List[str],
-                 decompress: Optional[Callable[[bytes], bytes]] = None) -> None:
+    def __init__(self, path: Path, warnings: list[str],
+                 decompress: Callable[[bytes], bytes] | None = None) -> None:
         self.path = path
         self.warnings = warnings
         self.decompress = decompress  # per-message decompression of rosbag2, or None
 
-    def topics(self) -> List[_Topic]:
+    def topics(self) -> list[_Topic]:
         """Return every topic with its type, count (or None) and encoding."""
         raise NotImplementedError
 

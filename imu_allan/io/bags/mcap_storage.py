@@ -7,7 +7,7 @@ Part of :mod:`imu_allan.io.bag_reader`.
 import mmap
 from pathlib import Path
 import struct
-from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Tuple, Union
+from typing import Callable, Iterator, NamedTuple
 
 import lz4.frame
 from mcap.exceptions import McapError
@@ -32,7 +32,7 @@ class _ChunkInfo(NamedTuple):
     record_pos: int
     body_end: int
     complete: bool
-    indexes: Optional[Dict[int, np.ndarray]]
+    indexes: dict[int, np.ndarray] | None
 
 
 class _McapBackend(_Backend):
@@ -40,16 +40,16 @@ class _McapBackend(_Backend):
 
     storage = 'mcap'
 
-    def __init__(self, path: Path, warnings: List[str],
-                 decompress: Optional[Callable[[bytes], bytes]] = None) -> None:
+    def __init__(self, path: Path, warnings: list[str],
+                 decompress: Callable[[bytes], bytes] | None = None) -> None:
         super().__init__(path, warnings, decompress)
         self.zstd = zstandard.ZstdDecompressor()
         self.file = open(path, 'rb')
         self.mm = mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ)
         self.u8 = np.frombuffer(self.mm, np.uint8)
-        self.schemas: Dict[int, str] = {}
-        self.channels: Dict[int, Tuple[str, int, str]] = {}
-        self.counts: Optional[Dict[int, int]] = None
+        self.schemas: dict[int, str] = {}
+        self.channels: dict[int, tuple[str, int, str]] = {}
+        self.counts: dict[int, int] | None = None
         try:
             self._open()
         except BaseException as err:
@@ -113,7 +113,7 @@ class _McapBackend(_Backend):
 
     def _discover(self) -> None:
         """Scan the data section for channels and message counts (no usable summary)."""
-        counts: Dict[int, int] = {}
+        counts: dict[int, int] = {}
         for item in self._scan():
             if isinstance(item, _ChunkInfo):
                 if item.indexes is not None and all(c in self.channels for c in item.indexes):
@@ -133,7 +133,7 @@ class _McapBackend(_Backend):
         self.counts = counts
 
     # -- data section scan ----------------------------------------------------------
-    def _scan(self) -> Iterator[Union[_ChunkInfo, np.ndarray]]:
+    def _scan(self) -> Iterator[_ChunkInfo | np.ndarray]:
         """
         Walk the records of the data section.
 
@@ -146,8 +146,8 @@ class _McapBackend(_Backend):
         """
         mm, end = self.mm, self.data_end
         pos = self.data_start
-        pending: Optional[_ChunkInfo] = None
-        loose: List[int] = []
+        pending: _ChunkInfo | None = None
+        loose: list[int] = []
         while True:
             if pos + 9 > end:
                 break
@@ -195,7 +195,7 @@ class _McapBackend(_Backend):
         if loose:
             yield np.array(loose, np.int64)
 
-    def _chunk_data(self, chunk: _ChunkInfo) -> Optional[bytes]:
+    def _chunk_data(self, chunk: _ChunkInfo) -> bytes | None:
         """Return a chunk's records decompressed (what is readable, if cut short)."""
         mm, body = self.mm, chunk.record_pos + 9
         try:
@@ -282,9 +282,9 @@ class _McapBackend(_Backend):
         return np.concatenate(runs) if runs else np.zeros(0, np.int64)
 
     # -- reading --------------------------------------------------------------------
-    def topics(self) -> List[_Topic]:
+    def topics(self) -> list[_Topic]:
         """Return one entry per topic (channels with the same topic are merged)."""
-        found: Dict[str, _Topic] = {}
+        found: dict[str, _Topic] = {}
         for channel_id, (name, schema_id, encoding) in sorted(self.channels.items()):
             count = (self.counts or {}).get(channel_id, 0)
             msgtype = self.schemas.get(schema_id, '')
@@ -296,7 +296,7 @@ class _McapBackend(_Backend):
         return list(found.values())
 
     def _message_piece(self, buf: np.ndarray, offsets: np.ndarray, wanted: set,
-                       encoding: str) -> Optional[_Piece]:
+                       encoding: str) -> _Piece | None:
         """Decode the Message records at (k,) offsets of buf that belong to wanted."""
         if offsets.size == 0:
             return None

@@ -6,7 +6,7 @@ Part of :mod:`imu_allan.io.bag_reader`.
 
 from pathlib import Path
 import struct
-from typing import Dict, Iterator, List
+from typing import Iterator
 
 import numpy as np
 
@@ -20,7 +20,7 @@ class _Ros1Backend(_Backend):
 
     storage = 'ros1'
 
-    def __init__(self, path: Path, warnings: List[str]) -> None:
+    def __init__(self, path: Path, warnings: list[str]) -> None:
         super().__init__(path, warnings)
         from rosbags.rosbag1 import Reader, ReaderError
 
@@ -32,9 +32,9 @@ class _Ros1Backend(_Backend):
             raise InputError(f'{path}: unreadable ROS 1 bag ({err}); a bag cut short needs '
                              '`rosbag reindex`') from None
 
-    def topics(self) -> List[_Topic]:
+    def topics(self) -> list[_Topic]:
         """Return one entry per topic, with ROS 1 type names (sensor_msgs/Imu)."""
-        found: Dict[str, _Topic] = {}
+        found: dict[str, _Topic] = {}
         for conn in self.reader.connections:
             msgtype = conn.msgtype.replace('/msg/', '/')
             if conn.topic in found:
@@ -47,8 +47,8 @@ class _Ros1Backend(_Backend):
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield the topic's messages in time order, decoded in batches."""
         conns = [c for c in self.reader.connections if c.topic == topic.name]
-        recv: List[int] = []
-        payloads: List[bytes] = []
+        recv: list[int] = []
+        payloads: list[bytes] = []
         try:
             for _, stamp, raw in self.reader.messages(connections=conns):
                 recv.append(stamp)

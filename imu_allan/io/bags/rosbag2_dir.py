@@ -7,7 +7,7 @@ Part of :mod:`imu_allan.io.bag_reader`.
 from pathlib import Path, PurePath
 import re
 import tempfile
-from typing import Callable, Dict, Iterator, List, Optional, Tuple
+from typing import Callable, Iterator
 
 import yaml
 import zstandard
@@ -36,8 +36,8 @@ def _sniff(path: Path) -> bytes:
         raise InputError(f'{path}: cannot read ({err.strerror})') from None
 
 
-def _open_file(path: Path, warnings: List[str],
-               decompress: Optional[Callable[[bytes], bytes]] = None) -> _Backend:
+def _open_file(path: Path, warnings: list[str],
+               decompress: Callable[[bytes], bytes] | None = None) -> _Backend:
     """Open one storage file, recognised by its signature rather than its suffix."""
     head = _sniff(path)
     if not head:
@@ -64,10 +64,10 @@ def _natural_key(path: Path) -> list:
 class _Rosbag2DirBackend(_Backend):
     """A rosbag2 directory: metadata.yaml (any version) plus storage files."""
 
-    def __init__(self, path: Path, warnings: List[str]) -> None:
+    def __init__(self, path: Path, warnings: list[str]) -> None:
         super().__init__(path, warnings)
-        self.tmp: Optional[tempfile.TemporaryDirectory] = None
-        self.parts: List[_Backend] = []
+        self.tmp: tempfile.TemporaryDirectory | None = None
+        self.parts: list[_Backend] = []
         info = self._metadata()
         files, decompress = self._files(info)
         try:
@@ -79,7 +79,7 @@ class _Rosbag2DirBackend(_Backend):
         self.storage = self.parts[0].storage
         self._topics = self._merge_topics(info)
 
-    def _metadata(self) -> Optional[dict]:
+    def _metadata(self) -> dict | None:
         meta = self.path / 'metadata.yaml'
         if not meta.exists():
             self.warnings.append(f'{self.path}: no metadata.yaml; reading the storage files '
@@ -96,10 +96,10 @@ class _Rosbag2DirBackend(_Backend):
                                  'directly')
             return None
 
-    def _files(self, info: Optional[dict]) -> Tuple[List[Path], Optional[Callable]]:
+    def _files(self, info: dict | None) -> tuple[list[Path], Callable | None]:
         """Return the storage files in order and the per-message decompressor, if any."""
         decompress = None
-        listed: List[Path] = []
+        listed: list[Path] = []
         if info is not None:
             mode = str(info.get('compression_mode') or '').lower()
             fmt = str(info.get('compression_format') or '').lower()
@@ -140,8 +140,8 @@ class _Rosbag2DirBackend(_Backend):
             raise InputError(f'{packed}: cannot decompress ({err})') from None
         return target
 
-    def _merge_topics(self, info: Optional[dict]) -> Dict[str, _Topic]:
-        merged: Dict[str, _Topic] = {}
+    def _merge_topics(self, info: dict | None) -> dict[str, _Topic]:
+        merged: dict[str, _Topic] = {}
         for part in self.parts:
             for topic in part.topics():
                 old = merged.get(topic.name)
@@ -162,7 +162,7 @@ class _Rosbag2DirBackend(_Backend):
                 merged[name] = merged[name]._replace(n_messages=count)
         return merged
 
-    def topics(self) -> List[_Topic]:
+    def topics(self) -> list[_Topic]:
         """Return the topics of all storage files."""
         return list(self._topics.values())
 
@@ -191,7 +191,7 @@ class _Rosbag2DirBackend(_Backend):
             self.tmp.cleanup()
 
 
-def _open_backend(path: PathLike, warnings: List[str]) -> _Backend:
+def _open_backend(path: PathLike, warnings: list[str]) -> _Backend:
     path = Path(path)
     if not path.exists():
         raise InputError(f'{path}: no such file or directory')

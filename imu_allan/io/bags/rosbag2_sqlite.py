@@ -8,7 +8,7 @@ import mmap
 from pathlib import Path
 import sqlite3
 import struct
-from typing import Callable, Dict, Iterator, List, Optional, Tuple
+from typing import Callable, Iterator
 from urllib.parse import quote
 
 import numpy as np
@@ -36,8 +36,8 @@ class _SqliteBackend(_Backend):
 
     storage = 'sqlite3'
 
-    def __init__(self, path: Path, warnings: List[str],
-                 decompress: Optional[Callable[[bytes], bytes]] = None) -> None:
+    def __init__(self, path: Path, warnings: list[str],
+                 decompress: Callable[[bytes], bytes] | None = None) -> None:
         super().__init__(path, warnings, decompress)
         try:
             self.conn = _connect_sqlite(path)
@@ -56,14 +56,14 @@ class _SqliteBackend(_Backend):
                 total = self.conn.execute('SELECT count(*) FROM messages').fetchone()[0]
         except sqlite3.DatabaseError as err:
             raise InputError(f'{path}: damaged or not a sqlite3 database ({err})') from None
-        self.ids: Dict[str, List[int]] = {}
-        self._topics: Dict[str, _Topic] = {}
+        self.ids: dict[str, list[int]] = {}
+        self._topics: dict[str, _Topic] = {}
         for topic_id, name, msgtype, fmt in rows:
             self.ids.setdefault(name, []).append(topic_id)
             count = total if total is not None else metadata_counts.get(name)
             self._topics.setdefault(name, _Topic(name, msgtype, count, fmt))
 
-    def _metadata_counts(self) -> Dict[str, int]:
+    def _metadata_counts(self) -> dict[str, int]:
         """Return topic counts of the metadata table (schema 3+) of a one-file bag."""
         try:
             row = self.conn.execute(
@@ -78,7 +78,7 @@ class _SqliteBackend(_Backend):
                 ValueError):
             return {}
 
-    def topics(self) -> List[_Topic]:
+    def topics(self) -> list[_Topic]:
         """Return every topic of the database."""
         return list(self._topics.values())
 
@@ -151,7 +151,7 @@ class _NotPlain(Exception):
     """The sqlite3 file is not one the page reader vouches for: use SQL."""
 
 
-def _varint(u8: np.ndarray, pos: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+def _varint(u8: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     Decode one sqlite varint at each offset (big-endian groups of 7 bits, 9th byte 8).
 
@@ -241,7 +241,7 @@ class _SqlitePages:
             raise _NotPlain('not the rosbag2 messages layout')
         self.root = int(row[0])
 
-    def locate(self, topic_ids: List[int], expected: int):
+    def locate(self, topic_ids: list[int], expected: int):
         """
         Return (u8, starts, lengths, recv_ns) of the topic's payloads, time-ordered.
 
@@ -270,7 +270,7 @@ class _SqlitePages:
 
     def _leaves(self, u8: np.ndarray, page_size: int, n_pages: int) -> np.ndarray:
         """Page numbers of the table's leaf pages in key order."""
-        leaves: List[np.ndarray] = []
+        leaves: list[np.ndarray] = []
         stack = [np.array([self.root], np.int64)]
         visited = 0
         while stack:
@@ -312,7 +312,7 @@ class _SqlitePages:
         return np.concatenate(leaves) if leaves else np.zeros(0, np.int64)
 
     def _cells(self, u8: np.ndarray, leaves: np.ndarray, page_size: int, usable: int,
-               topic_ids: List[int], expected: int):
+               topic_ids: list[int], expected: int):
         parts = []
         # Batches of leaves keep the numpy temporaries in the CPU caches.
         for k in range(0, leaves.size, 2048):
@@ -332,7 +332,7 @@ class _SqlitePages:
 
     @staticmethod
     def _leaf_cells(u8: np.ndarray, leaves: np.ndarray, page_size: int, usable: int,
-                    topic_ids: List[int]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    topic_ids: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return (data offset, data length, timestamp) of the topic's rows in leaves."""
         base = (leaves - 1) * page_size
         n_cells = (u8[base + 3].astype(np.int64) << 8) | u8[base + 4]
