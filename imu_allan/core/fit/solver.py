@@ -328,17 +328,22 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
 _FIRST_STEP = 0.02
 #: A profile still below its threshold 1e7 x away from the estimate is unbounded there.
 _MAX_REACH = math.log(1e7)
-#: Forward-difference step in log(phi) for the variable-projection gradient.
+#: Forward-difference step in log(phi) for the variable-projection Jacobian.
 _H = 1e-7
+_EXP_H = math.exp(_H)
 #: Weight w of the order penalty on interchangeable terms held in a profile (chi-square
 #: per squared log-ratio: a swap by 0.1 % costs 1e-2).
 _ORDER_WEIGHT = 1e4
-_EXP_H = math.exp(_H)
+#: Relative drop of J below which a Levenberg-Marquardt polish stops (J is a chi-square:
+#: 1e-7 of it is far below what moves an interval end or a model choice).
+_LM_FTOL = 1e-7
+#: Most Levenberg-Marquardt iterations of one polish.
+_LM_MAX_ITER = 100
 
 
 def _polish_lm(residual_jac, x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     """
-    Levenberg-Marquardt from x within bounds (k, 2), projected; keep x unless it improves.
+    Levenberg-Marquardt from x within bounds (k, 2), projected; only improving steps count.
 
     ``residual_jac(x)`` returns the residual vector r and its Jacobian; J = r^T r.
     Parameters at a bound whose gradient pushes them out are held there (an active
@@ -386,13 +391,6 @@ def _polish_lm(residual_jac, x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
         if done:
             break
     return x
-
-
-#: Relative drop of J below which a Levenberg-Marquardt polish stops (J is a chi-square:
-#: 1e-7 of it is far below what moves an interval end or a model choice).
-_LM_FTOL = 1e-7
-#: Most Levenberg-Marquardt iterations of one polish.
-_LM_MAX_ITER = 100
 
 
 def _polish_1d(objective, lo: float, hi: float, x0: float, f0: float) -> float:
