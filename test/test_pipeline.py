@@ -339,6 +339,20 @@ def test_any_block_sizes_give_identical_results(kind):
         assert_allclose(s.curve().avar, whole.curve().avar, rtol=1e-12)
 
 
+def test_jittered_regular_stamps_give_identical_stats_for_any_blocks():
+    # Ordinary windows are judged together; the jitter sums must still come out the
+    # same, to the last bit, however the record is cut.
+    t, y = _record(30_000, seed=11, rate_hz=200.0)
+    rng = np.random.default_rng(12)
+    t = t + rng.integers(-50_000, 50_000, t.size)         # +-1 % of the 5 ms period
+    whole = _feed(Session(), t, y, block=t.size)
+    assert not whole.stats.irregular_stamps and whole.stats.jitter_rel > 0
+    for seed, max_block in [(1, 7), (2, 150), (3, 5_000)]:
+        s = _feed_random_blocks(Session(), t, y, seed, max_block)
+        assert s.stats == whole.stats
+        assert_allclose(s.curve().avar, whole.curve().avar, rtol=1e-12)
+
+
 def _resume(tmp_path, t, y, cut: int, lost: int = 0, node_style: bool = False) -> Session:
     """Feed t[:cut], checkpoint, load, drop ``lost`` samples, feed the rest."""
     first = _feed_random_blocks(Session(), t[:cut], y[:cut], 4, 700)

@@ -156,10 +156,10 @@ class _StampClock:
     def _note_ordinary(self, steps: np.ndarray) -> None:
         """Note the jitter of whole ordinary windows (see :meth:`_ordinary_windows`)."""
         w = steps.reshape(-1, _CLOCK_WINDOW).astype(np.float64)
-        jitter = w.std(axis=1) / w.mean(axis=1)
-        self._jitter_sq += float(np.sum(jitter ** 2)) * _CLOCK_WINDOW
-        self._jitter_n += steps.size
-        self.stats.jitter_rel = math.sqrt(self._jitter_sq / self._jitter_n)
+        # Summed window by window, in the order :meth:`_judge_clock` would: the same
+        # floating-point result whatever the block sizes.
+        for jitter in (w.std(axis=1) / w.mean(axis=1)).tolist():
+            self._note_jitter(jitter, _CLOCK_WINDOW)
         self._off_period_ns = None
 
     def _ingest_regular(self, stamp_ns: np.ndarray, samples: np.ndarray,
@@ -191,7 +191,8 @@ class _StampClock:
         aligned, ordinary = None, np.zeros(0, bool)
         while not judged and pos < n:
             start = max(pos, first_step)
-            if not self._step_buf:
+            # Irregular mode (it may start within this block) judges every window.
+            if not self._step_buf and not self.stats.irregular_stamps:
                 if aligned is None:
                     aligned, ordinary = start, self._ordinary_windows(steps[start:])
                 i = (start - aligned) // _CLOCK_WINDOW
