@@ -4,7 +4,7 @@ import json
 import re
 
 import numpy as np
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_equal
 import pytest
 
 from imu_allan.core.allan import overlapping_avar
@@ -405,3 +405,18 @@ def test_version_1_checkpoint_still_loads_with_its_rate(tmp_path):
     _feed(resumed, t[20_000:], y[20_000:], block=500)
     assert resumed.stats.irregular_stamps
     assert_allclose(resumed.rate_hz, 200.0, rtol=0.02)
+
+
+def test_axes_searched_in_worker_processes_give_the_same_result():
+    # imu-allan analyze searches one input's axes in two processes; the node in its own.
+    from imu_allan.pipeline.analysis import analyze
+
+    t, y = _record(20_000, seed=21, rate_hz=100.0)
+    s = _feed(Session(), t, y, block=5_000)
+    one, two = analyze(s, workers=1), analyze(s, workers=2)
+    for axis in one.fits:
+        a, b = one.fits[axis].optimised, two.fits[axis].optimised
+        assert a.keys() == b.keys() and one.fits[axis].terms == two.fits[axis].terms
+        for sym in a:   # exactly equal, NaN for NaN
+            assert_equal((a[sym].value, a[sym].ci95, a[sym].kind),
+                         (b[sym].value, b[sym].ci95, b[sym].kind), err_msg=f'{axis} {sym}')

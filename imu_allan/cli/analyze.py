@@ -26,7 +26,7 @@ from imu_allan import AXES
 from imu_allan.core.fit import json_num
 from imu_allan.errors import InputError
 from imu_allan.io.inputs import check_path, open_input, Progress, raw_tap, stream_input
-from imu_allan.pipeline.analysis import analyze
+from imu_allan.pipeline.analysis import analyze, start_workers
 from imu_allan.pipeline.session import SessionConfig
 
 
@@ -59,13 +59,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--format', choices=('text', 'json'), default='text')
     p.add_argument('--no-plot', action='store_true', help='skip the PNG/SVG figures')
     p.add_argument('--jobs', type=int, default=0,
-                   help='parallel inputs (default: the number of cores)')
+                   help='parallel inputs, or for one input the processes searching its '
+                        'axes (default: the number of cores, at most 2 for one input)')
     p.set_defaults(run=run)
     return p
 
 
 def analyze_input(path: Path, topic: str | None, config: SessionConfig,
-                  quiet: bool = False, progress: bool | None = None):
+                  quiet: bool = False, progress: bool | None = None, workers: int = 1):
     """
     Stream one input through a Session and fit it.
 
@@ -81,6 +82,9 @@ def analyze_input(path: Path, topic: str | None, config: SessionConfig,
         Do not print warnings on stderr (they are in the result anyway).
     progress : bool, optional
         Show a progress line on stderr for long inputs (default: not ``quiet``).
+    workers : int
+        Processes for the axes' effect searches (see
+        :func:`imu_allan.pipeline.analysis.analyze`).
 
     Returns
     -------
@@ -90,6 +94,8 @@ def analyze_input(path: Path, topic: str | None, config: SessionConfig,
     """
     start = time.monotonic()
     path = Path(path)
+    if workers > 1:
+        start_workers()     # its start-up overlaps the reading
 
     def warn(text):
         if not quiet:
@@ -109,7 +115,7 @@ def analyze_input(path: Path, topic: str | None, config: SessionConfig,
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
             result = analyze(session, source=source.label, raw=keeper,
-                             topic=source.topic or '')
+                             topic=source.topic or '', workers=workers)
         finally:
             if bar is not None:
                 bar.close()
@@ -252,7 +258,9 @@ def run(args) -> int:
         outcomes = _run_several(jobs, n_workers)
     else:
         from imu_allan.io.report import write_outputs
-        result, seconds = analyze_input(paths[0], args.topic, config)
+        # One input: its six axes are searched on the cores (several inputs: one each).
+        workers = args.jobs or min(2, os.cpu_count() or 1)
+        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers)
         with Progress(paths[0].name) as bar:
             bar.set_stage('writing the report of')
             files = write_outputs(result, outs[0], plot=not args.no_plot)

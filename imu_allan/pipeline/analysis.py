@@ -7,8 +7,10 @@ Kalman matrices, the Kalibr file and the Imu covariances in one frozen
 DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
 """
 
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 import math
+import multiprocessing
 
 import numpy as np
 
@@ -209,7 +211,47 @@ class AnalysisResult:
         }
 
 
-def analyze(session, source: str = '', raw=None, topic: str = '') -> AnalysisResult | None:
+def _search_job(job: tuple) -> AxisFit | None:
+    """Search one axis: (tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit)."""
+    tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit = job
+    try:
+        return search_axis(tau_s, avar, edf, rate_hz, n_samples, raw=raw,
+                           raw_rate_hz=raw_rate_hz, unit=unit).fit
+    except InputError:
+        return None
+
+
+def start_workers() -> None:
+    """
+    Start the fork server of :func:`analyze`'s worker processes now, in the background.
+
+    The search is pure Python and numpy on tiny matrices (GIL-bound): it runs in
+    processes, not threads.  They fork from a server process that has imported the
+    package once (forking a process with threads, the reader and the progress line,
+    can deadlock the child).  Called before the input is read, the server's start-up
+    (about a second) overlaps the reading.
+    """
+    if 'forkserver' not in multiprocessing.get_all_start_methods():
+        return      # Windows: the axes are searched one after another
+    ctx = multiprocessing.get_context('forkserver')
+    ctx.set_forkserver_preload(['imu_allan.pipeline.analysis'])
+    from multiprocessing import forkserver
+    forkserver.ensure_running()
+
+
+def _map_axes(jobs: list, workers: int) -> list:
+    """Run :func:`_search_job` over the axes, in worker processes when workers > 1."""
+    if (workers <= 1 or len(jobs) < 2
+            or 'forkserver' not in multiprocessing.get_all_start_methods()):
+        return [_search_job(job) for job in jobs]
+    start_workers()
+    ctx = multiprocessing.get_context('forkserver')
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
+        return list(pool.map(_search_job, jobs))
+
+
+def analyze(session, source: str = '', raw=None, topic: str = '',
+            workers: int = 1) -> AnalysisResult | None:
     """
     Fit every axis of a session's current Allan curve, effect search included.
 
@@ -229,6 +271,9 @@ def analyze(session, source: str = '', raw=None, topic: str = '') -> AnalysisRes
         from the Allan curve alone.
     topic : str
         The Imu topic of the samples (Kalibr's ``rostopic``); '' when unknown.
+    workers : int
+        Processes that search the axes (1: in this process, as the node does; the
+        results are the same either way).
 
     Returns
     -------
@@ -244,19 +289,15 @@ def analyze(session, source: str = '', raw=None, topic: str = '') -> AnalysisRes
         # A copy started before the stream's rate was known takes the session's.
         samples = raw.samples
         raw_rate = (raw.rate_hz or float(session.rate_hz)) / raw.factor
-    fits = {}
+    fits = dict.fromkeys(AXES)
+    jobs = {}
     for j, axis in enumerate(AXES):
         avar = curve.avar[:, j]
-        if not np.all(np.isfinite(avar)) or np.count_nonzero(avar > 0) < 3:
-            fits[axis] = None
-            continue
-        try:
-            fits[axis] = search_axis(
-                curve.tau_s, avar, curve.edf[:, j], curve.rate_hz, int(session.stats.n_used),
-                raw=None if samples is None else samples[:, j], raw_rate_hz=raw_rate,
-                unit=AXIS_UNITS[axis]).fit
-        except InputError:
-            fits[axis] = None
+        if np.all(np.isfinite(avar)) and np.count_nonzero(avar > 0) >= 3:
+            jobs[axis] = (curve.tau_s, avar, curve.edf[:, j], curve.rate_hz,
+                          int(session.stats.n_used),
+                          None if samples is None else samples[:, j], raw_rate, AXIS_UNITS[axis])
+    fits.update(zip(jobs, _map_axes(list(jobs.values()), workers)))
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
     return AnalysisResult(
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
