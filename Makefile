@@ -26,7 +26,7 @@ test: venv
 	$(PY) -m pytest -q test
 
 lint: venv
-	$(PY) -m pytest -q test/test_flake8.py test/test_pep257.py
+	$(PY) -m pytest -q test/test_flake8.py test/test_pep257.py test/test_mypy.py
 
 # Benchmarks print ratios against baselines measured in the same run (not timed tests).
 bench: venv

@@ -147,7 +147,7 @@ def role_node(args) -> int:
             acc = node.session.acc
             trace.append((now - marks['first'], node.n_received, _rss_mb(),
                           acc.state_nbytes() / 2 ** 20 if acc is not None else 0.0,
-                          len(node._buffer)))
+                          len(node.live.buffer)))
             marks['next'] = now + args.seconds / 20
         if 'first' in marks:
             if 'warm' not in marks and now - marks['first'] >= 2.0:

@@ -13,9 +13,10 @@ import pytest
 import yaml
 
 from imu_allan import AXES
+from imu_allan.core.exports import kalibr_yaml
 from imu_allan.core.fit import AxisFit, Param
 from imu_allan.core.kalman import (axis_densities, axis_noise_from, AxisDensities, discretise,
-                                   imu_covariance, kalibr_yaml, kalman_model, NOTES)
+                                   imu_covariance, kalman_model, NOTES)
 from imu_allan.core.model import avar_flicker, avar_gauss_markov, GM_PEAK_TAU
 from imu_allan.core.noise_params import AxisNoise, GaussMarkov
 from imu_allan.core.simulate import state_space_matrices

@@ -659,24 +659,24 @@ def test_the_node_keeps_raw_samples_for_the_diagnosis_periodogram(rig):
     t, y = _record(200.0, 20.0)
     r = rig()
     r.feed(t, y)
-    r.node._process()
-    view, raw = r.node._snapshot()
+    r.node.live.process()
+    view, raw = r.node.live.snapshot()
     # All 4000 samples fit in the default 262144 rows: kept as they came.
     assert raw.kept_rate_hz == 200.0 and view.stats.n_used == t.size
     assert_allclose(raw.samples, y, rtol=0, atol=0)
     small = rig(diagnose_raw_samples=1000)
     small.feed(t, y)
-    small.node._process()
-    raw = small.node._snapshot()[1]
+    small.node.live.process()
+    raw = small.node.live.snapshot()[1]
     # Full three times, so pairs were averaged three times: the means of eight samples.
     assert raw.kept_rate_hz == 25.0 and raw.samples.shape == (500, 6)
     assert_allclose(raw.samples, y.reshape(-1, 8, 6).mean(axis=1), rtol=1e-12)
     assert _call(small, 'reset').success
-    assert small.node._snapshot()[1] is None          # a new session, a new copy
+    assert small.node.live.snapshot()[1] is None          # a new session, a new copy
     none = rig(diagnose_raw_samples=0)
     none.feed(t[:1000], y[:1000])
-    none.node._process()
-    assert none.node._snapshot()[1] is None
+    none.node.live.process()
+    assert none.node.live.snapshot()[1] is None
 
 
 # ------------------------------------------------------ the executable itself

@@ -181,7 +181,7 @@ def spread_table(results: list, labels: list) -> tuple:
     head = ['axis', 'param', 'unit'] + list(labels) + ['mean', 'std', 'CV %', 'min', 'max',
                                                        'n']
     rows = ['| ' + ' | '.join(head) + ' |', '|' + ' --- |' * len(head)]
-    data = {}
+    data: dict[str, dict] = {}
     for axis in AXES:
         data[axis] = {}
         for sym in ('N', 'B', 'K', 'T_B'):
@@ -190,7 +190,7 @@ def spread_table(results: list, labels: list) -> tuple:
                 fit = r.fits.get(axis)
                 p = fit.optimised.get(sym) if fit else None
                 ok = p is not None and p.kind == 'estimate' and math.isfinite(p.value)
-                per_run.append(p.value if ok else None)
+                per_run.append(p.value if ok and p is not None else None)
                 unit = unit or (p.unit if p is not None else '')
             vals = np.array([v for v in per_run if v is not None])
             if not vals.size:
@@ -328,7 +328,7 @@ def _stem(path: Path) -> str:
 def _unique_stems(paths: list) -> list:
     """Output sub-directory names: the inputs' stems, numbered where they clash."""
     stems = [_stem(p) for p in paths]
-    seen = {}
+    seen: dict[str, int] = {}
     out = []
     for s in stems:
         seen[s] = seen.get(s, 0) + 1

@@ -143,17 +143,17 @@ def run(args) -> int:
             [sys.executable, '-c', 'import sys; from imu_allan.cli.demo import publish_main; '
              'sys.exit(publish_main())', str(npy), str(args.speed)])
         try:
-            t0 = None
+            t_first: float | None = None
             last_n, last_change = 0, time.monotonic()
             while node.n_received < n:
                 executor.spin_once(timeout_sec=0.1)
-                if node.n_received and t0 is None:
-                    t0 = time.monotonic()
+                if node.n_received and t_first is None:
+                    t_first = time.monotonic()
                 if node.n_received != last_n:
                     last_n, last_change = node.n_received, time.monotonic()
                 elif player.poll() is not None and time.monotonic() - last_change > 2.0:
                     break          # the player is done and nothing more arrives
-            seconds = time.monotonic() - (t0 or t_start)
+            seconds = time.monotonic() - (t_first or t_start)
             print(f'demo: {node.n_received:,} of {n:,} Imu messages received over rclpy '
                   f'topics in {seconds:.1f} s ({node.n_received / seconds:,.0f} msg/s, '
                   f'{args.duration / seconds:.0f}x real time)', file=sys.stderr)

@@ -116,7 +116,7 @@ def run(args) -> int:
     if not math.isfinite(args.start):
         raise InputError(f'--start must be finite, got {args.start:g}')
     spec = load_params(args.params)
-    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2**63)
+    seed = args.seed if args.seed is not None else int(np.random.default_rng().integers(2**63))
     t_s, samples = simulate_imu(spec, args.rate, args.duration, seed=seed)
     if t_s.size < 2:
         raise InputError(f'--duration {args.duration:g} s at {args.rate:g} Hz gives '

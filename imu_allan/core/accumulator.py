@@ -49,18 +49,13 @@ second difference, so |X| is bounded by the window length times the *local*
 variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 """
 
-import json
-from pathlib import Path
-
 import numpy as np
 
-from imu_allan.atomic import write_atomic
+from imu_allan.core.accumulator_state import _Persistence
 from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
 from imu_allan.errors import InputError
 
 #: Format tag and version written into every state file.
-STATE_FORMAT = 'imu_allan.core.accumulator'
-STATE_VERSION = 1
 
 #: Decimated levels serve m = m' D_L with _M_LO < m' <= 2 * _M_LO.
 _M_LO = 64
@@ -106,7 +101,10 @@ class _Level:
         self.n = 0                      # level samples in the current segment
 
 
-class AllanAccumulator:
+# Long by design (about 300 lines): one streaming state machine whose level-0 buffer,
+# decimated levels and pooled sums every method updates together; its persistence is in
+# accumulator_state.py.
+class AllanAccumulator(_Persistence):
     """
     Streaming overlapping Allan variance of ``n_axes`` axes in bounded memory.
 
@@ -177,7 +175,7 @@ class AllanAccumulator:
         self._build_grid()
         self._sums = np.zeros((self._m.size, n_axes))
         self._counts = np.zeros(self._m.size, dtype=np.int64)
-        self._work = None
+        self._work: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ grid
     def _build_grid(self) -> None:
@@ -415,175 +413,6 @@ class AllanAccumulator:
         return AllanCurve(tau_s, m, avar, n_terms, edf, alpha_arr, np.asarray(adev_lo),
                           np.asarray(adev_hi), float(confidence), 'overlapping',
                           self.rate_hz)
-
-    # ------------------------------------------------------------ save/load
-    def _copy(self) -> 'AllanAccumulator':
-        new = AllanAccumulator(self.n_axes, self.rate_hz, self.exact_max_m, self.per_decade)
-        new._set_state(*self.to_state())
-        return new
-
-    def to_state(self) -> tuple[dict, dict]:
-        """
-        Return the whole state in memory: JSON-able metadata and named arrays.
-
-        Returns
-        -------
-        meta : dict
-            Settings, counters and the format version (JSON-able).
-        arrays : dict of str to np.ndarray
-            Copies of the sums, counts, history and reference values.
-
-        """
-        meta = {
-            'format': STATE_FORMAT, 'version': STATE_VERSION, 'n_axes': self.n_axes,
-            'rate_hz': self.rate_hz, 'exact_max_m': self.exact_max_m,
-            'per_decade': self.per_decade, 'n_samples': self._n_samples,
-            'n_segments': self._n_segments, 'seg_n': self._seg_n, 'h0': self._h0,
-            'pending': self._pending, 'ref_set': self._ref_set,
-            'level_h': [lv.h for lv in self._levels],
-            'level_n': [lv.n for lv in self._levels],
-        }
-        arrays = {
-            'buf': self._buf[:, :self._h0 + self._pending].copy(),
-            'ref': self._ref.copy(),
-            'level_hist': np.stack([lv.hist for lv in self._levels]),
-            'sums': self._sums.copy(), 'counts': self._counts.copy(), 'm': self._m.copy(),
-        }
-        return meta, arrays
-
-    def _set_state(self, meta: dict, arrays: dict) -> None:
-        w = meta['h0'] + meta['pending']
-        self._buf[:, :w] = arrays['buf']
-        self._ref = arrays['ref'].astype(float)
-        self._sums = arrays['sums'].astype(float)
-        self._counts = arrays['counts'].astype(np.int64)
-        for lv, hist, h, n in zip(self._levels, arrays['level_hist'], meta['level_h'],
-                                  meta['level_n']):
-            lv.hist[...] = hist
-            lv.h, lv.n = int(h), int(n)
-        self._n_samples, self._n_segments = int(meta['n_samples']), int(meta['n_segments'])
-        self._seg_n, self._h0 = int(meta['seg_n']), int(meta['h0'])
-        self._pending, self._ref_set = int(meta['pending']), bool(meta['ref_set'])
-
-    def save(self, path) -> None:
-        """
-        Write the whole state to an .npz file atomically (temporary file, then rename).
-
-        Parameters
-        ----------
-        path : str or Path
-            Target file, written exactly at this name; no pickled objects inside
-            (metadata is a JSON string).
-
-        """
-        path = Path(path)
-        meta, arrays = self.to_state()
-        write_atomic(path, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
-
-    @classmethod
-    def load(cls, path) -> 'AllanAccumulator':
-        """
-        Restore an accumulator written by :meth:`save`.
-
-        Parameters
-        ----------
-        path : str or Path
-            State file.
-
-        Returns
-        -------
-        AllanAccumulator
-            Ready for more samples; continuing gives the same sums as never stopping.
-
-        Raises
-        ------
-        InputError
-            The file is missing, corrupt, or not a state of this format and version.
-
-        """
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z['meta']))
-                arrays = {k: z[k] for k in ('buf', 'ref', 'level_hist', 'sums', 'counts',
-                                            'm')}
-        except FileNotFoundError:
-            raise InputError(f'accumulator state {path} does not exist') from None
-        except Exception as exc:  # zip, JSON, missing keys: all mean a bad file
-            raise InputError(f'accumulator state {path} is unreadable or corrupt '
-                             f'({type(exc).__name__})') from None
-        try:
-            acc = cls.from_state(meta, arrays)
-        except InputError as exc:
-            raise InputError(f'accumulator state {path}: {exc}') from None
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f'accumulator state {path} is inconsistent '
-                             f'({type(exc).__name__}: {exc})') from None
-        return acc
-
-    @classmethod
-    def from_state(cls, meta, arrays: dict) -> 'AllanAccumulator':
-        """
-        Rebuild an accumulator from :meth:`to_state`, checking every field.
-
-        Parameters
-        ----------
-        meta : dict
-            The metadata.
-        arrays : dict of str to np.ndarray
-            The arrays.
-
-        Returns
-        -------
-        AllanAccumulator
-            Ready for more samples.
-
-        Raises
-        ------
-        InputError
-            Wrong format or version, or fields that do not fit together.
-        KeyError, TypeError, ValueError
-            Missing or mistyped fields (:meth:`load` turns them into InputError).
-
-        """
-        if not isinstance(meta, dict) or meta.get('format') != STATE_FORMAT:
-            raise InputError('not an imu_allan accumulator state')
-        if meta.get('version') != STATE_VERSION:
-            raise InputError(f'state version {meta.get("version")} is not supported '
-                             f'(expected {STATE_VERSION})')
-        if arrays['ref'].shape != (int(meta['n_axes']),):
-            raise InputError(f'{meta["n_axes"]} axes in its settings but '
-                             f'{arrays["ref"].shape} reference values')
-        acc = cls(meta['n_axes'], meta['rate_hz'], meta['exact_max_m'], meta['per_decade'])
-        a, n_lv = acc.n_axes, len(acc._levels)
-        h0, pending = int(meta['h0']), int(meta['pending'])
-        seg_n = int(meta['seg_n'])
-        expect = {
-            'buf': (a, h0 + pending), 'ref': (a,),
-            'level_hist': (n_lv, a, 4 * _M_LO),
-            'sums': (acc._m.size, a), 'counts': (acc._m.size,), 'm': (acc._m.size,),
-        }
-        for key, shape in expect.items():
-            arr = arrays[key]
-            if arr.shape != shape or arr.dtype.kind not in 'fi':
-                raise InputError(f'array {key!r} has shape {arr.shape} and type {arr.dtype}, '
-                                 f'expected {shape}')
-            if not np.isfinite(arr).all():
-                raise InputError(f'array {key!r} holds non-finite values')
-        if not np.array_equal(arrays['m'], acc._m):
-            raise InputError('its tau grid does not match its settings')
-        if (arrays['counts'] < 0).any() or (arrays['sums'] < 0).any():
-            raise InputError('negative sums or term counts')
-        level_h, level_n = list(meta['level_h']), list(meta['level_n'])
-        if len(level_h) != n_lv or len(level_n) != n_lv:
-            raise InputError('wrong number of decimated levels')
-        ok = (0 <= pending < acc._chunk and 0 <= h0 == min(acc._hist_cap, seg_n)
-              and int(meta['n_samples']) >= seg_n + pending
-              and int(meta['n_segments']) >= 0
-              and all(0 <= h == min(4 * _M_LO, n) for h, n in zip(level_h, level_n)))
-        if not ok:
-            raise InputError('inconsistent buffer counters')
-        acc._set_state(meta, arrays)
-        return acc
 
 
 def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:

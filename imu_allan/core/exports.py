@@ -4,6 +4,8 @@ Outputs in the shapes their consumers read: robot_localization, IMU drivers, VIO
 Each function takes the six per-axis sources of :func:`imu_allan.core.kalman.kalman_model`
 (AxisNoise or AxisFit) and returns YAML text whose keys are the consumer's own:
 
+* :func:`kalibr_yaml`: Kalibr's imu.yaml (one noise density and random walk per sensor,
+  :func:`sensor_value`; OpenVINS reads the same keys);
 * :func:`robot_localization_yaml`: an ``ekf.yaml`` fragment (robot_localization reads
   IMU noise from each message's covariance fields; the Allan result does not enter its
   ``process_noise_covariance``, which is a motion model without bias states);
@@ -14,16 +16,19 @@ Each function takes the six per-axis sources of :func:`imu_allan.core.kalman.kal
   / ``linear_accel_cov``);
 * :func:`vins_yaml`: the VINS-Mono / VINS-Fusion keys acc_n, gyr_n, acc_w, gyr_w
   (continuous densities, worst axis; OpenVINS reads Kalibr's keys, see
-  :func:`imu_allan.core.kalman.kalibr_yaml`).
+  :func:`kalibr_yaml`).
 
 Only numpy and the package core are imported: the node and the CLI write these files.
 """
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Sequence
+
+import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.kalman import _six, imu_covariance, sensor_value
+from imu_allan.core.kalman import _param, _six, imu_covariance
+from imu_allan.core.noise_params import AxisNoise
 from imu_allan.errors import InputError
 
 #: robot_localization's imu0_config order (15 booleans): x y z, roll pitch yaw, vx vy vz,
@@ -36,6 +41,196 @@ IMU0_CONFIG = (False, False, False, False, False, False, False, False, False,
 #: a 3-D Gaussian innovation exceeds it with probability ~1e-6 (sqrt of the chi-square
 #: 1 - 1e-6 quantile with 3 degrees of freedom).
 REJECTION_SIGMAS = 5.7
+
+
+def _reduce(values: Sequence[float], how: str) -> float:
+    if how == 'max':
+        return float(max(values))
+    if how == 'mean':
+        return float(np.mean(values))
+    raise InputError(f"axis reduction must be 'max' or 'mean', got {how!r}")
+
+
+def _kinded(source, symbol: str, use_upper_bounds: bool) -> tuple[float, str]:
+    """
+    Value of N or K for one axis with its kind ('estimate', 'upper_bound', 'absent').
+
+    An AxisNoise carries estimates (0 means absent); an AxisFit its optimised parameter,
+    an upper bound only when ``use_upper_bounds`` (otherwise it counts as absent).
+    """
+    if isinstance(source, AxisNoise):
+        value = float(getattr(source, symbol))
+        return value, ('estimate' if value > 0 else 'absent')
+    value, kind = _param(source, symbol, use_upper_bounds)
+    if value is None or kind not in ('estimate', 'upper_bound') or value <= 0:
+        return 0.0, 'absent'
+    return value, kind
+
+
+def _curve_bound(source, symbol: str) -> float:
+    """
+    Bound of N or K that the measured curve itself sets, 0.0 without a curve.
+
+    No term can exceed the whole measured AVAR at any tau: N^2 / tau <= AVAR(tau) and
+    K^2 tau / 3 <= AVAR(tau) (IEEE Std 952 C.1 slopes), so N <= min sqrt(AVAR tau) and
+    K <= min sqrt(3 AVAR / tau) over the fitted taus.
+    """
+    tau, avar = getattr(source, 'tau_s', None), getattr(source, 'avar_meas', None)
+    if tau is None or avar is None or not np.size(tau):
+        return 0.0
+    tau, avar = np.asarray(tau, dtype=np.float64), np.asarray(avar, dtype=np.float64)
+    level = avar * tau if symbol == 'N' else 3.0 * avar / tau
+    return float(np.sqrt(np.min(level)))
+
+
+class SensorValue(NamedTuple):
+    """
+    One value of N or K for a whole sensor (three axes), as Kalibr and VIO configs take.
+
+    Attributes
+    ----------
+    value : float or None
+        The value [unit of the symbol], None when no axis gives one.
+    kind : str
+        'estimate', 'upper_bound' (the axes' 95 % bounds), 'curve_bound' (the measured
+        curve's own bound: the record cannot separate the term) or 'absent'.
+    per_axis : dict of str to tuple
+        (value, kind) of each axis ('absent' with 0.0).
+
+    """
+
+    value: float | None
+    kind: str
+    per_axis: dict
+
+
+def sensor_value(sources, axes: Sequence[str], symbol: str, reduce: str = 'max',
+                 use_upper_bounds: bool = True) -> SensorValue:
+    """
+    Reduce N or K of three axes to one positive value for the sensor.
+
+    Only axes where the term was *estimated* enter the reduction: an upper bound (a term
+    the record was too short to see on that axis) can lie far above the values the other
+    axes measure (an accelerometer K bound of 1e-4 beside estimates of 8e-6), so it
+    would dominate 'max' without being a measurement.  Without any estimate (and with
+    ``use_upper_bounds``) the axes' 95 % bounds are used, then the bound the measured
+    curve sets (:func:`_curve_bound`); never 0, which Kalibr's and the VIO packages'
+    config readers reject.
+
+    Parameters
+    ----------
+    sources : mapping of str to AxisNoise or AxisFit
+        Per axis name.
+    axes : sequence of str
+        The sensor's three axes.
+    symbol : str
+        'N' or 'K'.
+    reduce : str
+        'max' (worst axis) or 'mean'.
+    use_upper_bounds : bool
+        Fall back to bounds when no axis has an estimate (True) or give None.
+
+    Returns
+    -------
+    SensorValue
+
+    """
+    per = {a: _kinded(sources[a], symbol, use_upper_bounds) for a in axes}
+    for kind in ('estimate', 'upper_bound'):
+        got = [v for v, k in per.values() if k == kind]
+        if got:
+            return SensorValue(_reduce(got, reduce), kind, per)
+    if use_upper_bounds:
+        got = [b for b in (_curve_bound(sources[a], symbol) for a in axes) if b > 0]
+        if got:
+            return SensorValue(_reduce(got, reduce), 'curve_bound', per)
+    return SensorValue(None, 'absent', per)
+
+
+def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/imu/data',
+                use_upper_bounds: bool = True) -> str:
+    """
+    Write a Kalibr imu.yaml (continuous densities: noise density = N, random walk = K).
+
+    Kalibr takes one value per sensor for all three axes (:func:`sensor_value`).
+    Default ``reduce='max'``: the worst axis, because under-stating any axis' noise
+    makes the calibration (and a filter tuned from it) over-confident on that axis,
+    while over-stating only down-weights it; ``'mean'`` gives the typical axis.
+    Per-axis values are written as comments.  Every value written is positive: a key
+    no axis can give (``use_upper_bounds`` False, or a model without that term) is left
+    out with a comment, so Kalibr stops on it instead of using 0.
+
+    Parameters
+    ----------
+    sources : mapping or sequence
+        Six AxisNoise / AxisFit, see :func:`kalman_model`.
+    rate_hz : float
+        IMU message rate [Hz] (Kalibr's update_rate).
+    reduce : str
+        'max' (worst axis) or 'mean'.
+    rostopic : str
+        Value of Kalibr's rostopic key (the analysed topic).
+    use_upper_bounds : bool
+        Fall back to bounds when no axis has an estimate, see :func:`sensor_value`.
+
+    Returns
+    -------
+    str
+        YAML text with keys accelerometer_noise_density [m/s^2/sqrt(Hz)],
+        accelerometer_random_walk [m/s^3/sqrt(Hz)], gyroscope_noise_density
+        [rad/s/sqrt(Hz)], gyroscope_random_walk [rad/s^2/sqrt(Hz)], rostopic,
+        update_rate [Hz].
+
+    """
+    if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+    how = {'max': 'worst (largest) axis', 'mean': 'mean of the three axes'}.get(reduce)
+    _reduce([0.0], reduce)  # validates ``reduce``
+    srcs = dict(zip(AXES, _six(sources)))
+    lines = ['# IMU noise for Kalibr (imu_allan).  Continuous-time densities:',
+             '# noise_density = N (white noise), random_walk = K (bias random walk).',
+             f'# One value per sensor: the {how} of the per-axis estimates below',
+             '# (axes where a term is only an upper bound are left out of it).',
+             '# B and T_B (bias instability, Gauss-Markov) have no Kalibr key.']
+    keys, remarks = [], []
+    for sensor, axes, u_n, u_k in (('accelerometer', ACCEL_AXES, 'm/s^2/sqrt(Hz)',
+                                    'm/s^3/sqrt(Hz)'),
+                                   ('gyroscope', GYRO_AXES, 'rad/s/sqrt(Hz)',
+                                    'rad/s^2/sqrt(Hz)')):
+        got = {sym: sensor_value(srcs, axes, sym, reduce, use_upper_bounds)
+               for sym in ('N', 'K')}
+        lines.append(f'# {sensor} per axis:')
+        for a in axes:
+            text = []
+            for sym, u in (('N', u_n), ('K', u_k)):
+                value, kind = got[sym].per_axis[a]
+                mark = {'estimate': '', 'upper_bound': ' (95 % upper bound)',
+                        'absent': ' (not available)'}[kind]
+                text.append(f'{sym} = {value:.6e} {u}{mark}')
+            lines.append(f'#   {a}: ' + ', '.join(text))
+        for sym, key, u in (('N', f'{sensor}_noise_density', u_n),
+                            ('K', f'{sensor}_random_walk', u_k)):
+            sv = got[sym]
+            n_est = sum(k == 'estimate' for _, k in sv.per_axis.values())
+            if sv.kind == 'estimate' and n_est < len(axes):
+                remarks.append(f'# {key}: from the {n_est} axes with an estimate; '
+                               'the others only bound it')
+            elif sv.kind == 'upper_bound':
+                remarks.append(f'# {key}: no axis has an estimate; this is the '
+                               f'{reduce} of the 95 % upper bounds (the record is too '
+                               'short to measure it)')
+            elif sv.kind == 'curve_bound':
+                remarks.append(f'# {key}: no axis has an estimate or a bound; this is '
+                               'the bound the measured curve sets (conservative)')
+            elif sv.kind == 'absent':
+                remarks.append(f'# {key}: not available on any axis; left out (Kalibr '
+                               'needs a positive value: measure a longer record)')
+            keys.append((key, sv.value, u))
+    lines += remarks
+    lines += [f'{key}: {value:.6e}  # [{u}]' for key, value, u in keys if value is not None]
+    lines.append(f'rostopic: {rostopic}')
+    lines.append(f'update_rate: {float(rate_hz):g}  # [Hz]')
+    return '\n'.join(lines) + '\n'
 
 
 class DriverNoise(NamedTuple):
@@ -90,7 +285,7 @@ def driver_noise(sources, rate_hz: float) -> DriverNoise:
     std = {a: (None if v is None else math.sqrt(v)) for a, v in var.items()}
     worst = {}
     for field, axes in (('angular_velocity', GYRO_AXES), ('linear_acceleration', ACCEL_AXES)):
-        known = [var[a] for a in axes if var[a] is not None]
+        known = [v for v in (var[a] for a in axes) if v is not None]
         worst[f'{field}_variance'] = max(known) if known else None
         worst[f'{field}_stdev'] = math.sqrt(max(known)) if known else None
     return DriverNoise(float(rate_hz), std, var, worst)
@@ -228,7 +423,7 @@ def vins_yaml(sources, rate_hz: float, reduce: str = 'max') -> str:
     Return the VINS-Mono / VINS-Fusion IMU noise keys (acc_n, gyr_n, acc_w, gyr_w).
 
     The values are the continuous-time densities Kalibr uses (N and K, one per sensor,
-    :func:`imu_allan.core.kalman.sensor_value`), which is how they are usually filled
+    :func:`sensor_value`), which is how they are usually filled
     in.  VINS' pre-integration uses them as per-sample values (see
     :data:`imu_allan.core.kalman.NOTES`), and its shipped examples are larger than the
     Allan densities by factors of 10-50: start from these and inflate.  A value no axis

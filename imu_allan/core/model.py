@@ -305,7 +305,7 @@ def _w2(f_hz: float) -> float:
 # from the rate autocovariances c delta (white), c T/2 e^(-|u|/T) (Gauss-Markov), the
 # integrated white c delta (random walk), flicker h_-1 / f with h_-1 = B^2 / pi one-sided,
 # and white phase of variance c per sample (quantization).
-_PSD_PHASE = {
+_PSD_PHASE: dict[str, Callable[..., float]] = {
     'quantization': lambda f, dt: dt,
     'white': lambda f, dt: 1.0 / _w2(f),
     'flicker': lambda f, dt: 1.0 / (2.0 * math.pi * abs(f) * _w2(f)),
@@ -578,7 +578,8 @@ def noise_from_terms(values: dict[str, dict[str, float]]) -> AxisNoise:
 
     """
     kw: dict = {'gauss_markov': [], 'sinusoids': []}
-    flicker_b, bias = 0.0, (0.0, None)
+    # T_B is read only when the Gauss-Markov level is positive.
+    flicker_b, bias = 0.0, (0.0, 0.0)
     for name, p in values.items():
         base = base_name(name)
         if base == 'quantization':

@@ -196,7 +196,7 @@ def _entry(raw, entry: str, sensor: str, prefix: str) -> dict:
         return {}
     if not isinstance(raw, dict):
         raise InputError(f'{here}: expected a mapping of terms, got {type(raw).__name__}')
-    out = {}
+    out: dict[str, object] = {}
     for key, val in raw.items():
         where = f'{here}.{key}'
         if key in ('sinusoids',):  # the AxisNoise field name, accepted as an alias
@@ -292,7 +292,7 @@ def parse_params(mapping, source: str = '') -> NoiseSpec:
         if entry not in _GROUPS and entry not in AXES:
             raise InputError(f'{prefix}axes.{entry}: unknown axis (expected gyro, accel or '
                              f'one of {", ".join(AXES)})')
-    terms = {axis: {} for axis in AXES}
+    terms: dict[str, dict] = {axis: {} for axis in AXES}
     for group, members in _GROUPS.items():  # groups first, then per-axis overrides
         if group in axes_raw:
             parsed = _entry(axes_raw[group], group, group, prefix)
@@ -400,7 +400,7 @@ def dump_params(spec: NoiseSpec, with_units: bool = False) -> dict:
             rest = {k: v for k, v in terms.items() if k not in common}
             if rest:
                 axes[axis] = rest
-    out = {'name': spec.name} if spec.name else {}
+    out: dict[str, object] = {'name': spec.name} if spec.name else {}
     out['axes'] = axes
     return out
 

@@ -52,7 +52,7 @@ STANDARD_GRAVITY = 9.80665
 
 # A dimension is (angle, length, time) exponents; angle is tracked separately from
 # "dimensionless" so that a gyro value cannot be given in accelerometer units.
-_Dim = tuple[Fraction, Fraction, Fraction]
+_Dim = tuple[Fraction, ...]
 _ZERO = (Fraction(0), Fraction(0), Fraction(0))
 
 

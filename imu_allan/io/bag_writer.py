@@ -430,21 +430,22 @@ def _write_mcap(mcap_path: Path, topic: str, batches, info: dict) -> None:
             message_count=n_messages, schema_count=1, channel_count=1, attachment_count=0,
             metadata_count=1, chunk_count=len(chunk_indexes), message_start_time=t_first,
             message_end_time=t_last, channel_message_counts={1: n_messages})
-        groups = [(Opcode.SCHEMA, [schema]), (Opcode.CHANNEL, [channel]),
-                  (Opcode.STATISTICS, [statistics]), (Opcode.CHUNK_INDEX, chunk_indexes),
-                  (Opcode.METADATA_INDEX, [meta_index])]
-        offsets = []
-        for opcode, records in groups:
+        groups: list[tuple[int, list]] = [
+            (Opcode.SCHEMA, [schema]), (Opcode.CHANNEL, [channel]),
+            (Opcode.STATISTICS, [statistics]), (Opcode.CHUNK_INDEX, chunk_indexes),
+            (Opcode.METADATA_INDEX, [meta_index])]
+        offsets: list = []
+        for opcode, group in groups:
             group_start = builder.count
-            for record in records:
+            for record in group:
                 record.write(builder)
             if builder.count > group_start:
                 offsets.append(SummaryOffset(group_opcode=opcode,
                                              group_start=summary_start + group_start,
                                              group_length=builder.count - group_start))
         offset_start = summary_start + builder.count
-        for record in offsets:
-            record.write(builder)
+        for offset in offsets:
+            offset.write(builder)
         summary = builder.end()
         # The footer CRC covers the summary and the footer's own fields before the CRC.
         crc = zlib.crc32(struct.pack('<BQQQ', Opcode.FOOTER, 20, summary_start, offset_start),

@@ -15,6 +15,7 @@ that fails does a line-by-line pass run, to name the first bad row.  A 1,000,000
 
 import gzip
 import io
+import os
 from pathlib import Path
 from typing import NamedTuple, Sequence
 import warnings
@@ -28,7 +29,7 @@ from imu_allan.errors import InputError
 #: Names accepted for the time column [s].
 TIME_COLUMNS = ('t', 'time', 't_s')
 
-PathLike = str | Path
+PathLike = str | os.PathLike
 
 
 class CsvData(NamedTuple):

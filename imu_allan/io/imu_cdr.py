@@ -12,6 +12,8 @@ imported on demand.
 """
 
 
+from typing import Any
+
 import numpy as np
 
 from imu_allan.errors import InputError
@@ -108,6 +110,8 @@ def _fields_dtype(doubles_offset: int, big: bool, ros1: bool, itemsize: int,
 def _fallback_decode(payload: bytes, ros1: bool) -> tuple[int, list] | None:
     """Decode one odd payload with rosbags; return (stamp_ns, six values) or None."""
     from rosbags.typesys import get_typestore, Stores
+
+    msg: Any
 
     try:
         if ros1:

@@ -16,9 +16,9 @@ import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve
-from imu_allan.core.exports import driver_yaml, robot_localization_yaml, vins_yaml
+from imu_allan.core.exports import driver_yaml, kalibr_yaml, robot_localization_yaml, vins_yaml
 from imu_allan.core.fit import AxisFit, json_floats
-from imu_allan.core.kalman import imu_covariance, kalibr_yaml, kalman_model, KalmanModel
+from imu_allan.core.kalman import imu_covariance, kalman_model, KalmanModel
 from imu_allan.core.noise_params import AxisNoise
 from imu_allan.core.search import search_axis
 from imu_allan.core.units import format_quoted, sensor_of
@@ -32,6 +32,8 @@ B_CONVENTION = ('B is the bias instability read off the ADEV floor (ADEV_min = 0
 _CORE = ('N', 'B', 'K', 'T_B')
 
 
+# Long by design: the one result every output is made of; each method is one view of
+# it (JSON, Q/R, Kalibr, covariances, statuses), so they cannot drift apart.
 @dataclass(frozen=True)
 class AnalysisResult:
     """
@@ -175,16 +177,17 @@ class AnalysisResult:
         axes = {}
         for j, axis in enumerate(AXES):
             fit = self.fits.get(axis)
-            entry = {'unit': AXIS_UNITS[axis],
-                     'tau_s': json_floats(self.curve.tau_s),
-                     'adev': json_floats(self.curve.adev[:, j]),
-                     'adev_lo': json_floats(self.curve.adev_lo[:, j]),
-                     'adev_hi': json_floats(self.curve.adev_hi[:, j]),
-                     'edf': json_floats(self.curve.edf[:, j]),
-                     'n_terms': [int(n) for n in self.curve.n_terms]}
+            entry: dict[str, object] = {
+                'unit': AXIS_UNITS[axis],
+                'tau_s': json_floats(self.curve.tau_s),
+                'adev': json_floats(self.curve.adev[:, j]),
+                'adev_lo': json_floats(self.curve.adev_lo[:, j]),
+                'adev_hi': json_floats(self.curve.adev_hi[:, j]),
+                'edf': json_floats(self.curve.edf[:, j]),
+                'n_terms': [int(n) for n in self.curve.n_terms]}
             if fit is None:
-                entry.update(params={}, nominal={}, terms=[],
-                             notes=['no usable noise (frozen or constant axis)'])
+                entry.update({'params': {}, 'nominal': {}, 'terms': [],
+                              'notes': ['no usable noise (frozen or constant axis)']})
             else:
                 entry.update(fit.to_json())
                 # The final model at every tau, and the range it was fitted on (beyond

@@ -9,12 +9,13 @@ import numpy as np
 
 from imu_allan import AXES
 from imu_allan.pipeline.clock import _NS
+from imu_allan.pipeline.parts import _Parts
 
 
 N_AXES = len(AXES)
 
 
-class _SampleChecks:
+class _SampleChecks(_Parts):
     """Saturation and frozen-axis checks, then the motion gate before the accumulator."""
 
     def _accumulate(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
@@ -105,6 +106,7 @@ class _SampleChecks:
             if not self._moving:
                 self._moving = True
                 self._drain()
+                assert self.acc is not None  # samples are judged only once it exists
                 self.acc.break_segment()
                 if policy == 'restart':
                     self.stats.n_restarts += 1
@@ -130,6 +132,7 @@ class _SampleChecks:
     def _drain(self) -> None:
         """Pass the samples :meth:`_use` holds to the accumulator (one call)."""
         if self._pending:
+            assert self.acc is not None
             self.acc.add(self._pending[0] if len(self._pending) == 1
                          else np.concatenate(self._pending))
             self._pending = []

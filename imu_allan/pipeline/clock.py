@@ -12,6 +12,8 @@ from typing import Callable
 
 import numpy as np
 
+from imu_allan.pipeline.parts import _Parts
+
 
 _NS = 1_000_000_000
 #: Stamp steps per judged window (jitter, regularity and rate changes).  Fixed step
@@ -21,7 +23,9 @@ _CLOCK_WINDOW = 100
 _MAX_JITTER = 0.25
 
 
-class _StampClock:
+# Long by design: the clock's state (rate, jitter window, gap and step counters) is
+# carried from block to block; each judgement of a block is a short method.
+class _StampClock(_Parts):
     """Rate estimate, stamp windows and gaps: the gap-free runs go on to the sample checks."""
 
     def _monotonic_mask(self, stamp_ns: np.ndarray) -> np.ndarray:
@@ -224,7 +228,7 @@ class _StampClock:
         self._clock_ns += int(real[ok].sum())
         gap_idx = np.flatnonzero(~ok) + skip
         start = 0
-        for g in list(gap_idx) + [stamp_ns.size]:
+        for g in [int(i) for i in gap_idx] + [stamp_ns.size]:
             if g > start:
                 self._accumulate(stamp_ns[start:g], samples[start:g])
             if g < stamp_ns.size:

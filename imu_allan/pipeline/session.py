@@ -141,6 +141,8 @@ class HygieneStats:
     irregular_stamps: bool = False
 
 
+# Slightly long: the pipeline's one entry point (add, flush, curve, break_segment) over
+# its three mixins; the stamp clock, sample checks and state file live in their modules.
 class Session(_StampClock, _SampleChecks, _StateFile):
     """
     Input checks plus streaming Allan accumulation for the six IMU axes.

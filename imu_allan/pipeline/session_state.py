@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import asdict, replace
 import json
 from pathlib import Path
-from typing import Callable, TYPE_CHECKING
+from typing import Callable, Self, TYPE_CHECKING
 
 import numpy as np
 
@@ -18,15 +18,18 @@ from imu_allan.atomic import write_atomic
 from imu_allan.core.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clock import _NS
+from imu_allan.pipeline.parts import _Parts
 
 if TYPE_CHECKING:  # the session module imports this one
-    from imu_allan.pipeline.session import Session, SessionConfig
+    from imu_allan.pipeline.session import SessionConfig
 
 
 N_AXES = len(AXES)
 
 
-class _StateFile:
+# Slightly long: a checkpoint's format, and a check of every field when it is read
+# back (a foreign or corrupt file is set aside, never trusted).
+class _StateFile(_Parts):
     """Checkpoint (save_state) and resume (load_state) of the whole session."""
 
     # ------------------------------------------------------------- checkpoint
@@ -96,7 +99,7 @@ class _StateFile:
 
     @classmethod
     def load_state(cls, path, config: SessionConfig | None = None,
-                   on_warning: Callable[[str], None] | None = None) -> Session:
+                   on_warning: Callable[[str], None] | None = None) -> Self:
         """
         Restore a session saved by :meth:`save_state`.
 
@@ -134,7 +137,7 @@ class _StateFile:
     @classmethod
     def _restore(cls, path, meta: dict, acc_arrays: dict, held: dict,
                  config: SessionConfig | None,
-                 on_warning: Callable[[str], None] | None) -> Session:
+                 on_warning: Callable[[str], None] | None) -> Self:
         if not isinstance(meta, dict):
             raise TypeError('its metadata is not a JSON object')
         if meta.get('axes') != list(AXES):

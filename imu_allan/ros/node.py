@@ -6,7 +6,8 @@ deserialisation) and its callback only appends the serialized message to a buffe
 with ``publish_imu_with_covariance``, relays it at once with the current covariances
 written into its bytes, :mod:`imu_allan.ros.relay`); a timer decodes the buffer in one
 vectorised step (:func:`~imu_allan.io.imu_cdr.decode_imu_cdr`) and feeds the pipeline
-:class:`~imu_allan.pipeline.Session` that the offline mode uses too.  The fit (seconds
+:class:`~imu_allan.pipeline.Session` that the offline mode uses too; both live in the
+ROS-free :class:`~imu_allan.ros.live.LiveInput`.  The fit (seconds
 of CPU) runs on a worker thread on a snapshot of the Allan curve, so the executor keeps
 taking messages while it runs.  Other timers report progress, publish /diagnostics at
 1 Hz and checkpoint.  ``main`` spins the node with rclpy's EventsExecutor (measured in
@@ -14,8 +15,6 @@ bench/bench_node.py: several times cheaper per message than the SingleThreadedEx
 which it falls back to when unavailable).
 """
 
-from collections import deque
-import copy
 import os
 from pathlib import Path
 import sys
@@ -23,7 +22,6 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
@@ -37,31 +35,24 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
-from imu_allan import AXES
-from imu_allan.core.diagnose import diagnose_session, RawKeeper
+from imu_allan.core.diagnose import RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.io.imu_cdr import decode_imu_cdr, imu_frame_id
 from imu_allan.io.report import write_outputs
-from imu_allan.pipeline.analysis import analyze, CONFIDENCE
+from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session
-from imu_allan.ros.params import BY_NAME, PARAMS, session_config
+from imu_allan.ros.live import LiveInput, SessionView
+from imu_allan.ros.params import BY_NAME, PARAMS
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 from imu_allan.ros.reports import _matrix_msg, _Reports
+from imu_allan.ros.services import _Services
 from imu_allan.ros.spin import create_executor, spin_until_shutdown
 
-CHECKPOINT = 'checkpoint.npz'
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
 _SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messages',
                    'output_dir', 'resume', 'publish_imu_with_covariance',
                    'initial_covariance_file', 'diagnose_raw_samples'}
 #: Period of the /diagnostics statuses (the aggregator marks a status stale after 5 s).
 DIAGNOSTICS_PERIOD_S = 1.0
-#: Samples a resumed session waits for before it compares their rate with the checkpoint.
-_RESUME_CHECK_SAMPLES = 50
-#: The timer hands the pipeline at least this many messages (or whatever is there after
-#: _MAX_HOLD_S): its rate-change check needs 50 stamp steps in one block.
-_MIN_BLOCK = 64
-_MAX_HOLD_S = 2.0
 
 
 def _descriptor(p) -> ParameterDescriptor:
@@ -86,27 +77,9 @@ def _result_qos() -> QoSProfile:
                       history=HistoryPolicy.KEEP_LAST)
 
 
-class _SessionView:
-    """
-    A frozen view of a session for :func:`~imu_allan.pipeline.analysis.analyze`.
-
-    Taken under the node's lock in milliseconds (the Allan curve plus the counters),
-    so that the fit, which takes seconds, runs without holding up the input.
-    """
-
-    def __init__(self, session: Session):
-        self._curve = session.curve(confidence=CONFIDENCE)
-        self.stats = copy.deepcopy(session.stats)
-        self.rate_hz = session.rate_hz
-        self.duration_s = session.duration_s
-        self.warnings = session.warnings
-
-    def curve(self, confidence: float = CONFIDENCE):
-        """Return the Allan curve taken with the snapshot."""
-        return self._curve
-
-
-class ImuAllanNode(_Reports, Node):
+# Long because __init__ declares every parameter, topic, service and timer in one place
+# (the ROS convention); the work is in LiveInput, _Reports and _Services.
+class ImuAllanNode(_Reports, _Services, Node):
     """
     Subscribe to sensor_msgs/Imu, characterise its noise, publish the results.
 
@@ -149,29 +122,14 @@ class ImuAllanNode(_Reports, Node):
             self.destroy_node()
             raise
         self.relay = CovarianceRelay(initial)
-        # _lock guards the session; _process_lock keeps blocks in stamp order when
-        # _process runs from the timer and from publish_now/save on another thread.
-        self._lock = threading.Lock()
-        self._process_lock = threading.Lock()
-        self._buffer: deque = deque()
-        self.n_received = 0
-        self.n_buffer_dropped = 0
+        self.live = LiveInput(self.values, self.output_dir, self.get_logger())
         self.n_fits = 0
         self._last_result = None
         self._axis_statuses: list = []
-        self._frame_id = ''
-        self._last_rx = None
         self._started = time.monotonic()
         self._fit_thread: threading.Thread | None = None
         self._diagnose_thread: threading.Thread | None = None
         self._progress_mark = (time.monotonic(), 0.0)
-        self._last_handover = time.monotonic()
-        self._resume_hold: list | None = None
-        self._diagnose_fn = None
-        # Block-averaged copy of the samples for the ~/diagnose periodogram check, and
-        # the session it belongs to (a new session starts a new copy).
-        self._raw: tuple[Session, RawKeeper] | None = None
-        self.session = self._new_session(resume=self.values['resume'])
 
         qos = QoSProfile(
             depth=self.values['qos_depth'], history=HistoryPolicy.KEEP_LAST,
@@ -240,49 +198,21 @@ class ImuAllanNode(_Reports, Node):
         # Input-check settings apply to the next session (~/reset).
         return SetParametersResult(successful=True)
 
-    def _warn(self, text: str) -> None:
-        self.get_logger().warning(text)
+    @property
+    def session(self) -> Session:
+        """Return the pipeline session the node accumulates into (a new one after ~/reset)."""
+        return self.live.session
 
-    def _new_session(self, resume: bool) -> Session:
-        config = session_config(self.values)
-        path = self.output_dir / CHECKPOINT
-        if resume and path.exists():
-            try:
-                session = Session.load_state(path, config, on_warning=self._warn)
-            except InputError as exc:
-                self._set_aside(path, str(exc))
-            else:
-                # Samples after the last checkpoint are lost: no Allan term may span them,
-                # and the step to the first new stamp is not a step of the sensor clock.
-                # The samples the checkpoint held for the motion check count from here.
-                session.break_segment()
-                session.last_stamp_ns = None
-                self.get_logger().info(
-                    f'resumed from {path}: {session.stats.n_used} samples, '
-                    f'{session.duration_s / 3600:.3f} h at {session.rate_hz:.2f} Hz, '
-                    'split from the new samples'
-                    + ('' if config.rate_hz > 0 else
-                       '; the rate of the incoming data is checked against it'))
-                if config.rate_hz <= 0:
-                    self._resume_hold = []
-                return session
-        elif resume:
-            self.get_logger().info(f'resume requested but {path} does not exist: starting fresh')
-        return Session(config, on_warning=self._warn)
-
-    def _set_aside(self, path: Path, why: str) -> None:
-        kept = path.with_name(f'checkpoint.{time.strftime("%Y%m%d-%H%M%S")}.npz')
-        os.replace(path, kept)
-        self.get_logger().warning(f'not resuming: {why}; starting fresh, old state kept as '
-                                  f'{kept}')
+    @property
+    def n_received(self) -> int:
+        """Return the number of messages received since start."""
+        return self.live.n_received
 
     # ----------------------------------------------------------- callbacks
     def _on_imu(self, raw: bytes) -> None:
         # The only per-message Python work: count, append and (if asked) relay the
         # message at once with the current covariances (a byte patch, ~1 us).
-        self.n_received += 1
-        self._last_rx = time.monotonic()
-        self._buffer.append(raw)
+        self.live.append(raw)
         if self.pub_imu is not None:
             patched = self.relay.patch(raw)
             if patched is None:  # an unusual layout: through a Python message
@@ -291,76 +221,9 @@ class ImuAllanNode(_Reports, Node):
                 patched.linear_acceleration_covariance = self.relay.fields[1]
             self.pub_imu.publish(patched)
 
-    def _take_buffer(self) -> list:
-        n = len(self._buffer)
-        limit = self.values['max_buffer_messages']
-        if n > limit:
-            for _ in range(n - limit):
-                self._buffer.popleft()
-            self.n_buffer_dropped += n - limit
-            self.get_logger().warning(f'{n - limit} messages dropped by a full buffer '
-                                      f'(max_buffer_messages = {limit})')
-            n = limit
-        return [self._buffer.popleft() for _ in range(n)]
-
     def _on_process_timer(self) -> None:
-        if (len(self._buffer) >= _MIN_BLOCK
-                or time.monotonic() - self._last_handover >= _MAX_HOLD_S):
-            self._process()
-
-    def _process(self) -> None:
-        self._last_handover = time.monotonic()
-        with self._process_lock:
-            self._process_locked()
-
-    def _process_locked(self) -> None:
-        raws = self._take_buffer()
-        if not raws:
-            return
-        self._frame_id = imu_frame_id(raws[-1]) or self._frame_id
-        try:
-            stamp_ns, samples = decode_imu_cdr(raws)
-        except InputError as exc:
-            self.get_logger().error(f'undecodable Imu messages dropped: {exc}')
-            return
-        with self._lock:
-            if self._resume_hold is not None:
-                stamp_ns, samples = self._check_resume(stamp_ns, samples)
-            if stamp_ns.size:
-                self.session.add(stamp_ns, samples)
-                self._keep_raw(samples)
-
-    def _keep_raw(self, samples: np.ndarray) -> None:
-        rows = self.values['diagnose_raw_samples']
-        if rows < 2:
-            return
-        if self._raw is None or self._raw[0] is not self.session:
-            # The rate is known after a few blocks; the copy keeps every sample anyway.
-            self._raw = (self.session, RawKeeper(None, len(AXES), rows))
-        self._raw[1].add(samples[np.isfinite(samples).all(axis=1)])
-
-    def _check_resume(self, stamp_ns: np.ndarray, samples: np.ndarray) -> tuple:
-        """Hold the first samples after a resume; compare their rate with the checkpoint."""
-        self._resume_hold.append((stamp_ns, samples))
-        t = np.concatenate([b[0] for b in self._resume_hold])
-        if t.size < _RESUME_CHECK_SAMPLES:
-            return t[:0], samples[:0]
-        y = np.concatenate([b[1] for b in self._resume_hold])
-        self._resume_hold = None
-        # Judged as the session judges stamps: a reader that has just started often
-        # misses messages, and a gap must not pass for another rate.
-        rate = self.session.stamp_rate_hz(t)
-        saved = self.session.rate_hz
-        tolerance = self.values['rate_tolerance']
-        if rate <= 0 or abs(rate / saved - 1) > tolerance:
-            self._set_aside(self.output_dir / CHECKPOINT,
-                            f'the checkpoint was taken at {saved:.3f} Hz but the data now '
-                            f'arrive at {rate:.3f} Hz')
-            self.session = Session(session_config(self.values), on_warning=self._warn)
-        else:
-            self.get_logger().info(f'resume confirmed: incoming rate {rate:.3f} Hz matches '
-                                   f'the checkpoint ({saved:.3f} Hz); continuing')
-        return t, y
+        if self.live.due():
+            self.live.process()
 
     @property
     def last_result(self):
@@ -375,8 +238,8 @@ class ImuAllanNode(_Reports, Node):
     def _publish(self) -> None:
         if self.session.duration_s < self.values['min_duration_s'] or self.fitting:
             return
-        self._process()
-        view, raw = self._snapshot()
+        self.live.process()
+        view, raw = self.live.snapshot()
         self._fit_thread = threading.Thread(target=self._fit_and_publish, args=(view, raw),
                                             name='imu_allan_fit', daemon=True)
         self._fit_thread.start()
@@ -391,10 +254,10 @@ class ImuAllanNode(_Reports, Node):
             The result published, or None while no Allan deviation is computable.
 
         """
-        self._process()
-        return self._fit_and_publish(*self._snapshot())
+        self.live.process()
+        return self._fit_and_publish(*self.live.snapshot())
 
-    def _fit_and_publish(self, view: _SessionView, raw: RawKeeper | None = None):
+    def _fit_and_publish(self, view: SessionView, raw: RawKeeper | None = None):
         if view.curve() is None:
             return None
         # The raw copy feeds the effect search's periodogram and ramp evidence, so the
@@ -417,109 +280,10 @@ class ImuAllanNode(_Reports, Node):
         return result
 
     def _checkpoint(self) -> None:
-        with self._lock:
-            try:
-                self.session.save_state(self.output_dir / CHECKPOINT)
-            except OSError as exc:
-                self.get_logger().error(f'checkpoint failed: {exc}')
-
-    def _on_reset(self, request, response):
-        with self._process_lock, self._lock:
-            self._take_buffer()
-            self.session = self._new_session(resume=False)
-            self._resume_hold = None
-            self._last_result = None
-            self._axis_statuses = []
-        response.success = True
-        response.message = 'accumulator reset: a new characterisation starts now'
-        self.get_logger().info(response.message)
-        return response
-
-    def _on_save(self, request, response):
         try:
-            paths = self.save()
-        except (InputError, OSError) as exc:
-            response.success, response.message = False, str(exc)
-        else:
-            response.success = True
-            response.message = 'wrote ' + ', '.join(str(p) for p in paths)
-        return response
-
-    def _on_diagnose(self, request, response):
-        # A diagnosis takes seconds to minutes (refits and re-simulations): it runs on a
-        # worker thread so the executor keeps taking input; the summary follows on
-        # ~/diagnosis.
-        if self._diagnose_thread is not None and self._diagnose_thread.is_alive():
-            response.success = False
-            response.message = 'a diagnosis is already running; its summary will be ' \
-                'published on ~/diagnosis'
-            return response
-        self._process()
-        view, raw = self._snapshot()
-        if view.curve() is None:
-            response.success = False
-            response.message = 'not enough data for any Allan deviation yet'
-            return response
-        self._diagnose_thread = threading.Thread(target=self._diagnose_and_log,
-                                                 args=(view, raw), name='imu_allan_diagnose',
-                                                 daemon=True)
-        self._diagnose_thread.start()
-        response.success = True
-        response.message = (f'diagnosing {view.stats.n_used:,} samples in the background; '
-                            'the summary will be published on ~/diagnosis')
-        return response
-
-    def _snapshot(self) -> tuple:
-        """Return (session view, copy of its kept samples or None), taken together."""
-        with self._lock:
-            raw = None
-            if self._raw is not None and self._raw[0] is self.session:
-                raw = copy.deepcopy(self._raw[1])
-                raw.rate_hz = raw.rate_hz or (self.session.rate_hz or None)
-            return _SessionView(self.session), raw
-
-    def _diagnose_and_log(self, view, raw) -> None:
-        try:
-            self.diagnose(view, raw)
-        except InputError as exc:
-            self.get_logger().warning(f'diagnosis failed: {exc}')
-
-    def diagnose(self, view=None, raw: RawKeeper | None = None) -> str:
-        """
-        Diagnose the data so far (imu_allan.core.diagnose); publish the summary on ~/diagnosis.
-
-        Runs in the caller's thread (the ~/diagnose service runs it on a worker thread).
-        A sinusoid is checked in the periodogram of the block-averaged samples the node
-        keeps (``diagnose_raw_samples`` rows; with 0, from the Allan curve alone).
-
-        Parameters
-        ----------
-        view : optional
-            A snapshot of the session (default: one taken now, with the raw samples).
-        raw : RawKeeper, optional
-            A snapshot of the kept samples, taken with ``view``.
-
-        Returns
-        -------
-        str
-            One line per axis: the gap between model and data and what is missing.
-
-        Raises
-        ------
-        InputError
-            If there is not enough data for any Allan deviation yet.
-
-        """
-        if view is None:
-            self._process()
-            view, raw = self._snapshot()
-        result = diagnose_session(view, raw, source=self.subscription.topic_name)
-        if result is None:
-            raise InputError('not enough data for any Allan deviation yet')
-        text = '\n'.join(result.summary_lines())
-        self.pub_diagnosis.publish(String(data=text))
-        self.get_logger().info('diagnosis:\n' + text)
-        return text
+            self.live.checkpoint()
+        except OSError as exc:
+            self.get_logger().error(f'checkpoint failed: {exc}')
 
     def save(self) -> list:
         """
@@ -538,12 +302,8 @@ class ImuAllanNode(_Reports, Node):
         """
         if self._fit_thread is not None:
             self._fit_thread.join()
-        self._process()
-        with self._lock:
-            self.session.flush()
-            if self.session.curve() is not None:
-                self.session.save_state(self.output_dir / CHECKPOINT)
-        view, raw = self._snapshot()
+        self.live.checkpoint(flush=True)
+        view, raw = self.live.snapshot()
         # The same model as the periodic fit: raw copy and topic included.
         result = analyze(view, source=self.subscription.topic_name, raw=raw,
                          topic=self.subscription.topic_name) \
@@ -554,7 +314,7 @@ class ImuAllanNode(_Reports, Node):
         self.relay.update(result.imu_covariances())
         imu_topic = self.pub_imu.topic_name if self.pub_imu is not None else None
         return write_outputs(result, self.output_dir, imu_topic=imu_topic) + [
-            self.output_dir / CHECKPOINT]
+            self.live.checkpoint_path]
 
 
 def main(args=None) -> int:

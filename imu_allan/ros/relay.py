@@ -88,9 +88,10 @@ class CovarianceRelay:
             unknown = np.diag([UNKNOWN_VARIANCE] * 3).ravel()
             self._set(unknown, unknown, 'unknown')
         else:
-            self._set(*initial, 'file')
+            gyro, accel = initial
+            self._set(gyro, accel, 'file')
 
-    def _set(self, gyro, accel, source: str) -> None:
+    def _set(self, gyro, accel, source: str = 'fit') -> None:
         self.fields = (tuple(float(x) for x in gyro), tuple(float(x) for x in accel))
         self._patch = CovariancePatch(*self.fields)
         self.source = source

@@ -25,10 +25,12 @@ _LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
 class _Reports:
     """Diagnostic statuses of the node, built from its session, counters and last fit."""
 
+    _progress_mark: tuple[float, float]   # (wall time, duration) of the last progress log
+
     @property
     def hardware_id(self) -> str:
         """hardware_id of the statuses: the parameter, else the messages' frame_id."""
-        return self.values['hardware_id'] or self._frame_id
+        return self.values['hardware_id'] or self.live.frame_id
 
     def _status(self, what: str, level, message: str, values: list) -> DiagnosticStatus:
         return DiagnosticStatus(name=f'{self.diag_prefix}: {what}', level=level,
@@ -47,7 +49,7 @@ class _Reports:
         stats = session.stats
         values = [(k, str(v) if not isinstance(v, list) else ','.join(v))
                   for k, v in vars(stats).items()]
-        values += [('n_buffer_dropped', str(self.n_buffer_dropped)),
+        values += [('n_buffer_dropped', str(self.live.n_buffer_dropped)),
                    ('warnings', ' | '.join(session.warnings))]
         message = (' | '.join(session.warnings) if session.warnings
                    else 'input clean: no gaps, bad stamps, bad values or motion')
@@ -79,17 +81,17 @@ class _Reports:
             text = (f'collecting: {pct:.1f}% of {target:.0f} s, {s.stats.n_used} samples at '
                     f'{s.rate_hz:.2f} Hz, ETA {eta_text}')
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
-        if self.n_buffer_dropped:
-            text += f', {self.n_buffer_dropped} messages dropped by a full buffer'
+        if self.live.n_buffer_dropped:
+            text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
         level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
         return self._status('progress', level, text, values)
 
     def _data_status(self) -> DiagnosticStatus:
         """WARN while no message arrives on the input topic."""
         topic = self.subscription.topic_name
-        since = time.monotonic() - (self._last_rx or self._started)
+        since = time.monotonic() - (self.live.last_rx or self._started)
         if since > NO_DATA_WARN_S:
-            what = 'no message yet' if self._last_rx is None else 'no message'
+            what = 'no message yet' if self.live.last_rx is None else 'no message'
             return self._status('data', DiagnosticStatus.WARN,
                                 f'{what} on {topic} for {since:.0f} s',
                                 [('topic', topic), ('received', str(self.n_received))])

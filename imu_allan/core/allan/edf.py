@@ -18,7 +18,7 @@ from imu_allan.errors import InputError
 
 # Greenhall & Riley 2003, table 2: (a0, a1) of 1/edf ~ (a0 - a1 / r) / r for the
 # unmodified variances, by alpha (rows) and d = 1, 2, 3 (columns); None = divergent.
-_GH_TABLE2 = {
+_GH_TABLE2: dict[int, tuple] = {
     2: ((1.5, 0.5), (35.0 / 18.0, 1.0), (2.31, 1.5)),
     1: ((78.6, 25.2), (790.0, 410.0), (9950.0, 6520.0)),
     0: ((2.0 / 3.0, 1.0 / 6.0), (2.0 / 3.0, 1.0 / 3.0), (7.0 / 9.0, 0.5)),

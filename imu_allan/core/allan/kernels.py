@@ -211,11 +211,11 @@ def _pyramid_sums(col: np.ndarray, mean: float, levels: int, sums: np.ndarray,
     tile = max(_TILE_ELEMS, 2 * halo)  # keeps the halo a minor part of each tile
     bufs = (np.empty(tile + halo), np.empty(tile + halo))
     n_top = n + 1 - (1 << levels)
-    stores = [[] for _ in range(levels)] if blocks is not None else None
+    stores: list[list] | None = [[] for _ in range(levels)] if blocks is not None else None
     for t0 in range(0, n, tile):
         src = col[t0:min(n, t0 + tile + halo)]
         cur = np.subtract(src, mean, out=bufs[1][:src.size])
-        q_next = None
+        q_next: tuple[int, float] | None = None
         for j in range(levels):
             m = 1 << j
             if stores is not None:
@@ -229,8 +229,7 @@ def _pyramid_sums(col: np.ndarray, mean: float, levels: int, sums: np.ndarray,
                 break
             nxt = bufs[j % 2][:cur.size - m]
             np.add(cur[:-m], cur[m:], out=nxt)
-            qa = q_next if q_next is not None and q_next[0] == t else None
-            qa = qa[1] if qa is not None else _dot(cur[:t], cur[:t])
+            qa = q_next[1] if q_next is not None and q_next[0] == t else _dot(cur[:t], cur[:t])
             qb = qa - _dot(cur[:m], cur[:m]) + _dot(cur[t:t + m], cur[t:t + m])
             qs = _dot(nxt[:t], nxt[:t])
             sums[j] += 2.0 * (qa + qb) - qs
@@ -241,7 +240,7 @@ def _pyramid_sums(col: np.ndarray, mean: float, levels: int, sums: np.ndarray,
             own = min(tile, n_top - t0)
             if keep_top and own > 0:
                 col[t0:t0 + own] = cur[:own]
-    if stores is not None:
+    if stores is not None and blocks is not None:
         blocks.extend(np.concatenate(s) if s else np.empty(0) for s in stores)
 
 
@@ -341,7 +340,7 @@ def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarr
     """
     order = _DIFF_ORDER[method]
     out = np.empty(m.size)
-    cache = []
+    cache: list[np.ndarray] = []
 
     def phase() -> np.ndarray:
         if not cache:
@@ -351,9 +350,9 @@ def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarr
     if method == 'overlapping' and _is_octave(m) and m.size > 2:
         # The fast octave kernels never need the running sum X (a pass and a copy the
         # size of the record) unless they cancel too much or B1 asks for R(n).
-        blocks = [] if identify else None
+        blocks: list | None = [] if identify else None
         sums, cancel = _octave_sums(col, mean, int(m.max()).bit_length(), blocks)
-        pick = np.array([int(mj).bit_length() - 1 for mj in m])
+        pick = np.array([int(m_j).bit_length() - 1 for m_j in m])
         out[:] = sums[pick]
         # Where the identity cancelled more than 1e5 x the result (error ~1e-11
         # relative), recompute exactly from the running sum.
@@ -361,18 +360,18 @@ def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarr
             out[j] = _diff_sumsq(phase(), int(m[j]), order)
 
         def cluster_means(j: int) -> np.ndarray:
+            assert blocks is not None  # kept when identify asks for them
             return blocks[pick[j]] / float(m[j])
     else:
         col -= mean
         x = _phase_row(col)
         cache.append(x)
-        for j, mj in enumerate(m):
-            mj = int(mj)
+        for k, m_k in enumerate(m.tolist()):
             if method == 'nonoverlapping':
-                d = np.diff(x[::mj], 2)
-                out[j] = float(np.dot(d, d))
+                d = np.diff(x[::m_k], 2)
+                out[k] = float(np.dot(d, d))
             else:
-                out[j] = _diff_sumsq(x, mj, order)
+                out[k] = _diff_sumsq(x, m_k, order)
 
         def cluster_means(j: int) -> np.ndarray:
             mj = int(m[j])

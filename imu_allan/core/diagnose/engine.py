@@ -275,7 +275,7 @@ def diagnose_curve(curve: AllanCurve, n_samples: int, *, raw=None,
         raise InputError(f'the curve has {avar.shape[1]} columns but {len(axes)} axis names')
     raw_arr = None if raw is None else np.asarray(raw, dtype=np.float64).reshape(-1, len(axes))
     children = np.random.SeedSequence(seed).spawn(len(axes))
-    out = {}
+    out: dict[str, AxisDiagnosis | None] = {}
     for j, axis in enumerate(axes):
         ok = np.isfinite(avar[:, j]) & (avar[:, j] > 0)
         if np.count_nonzero(ok) < 3:

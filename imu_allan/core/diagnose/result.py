@@ -127,8 +127,8 @@ class AxisDiagnosis:
     chi2_before: float
     chi2_after: float
     dof: int
-    fit_before: AxisFit = field(repr=False, default=None)
-    fit_after: AxisFit = field(repr=False, default=None)
+    fit_before: AxisFit | None = field(repr=False, default=None)
+    fit_after: AxisFit | None = field(repr=False, default=None)
     summary: str = ''
     notes: tuple = ()
 

@@ -15,10 +15,10 @@ from scipy.special import ndtr
 
 from imu_allan.core.allan import AllanCurve
 from imu_allan.core.allan.blas import _single_thread_blas
+from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.nominal import nominal_fit
 from imu_allan.core.fit.result import _unit, AxisFit, Param
-from imu_allan.core.fit.solver import (_design, _fit_fixed_w, _Fitter, _profile_interval, _Slot,
-                                       _Solution)
+from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter, _Slot, _Solution
 from imu_allan.core.model import base_name, GM_PEAK_TAU, noise_from_terms, TERMS
 from imu_allan.core.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.errors import InputError
@@ -230,7 +230,66 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                      for s, p in zip(slots_all, start)]
     symbols = _symbols(slots_all)
 
-    # Full candidate model, then every subset at its weights (AIC).
+    full_sol, full_sigma, phi_full, supported = _select_terms(fitter, slots_all, start,
+                                                              sigma0, select)
+    # Values and intervals come from the supported terms plus the paper's core terms
+    # (white, bias instability, random walk) even where the data do not support them:
+    # a weak random walk dropped from the fit would push B and T_B up and make their
+    # intervals too narrow.  Other unsupported candidates (quantization, say) are left
+    # out, since keeping them only blurs N.  The selection decides what is reported as
+    # an estimate and what as an upper bound.
+    slots = [s for s in slots_all if s.label in supported or s.term.name in _CORE_TERMS]
+    if len(slots) == len(slots_all):
+        sol, sigma = full_sol, full_sigma
+        fitter.data.set_sigma(sigma)
+    else:
+        sol, sigma = fitter.irls(slots, phi0=[phi_full[s.label] for s in slots],
+                                 sigma0=full_sigma)
+    # J at exactly these weights (from the search's model: a polish, not a new search).
+    sol = _fit_fixed_w(fitter.data, slots, sol.phi, local=start is not None)
+    relabelled = (_dominant_bias_instability(slots, sol, fitter.data.scale) if not select
+                  else slots)
+    swap = {a.label: b.label for a, b in zip(slots, relabelled) if a.label != b.label}
+    supported = {swap.get(lb, lb) for lb in supported}
+    slots = relabelled
+    chi2_value = float(sol.j)
+    dof = int(tau.size - _n_params(slots))
+    threshold = _profile_threshold(chi2_value, dof)
+
+    optimised, values = _estimates(fitter, slots, sol, supported, threshold, symbols, unit,
+                                   notes)
+
+    _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
+                 symbols, unit, optimised, notes)
+    if dof > 0 and chi2_sf(chi2_value, dof) < 1e-3:
+        notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
+                     f'{dof} dof): a missing effect? (imu-allan diagnose)')
+    order = ['N', 'B', 'T_B', 'K']
+    rest = sorted(k for k in optimised if k not in order)
+    optimised = {k: optimised[k] for k in order + rest}
+    # The model keeps the core terms reported as bounds at their point estimates: it is
+    # the curve the data support best, e.g. for simulation and diagnosis.
+    for i, s in enumerate(slots):
+        if s.label not in values and s.term.name in _CORE_TERMS:
+            values[s.label] = s.term.to_params(sol.coef[i] * fitter.data.scale, *sol.phi[i])
+    avar_fit = _design(slots, tau, sol.phi) @ sol.coef * fitter.data.scale
+    components = tuple((s.label, float(c * fitter.data.scale), tuple(p))
+                       for s, c, p in zip(slots, sol.coef, sol.phi) if c > 0)
+    return AxisFit(nominal=nominal, optimised=optimised, model=noise_from_terms(values),
+                   terms=tuple(s.label for s in slots if s.label in supported),
+                   notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
+                   avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
+                   avar_meas=avar, edf=edf, components=components)
+
+
+def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple:
+    """
+    Fit the full candidate model, then every subset at its weights; keep the best (AIC).
+
+    Returns the full model's solution and covariance, its nonlinear parameters by label
+    and the set of labels the data support (all positive terms when not ``select``).
+    """
+    tau = fitter.data.tau
     if sigma0 is not None and np.shape(sigma0) != (tau.size, tau.size):
         sigma0 = None
     full_sol, full_sigma = fitter.irls(slots_all, phi0=start, sigma0=sigma0,
@@ -254,29 +313,11 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                 best = (ic, subset)
     if best is None:
         raise InputError('no noise term fits this curve (all coefficients zero)')
-    supported = {slots_all[i].label for i in best[1]}
-    # Values and intervals come from the supported terms plus the paper's core terms
-    # (white, bias instability, random walk) even where the data do not support them:
-    # a weak random walk dropped from the fit would push B and T_B up and make their
-    # intervals too narrow.  Other unsupported candidates (quantization, say) are left
-    # out, since keeping them only blurs N.  The selection decides what is reported as
-    # an estimate and what as an upper bound.
-    slots = [s for s in slots_all if s.label in supported or s.term.name in _CORE_TERMS]
-    if len(slots) == len(slots_all):
-        sol, sigma = full_sol, full_sigma
-        fitter.data.set_sigma(sigma)
-    else:
-        sol, sigma = fitter.irls(slots, phi0=[phi_full[s.label] for s in slots],
-                                 sigma0=full_sigma)
-    # J at exactly these weights (from the search's model: a polish, not a new search).
-    sol = _fit_fixed_w(fitter.data, slots, sol.phi, local=start is not None)
-    relabelled = (_dominant_bias_instability(slots, sol, fitter.data.scale) if not select
-                  else slots)
-    swap = {a.label: b.label for a, b in zip(slots, relabelled) if a.label != b.label}
-    supported = {swap.get(lb, lb) for lb in supported}
-    slots = relabelled
-    chi2_value = float(sol.j)
-    dof = int(tau.size - _n_params(slots))
+    return full_sol, full_sigma, phi_full, {slots_all[i].label for i in best[1]}
+
+
+def _profile_threshold(chi2_value: float, dof: int) -> float:
+    """Rise of the GLS chi-square that bounds a 95 % profile interval."""
     # Sigma is the model's own covariance of the curve (checked against Monte Carlo in
     # test_fit.py), so the scale is known and the threshold is the chi-square quantile
     # (likelihood-ratio interval, Bates & Watts 1988).  Where the model fits worse than
@@ -286,10 +327,14 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     # that is itself estimated.
     dispersion = chi2_value / dof if dof > 0 else 0.0
     if dispersion > 1.0:
-        threshold = f_ppf(0.95, 1, dof) * dispersion
+        return f_ppf(0.95, 1, dof) * dispersion
     else:
-        threshold = chi2_ppf(0.95, 1)
+        return chi2_ppf(0.95, 1)
 
+
+def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: float,
+               symbols: dict, unit: str, notes: list) -> tuple[dict, dict]:
+    """Values and 95 % profile intervals of the supported terms (notes appended)."""
     optimised: dict[str, Param] = {}
     values: dict[str, dict] = {}
     for i, s in enumerate(slots):
@@ -316,12 +361,22 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                                  'tau; poorly identified')
             optimised[symbols[(s.label, sym)]] = Param(
                 float(v), (float(ci[0]), float(ci[1])), kind, _unit(template, unit))
+    return optimised, values
 
-    # Candidates the data do not support: an upper bound for core or requested terms.
+
+def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported: set,
+                 candidates: tuple, requested: bool, symbols: dict, unit: str,
+                 optimised: dict, notes: list) -> None:
+    """
+    Report the candidates the data do not support: a 95 % upper bound, or not identified.
+
+    Only core terms (and every term when the caller chose the candidates) get a bound;
+    ``optimised`` and ``notes`` are filled in place.
+    """
     for s in slots_all:
         if s.label in supported:
             continue
-        if s.term.name not in _CORE_TERMS and terms is None:
+        if s.term.name not in _CORE_TERMS and not requested:
             notes.append(f'{s.label}: not supported by the data (left out)')
             continue
         others = [i for i, x in enumerate(slots) if x.label != s.label]
@@ -351,25 +406,6 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                                    _unit(units.get(sym, 'u'), unit))
             if base not in [base_name(x) for x in candidates]:
                 notes.append(f'{sym}: not modelled (term {base} not among the candidates)')
-    if dof > 0 and chi2_sf(chi2_value, dof) < 1e-3:
-        notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
-                     f'{dof} dof): a missing effect? (imu-allan diagnose)')
-    order = ['N', 'B', 'T_B', 'K']
-    rest = sorted(k for k in optimised if k not in order)
-    optimised = {k: optimised[k] for k in order + rest}
-    # The model keeps the core terms reported as bounds at their point estimates: it is
-    # the curve the data support best, e.g. for simulation and diagnosis.
-    for i, s in enumerate(slots):
-        if s.label not in values and s.term.name in _CORE_TERMS:
-            values[s.label] = s.term.to_params(sol.coef[i] * fitter.data.scale, *sol.phi[i])
-    avar_fit = _design(slots, tau, sol.phi) @ sol.coef * fitter.data.scale
-    components = tuple((s.label, float(c * fitter.data.scale), tuple(p))
-                       for s, c, p in zip(slots, sol.coef, sol.phi) if c > 0)
-    return AxisFit(nominal=nominal, optimised=optimised, model=noise_from_terms(values),
-                   terms=tuple(s.label for s in slots if s.label in supported),
-                   notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
-                   avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
-                   avar_meas=avar, edf=edf, components=components)
 
 
 def _dominant_bias_instability(slots: list, sol: _Solution, scale: float) -> list:

@@ -41,7 +41,10 @@ class _LagQuadrature:
 
     def __init__(self, m: np.ndarray, n_terms: np.ndarray, reach: np.ndarray):
         k = m.size
-        hs, ws, pair_ids, pairs = [], [], [], []
+        hs: list = []
+        ws: list = []
+        pair_ids: list = []
+        pairs: list = []
         for p in range(k):
             for q in range(p, k):
                 h, w = self._nodes(int(m[p]), int(m[q]), int(n_terms[p]), int(n_terms[q]),
@@ -62,7 +65,7 @@ class _LagQuadrature:
         self.kmin = -2.0 * self.m2
         self.kmax = 2.0 * self.m1
         self.k = k
-        self._lags = None
+        self._lags: tuple | None = None
         # Lags beyond the kink range of each node's pair (where tails apply).
         self.outside = (self.h < self.kmin) | (self.h > self.kmax)
         self.beyond = np.where(self.h > self.kmax, self.h - self.kmax, self.kmin - self.h)
@@ -104,20 +107,22 @@ class _LagQuadrature:
 
     def gamma(self, term: Term, nonlinear: tuple, dt: float) -> np.ndarray:
         """Covariance of the second differences per unit coefficient at every node."""
+        gcov = term.gcov
+        assert gcov is not None, term.name  # the caller keeps only terms that have one
         g = np.zeros(self.h.size)
         if term.reach is None or term.tail is not None:
             # Direct sums only between the kinks (beyond them the term has no
             # covariance, or its tail formula): one call over all nine stencil lags.
             inside, lags = self._stencil_lags(dt)
-            g[inside] = _STENCIL_WEIGHTS @ term.gcov(lags, *nonlinear)
+            g[inside] = _STENCIL_WEIGHTS @ gcov(lags, *nonlinear)
         else:
             reach = term.reach(self.m1, self.m2, dt, *nonlinear)
             direct = (self.h >= self.kmin - reach) & (self.h <= self.kmax + reach)
             h, m1, m2 = self.h[direct], self.m1[direct], self.m2[direct]
             for i, ai in _STENCIL:
                 for j, aj in _STENCIL:
-                    g[direct] += ai * aj * term.gcov(dt * (i * m1 - j * m2 - h), *nonlinear)
-        if term.tail is not None:
+                    g[direct] += ai * aj * gcov(dt * (i * m1 - j * m2 - h), *nonlinear)
+        if term.tail is not None and term.reach is not None:
             reach = term.reach(self.m1, self.m2, dt, *nonlinear)
             tail = self.outside & (self.beyond <= reach)
             g[tail] = term.tail(self.beyond[tail], self.m1[tail], self.m2[tail], dt, *nonlinear)

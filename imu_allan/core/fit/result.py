@@ -4,7 +4,7 @@ Result types of the fit: one parameter with its interval, one axis' fit.
 Part of :mod:`imu_allan.core.fit` (see its docstring for the method).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import NamedTuple
 
@@ -55,6 +55,11 @@ def json_num(x):
 def json_floats(a) -> list:
     """Return the values of an array as a list for strict JSON (None for NaN/inf)."""
     return [json_num(v) for v in np.asarray(a, dtype=np.float64).ravel()]
+
+
+def _no_curve() -> np.ndarray:
+    """Return the curve arrays of a fit made without one: empty."""
+    return np.empty(0)
 
 
 @dataclass(frozen=True)
@@ -110,11 +115,11 @@ class AxisFit:
     notes: tuple
     chi2: float = math.nan
     dof: int = 0
-    tau_s: np.ndarray = None
-    avar_fit: np.ndarray = None
-    avar_sd: np.ndarray = None
-    avar_meas: np.ndarray = None
-    edf: np.ndarray = None
+    tau_s: np.ndarray = field(default_factory=_no_curve)
+    avar_fit: np.ndarray = field(default_factory=_no_curve)
+    avar_sd: np.ndarray = field(default_factory=_no_curve)
+    avar_meas: np.ndarray = field(default_factory=_no_curve)
+    edf: np.ndarray = field(default_factory=_no_curve)
     components: tuple = ()
     effects: tuple = ()
     model_consistent: bool | None = None

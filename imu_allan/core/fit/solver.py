@@ -9,9 +9,10 @@ import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
-from scipy.optimize import minimize_scalar, nnls
+from scipy.optimize import nnls
 
 from imu_allan.core.fit.covariance import _shared_covariance
+from imu_allan.core.fit.polish import _polish_1d, _polish_lm
 from imu_allan.core.model import Term
 
 
@@ -38,9 +39,9 @@ class _Data:
         self.tau = tau
         self.y = avar / scale
         self.scale = scale
-        self.chol = None
-        self.inv = None
-        self.yw = None
+        self.chol: np.ndarray = np.empty((0, 0))
+        self.inv: np.ndarray = np.empty((0, 0))
+        self.yw: np.ndarray = np.empty(0)
 
     def set_sigma(self, sigma_scaled: np.ndarray) -> None:
         """Whiten with Sigma (scaled units); a tiny relative ridge keeps it definite."""
@@ -102,6 +103,9 @@ def _families(slots: Sequence[_Slot]) -> list:
     return [g for g in groups.values() if len(g) > 1]
 
 
+# Long by design: the variable-projection problem's state (column cache, held
+# parameters, bounds) is shared by its evaluations (objective, residual and Jacobian,
+# grid sweeps), each a short method.
 class _Problem:
     """
     One model at fixed weights: its nonlinear parameters x (log phi) and their bounds.
@@ -117,7 +121,7 @@ class _Problem:
     def __init__(self, data: _Data, slots: Sequence[_Slot], phi0, fix: _Fix | None):
         self.data, self.slots, self.phi0 = data, slots, phi0
         self.fixed_nl: dict = {}
-        self.fixed_level = None
+        self.fixed_level: _Fix | None = None
         if fix is not None:
             term = slots[fix.slot].term
             if fix.symbol in term.nonlinear:
@@ -216,7 +220,7 @@ class _Problem:
             step = list(phi[i])
             step[jj] *= _EXP_H
             col = slots[i].term.shape(data.tau, *step)
-            if held_level:
+            if held_level and fl is not None:
                 c_step = slots[i].term.to_coef(fl.value, *step) / data.scale
                 dm[:, d] = (col * c_step - self.column(i, phi[i]) * coef[i]) / _H
             else:
@@ -324,80 +328,12 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
     return sol
 
 
-#: First trial of a profile interval: 2 % from the estimate (then a quadratic guess).
-_FIRST_STEP = 0.02
-#: A profile still below its threshold 1e7 x away from the estimate is unbounded there.
-_MAX_REACH = math.log(1e7)
 #: Forward-difference step in log(phi) for the variable-projection Jacobian.
 _H = 1e-7
 _EXP_H = math.exp(_H)
 #: Weight w of the order penalty on interchangeable terms held in a profile (chi-square
 #: per squared log-ratio: a swap by 0.1 % costs 1e-2).
 _ORDER_WEIGHT = 1e4
-#: Relative drop of J below which a Levenberg-Marquardt polish stops (J is a chi-square:
-#: 1e-7 of it is far below what moves an interval end or a model choice).
-_LM_FTOL = 1e-7
-#: Most Levenberg-Marquardt iterations of one polish.
-_LM_MAX_ITER = 100
-
-
-def _polish_lm(residual_jac, x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-    """
-    Levenberg-Marquardt from x within bounds (k, 2), projected; only improving steps count.
-
-    ``residual_jac(x)`` returns the residual vector r and its Jacobian; J = r^T r.
-    Parameters at a bound whose gradient pushes them out are held there (an active
-    set), so a solution on a bound (a T at the edge of its range) converges as fast as
-    an interior one.  The damping follows the gain ratio (Nielsen 1999, as in Madsen,
-    Nielsen & Tingleff, "Methods for non-linear least squares problems", 2004).  Stops
-    when an accepted step lowers J by less than _LM_FTOL (J + 1), or moves no parameter
-    by more than 1e-7 in log units.
-    """
-    lo, hi = bounds[:, 0], bounds[:, 1]
-    x = np.clip(x, lo, hi)
-    r, jac = residual_jac(x)
-    cost = float(r @ r)
-    lam, nu = None, 2.0
-    for _ in range(_LM_MAX_ITER):
-        grad = jac.T @ r
-        free = ~(((x <= lo) & (grad > 0)) | ((x >= hi) & (grad < 0)))
-        if not free.any():
-            break
-        jf = jac[:, free]
-        h = jf.T @ jf
-        if lam is None:
-            lam = 1e-3 * float(np.max(np.diag(h))) + 1e-300
-        d = np.zeros(x.size)
-        try:
-            d[free] = np.linalg.solve(h + lam * np.eye(h.shape[0]), -grad[free])
-        except np.linalg.LinAlgError:
-            lam, nu = lam * nu, nu * 2.0
-            continue
-        x_new = np.clip(x + d, lo, hi)
-        d = x_new - x
-        predicted = -float(2.0 * grad @ d + d @ (jac.T @ (jac @ d)))
-        r_new, jac_new = residual_jac(x_new)
-        cost_new = float(r_new @ r_new)
-        gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
-        if gain <= 0:
-            lam, nu = lam * nu, nu * 2.0
-            if np.max(np.abs(d)) < 1e-7:
-                break
-            continue
-        done = cost - cost_new < _LM_FTOL * (cost + 1.0) or np.max(np.abs(d)) < 1e-7
-        x, r, jac, cost = x_new, r_new, jac_new, cost_new
-        lam *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
-        nu = 2.0
-        if done:
-            break
-    return x
-
-
-def _polish_1d(objective, lo: float, hi: float, x0: float, f0: float) -> float:
-    """Bounded 1-D minimisation of objective on [lo, hi]; keep x0 unless it improves on f0."""
-    res = minimize_scalar(lambda v: objective(np.array([v])), bounds=(lo, hi),
-                          method='bounded', options={'xatol': 1e-4})
-    return float(res.x) if res.fun <= f0 else x0
 
 
 def _canonical(slots: Sequence[_Slot], coef: np.ndarray, phi: tuple) -> tuple:
@@ -408,94 +344,14 @@ def _canonical(slots: Sequence[_Slot], coef: np.ndarray, phi: tuple) -> tuple:
     convention the first label gets the shortest correlation time (the lowest
     frequency), so 'bias_instability' is the fastest Gauss-Markov term.
     """
-    coef, phi = coef.copy(), list(phi)
+    coef, phi_list = coef.copy(), list(phi)
     for members in _families(slots):
-        order = sorted(members, key=lambda i: phi[i][0])
+        order = sorted(members, key=lambda i: phi_list[i][0])
         new_coef = [coef[i] for i in order]
-        new_phi = [phi[i] for i in order]
+        new_phi = [phi_list[i] for i in order]
         for dst, c, p in zip(members, new_coef, new_phi):
-            coef[dst], phi[dst] = c, p
-    return coef, tuple(phi)
-
-
-def _profile_interval(data: _Data, slots: Sequence[_Slot], sol: _Solution, slot: int,
-                      symbol: str, value: float, threshold: float,
-                      hard: tuple = (0.0, math.inf)) -> tuple[float, float]:
-    """
-    95 % profile interval of one parameter at fixed weights: {v : J(v) - J_min <= thr}.
-
-    J(v) is the GLS chi-square minimised over every other parameter with this one held
-    at v (non-negative coefficients, nonlinear parameters searched again), so the
-    interval follows the curvature and the bounds of the real problem, not a quadratic
-    approximation.  ``threshold`` is F(0.95; 1, dof) times the dispersion
-    max(1, J_min / dof) (see :func:`fit_axis`).  ``hard`` are the limits of the
-    parameter (a search range for nonlinear ones); a side that reaches one returns it.
-    """
-    target = sol.j + threshold
-
-    last = {'phi': sol.phi}
-
-    def excess(v):
-        fit = _fit_fixed_w(data, slots, last['phi'], _Fix(slot, symbol, v), local=True)
-        last['phi'] = fit.phi
-        return fit.j - target
-
-    def crossing(a: float, fa: float, b: float, fb: float) -> float:
-        # Illinois regula falsi in log(v) (or v when the bracket touches 0), from the
-        # bracket values already known: robust where the profile, found by local
-        # searches, is not exactly monotone; it stops at 0.2 % of v, or where J is
-        # within 1 % of the threshold of its target (the end then moves by < 0.5 %
-        # of the half-width).
-        logs = a > 0 and b > 0
-        xa, xb = (math.log(a), math.log(b)) if logs else (a, b)
-        side = 0
-        for _ in range(12):
-            xc = xb - fb * (xb - xa) / (fb - fa) if fb != fa else 0.5 * (xa + xb)
-            fc = excess(math.exp(xc) if logs else xc)
-            if abs(fc) < 0.01 * threshold:
-                return math.exp(xc) if logs else xc
-            if fc > 0:
-                xb, fb = xc, fc
-                if side == 1:
-                    fa *= 0.5
-                side = 1
-            else:
-                xa, fa = xc, fc
-                if side == -1:
-                    fb *= 0.5
-                side = -1
-            if abs(xb - xa) < (2e-3 if logs else 2e-3 * max(abs(xa), abs(xb))):
-                break
-        x = 0.5 * (xa + xb)
-        return math.exp(x) if logs else x
-
-    ends = []
-    for direction in (-1.0, 1.0):
-        last['phi'] = sol.phi
-        inner, f_inner = value, -threshold
-        limit = hard[0] if direction < 0 else hard[1]
-        end = limit
-        reach = _FIRST_STEP  # distance |log(v / value)| of the next trial
-        while reach < _MAX_REACH:
-            outer = value * math.exp(direction * reach)
-            if (direction < 0 and outer <= limit) or (direction > 0 and outer >= limit):
-                if math.isfinite(limit):
-                    f_limit = excess(limit) if limit > 0 else excess(0.0)
-                    if f_limit > 0:
-                        end = crossing(inner, f_inner, limit, f_limit)
-                break
-            f_outer = excess(outer)
-            if f_outer > 0:
-                end = crossing(inner, f_inner, outer, f_outer)
-                break
-            inner, f_inner = outer, f_outer
-            # The profile is about quadratic in log(v) near its minimum: aim just beyond
-            # the predicted crossing, at most 4x further out.
-            rise = f_outer + threshold
-            aim = reach * math.sqrt(threshold / rise) if rise > 0 else math.inf
-            reach = min(max(1.1 * aim, 1.2 * reach), 4.0 * reach)
-        ends.append(float(end))
-    return ends[0], ends[1]
+            coef[dst], phi_list[dst] = c, p
+    return coef, tuple(phi_list)
 
 
 class _Fitter:

@@ -35,6 +35,8 @@ class _ChunkInfo(NamedTuple):
     indexes: dict[int, np.ndarray] | None
 
 
+# Long by design: one reader of one MCAP file; its state (open file, summary, chunk
+# index, channel table) is shared by the reading steps, each a short method.
 class _McapBackend(_Backend):
     """MCAP storage (ros2 or ros1 profile), chunked or not, with or without a summary."""
 
@@ -165,9 +167,9 @@ class _McapBackend(_Backend):
                 channel_id, size = struct.unpack_from('<HI', mm, pos + 9)
                 size = min(size, body_end - pos - 15) // 16 * 16
                 index = np.frombuffer(mm, '<u8', count=size // 8, offset=pos + 15)
-                if pending.indexes is None:
-                    pending = pending._replace(indexes={})
-                pending.indexes[channel_id] = index.reshape(-1, 2)
+                indexes = pending.indexes if pending.indexes is not None else {}
+                indexes[channel_id] = index.reshape(-1, 2)
+                pending = pending._replace(indexes=indexes)
                 pos = body_end
                 continue
             if pending is not None:
@@ -290,7 +292,7 @@ class _McapBackend(_Backend):
             msgtype = self.schemas.get(schema_id, '')
             if name in found:
                 old = found[name]
-                found[name] = old._replace(n_messages=old.n_messages + count)
+                found[name] = old._replace(n_messages=(old.n_messages or 0) + count)
             else:
                 found[name] = _Topic(name, msgtype, count, encoding)
         return list(found.values())
@@ -355,7 +357,7 @@ class _McapBackend(_Backend):
 
     def close(self) -> None:
         """Release the memory map and the file."""
-        self.u8 = None
+        self.u8 = np.empty(0, np.uint8)
         try:
             self.mm.close()
         except BufferError:

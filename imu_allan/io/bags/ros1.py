@@ -39,7 +39,7 @@ class _Ros1Backend(_Backend):
             msgtype = conn.msgtype.replace('/msg/', '/')
             if conn.topic in found:
                 old = found[conn.topic]
-                found[conn.topic] = old._replace(n_messages=old.n_messages + conn.msgcount)
+                found[conn.topic] = old._replace(n_messages=(old.n_messages or 0) + conn.msgcount)
             else:
                 found[conn.topic] = _Topic(conn.topic, msgtype, conn.msgcount, 'ros1')
         return list(found.values())

@@ -68,7 +68,7 @@ class _SqliteBackend(_Backend):
         try:
             row = self.conn.execute(
                 'SELECT metadata FROM metadata ORDER BY id DESC LIMIT 1').fetchone()
-            info = yaml.safe_load(row[0]) if row else None
+            info = yaml.safe_load(row[0]) if row else {}
             info = info.get('rosbag2_bagfile_information', info)
             if len(info['relative_file_paths']) != 1:
                 return {}   # one part of a split bag: the counts may cover other files
@@ -205,6 +205,8 @@ def _serial_int(u8: np.ndarray, pos: np.ndarray, serial: np.ndarray) -> np.ndarr
     return value
 
 
+# Long by design: one walk of one sqlite file's B-tree (page size, encoding, overflow
+# pages) whose steps share the open file; each is a short method.
 class _SqlitePages:
     """
     Locate the rows of rosbag2's messages table by reading the file's pages directly.

@@ -1,47 +1,16 @@
 """
-The effect search: one model per axis, the base terms plus every effect the data name.
+One search of one axis: its state and its phases.
 
-Every analysis (``imu-allan analyze``, the node's periodic fit, ``imu-allan diagnose``)
-runs this search, so all of them report the same model, and N, B, K, T_B, Q/R, the
-Kalibr file and the Imu covariances all come from it.
-
-1. **Base model.**  White noise, the paper's Gauss-Markov bias instability (B, T_B)
-   and random walk (Maia et al., sec. 2).  White noise is taken through the sensor's
-   own low-pass filter (term ``filtered_white``: N and a filter time constant of at
-   most a few sample periods) when that lowers the GLS chi-square by more than
-   :data:`DELTA_MIN` plus ln(k): a real IMU's decimation filter bends the shortest
-   taus below the white line, and a model without it spends white noise on a
-   fast Gauss-Markov term (T_B a few samples: white noise to the curve).
-2. **Forward search.**  While the model does not explain the curve (chi-square
-   p-value below :data:`P_CONSISTENT`), every effect not yet in it is fitted at the
-   current model's covariance of the curve; the one with the largest drop of the
-   GLS chi-square beyond BIC's ln(k) per parameter and the margin :data:`DELTA_MIN`
-   is added and the model re-weighted (IRLS), up to :data:`MAX_STEPS` effects.  Rival
-   explanations compete on the same statistic: a second Gauss-Markov process (two
-   parameters) against flicker noise (one), a sinusoid against both.
-3. **Time-domain evidence**, where the curve blurs it (:mod:`imu_allan.core.evidence`):
-   a sinusoid must show as a periodogram line of the raw samples near the fitted
-   frequency (the line's frequency replaces the curve's); a rate ramp is tested on
-   the record itself by a likelihood ratio against more random walk, so a ramp that
-   the random walk absorbs on the curve is still found.
-4. **Guards.**  Quantization is a candidate only where the curve shows its slope
-   (steeper than -0.75 at the shortest taus).  When no effect closes the gap, the
-   axis says so (``model_consistent`` false) and N is read from the white region of
-   the curve, not from the distorted fit.
-
-Effect names (DESIGN.md diagnose contract): quantization, white, bias_instability
-(flicker noise, B), gauss_markov (a further Gauss-Markov process, B and T),
-random_walk, rate_ramp, sinusoid; the model's own low-pass is ``filtered_white``.
+The phases run in the order :func:`imu_allan.core.search.search_axis` calls them: base
+model, ramp test, forward search, backward check, final fit (see the package doc).
 """
 
 from dataclasses import replace
 import math
-from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from imu_allan.core.allan.blas import _single_thread_blas
-from imu_allan.core.evidence import periodogram_peak, ramp_test
+from imu_allan.core.evidence import ramp_test
 from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
@@ -49,178 +18,10 @@ from imu_allan.core.judge import (follows_curve, P_CONSISTENT, shows_quantizatio
                                   white_region, white_share)
 from imu_allan.core.model import base_name, TERMS
 from imu_allan.core.quantiles import chi2_sf
+from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
+from imu_allan.core.search.rules import (_label_for, _sinusoid_evidence, DELTA_MIN, MAX_STEPS,
+                                         Step)
 from imu_allan.errors import InputError
-
-#: Effects the search may add, in the order they are tried (ties keep the first).
-SEARCH_EFFECTS = ('sinusoid', 'gauss_markov', 'bias_instability', 'quantization',
-                  'rate_ramp')
-#: The paper's base model (fit labels).
-BASE_LABELS = ('white', 'bias_instability', 'random_walk')
-#: Fit term behind each effect when it is added ('bias_instability' is flicker noise).
-EFFECT_TERM = {'quantization': 'quantization', 'white': 'white',
-               'bias_instability': 'flicker', 'gauss_markov': 'gauss_markov',
-               'random_walk': 'random_walk', 'rate_ramp': 'rate_ramp',
-               'sinusoid': 'sinusoid'}
-#: At most this many of a repeatable effect (gauss_markov, sinusoid) are added.
-MAX_REPEATS = 2
-#: Most effects added per axis.
-MAX_STEPS = 4
-#: Drop of the GLS chi-square, beyond BIC's ln(k) per parameter, that an effect must buy
-#: (keeps clean axes clean: bench/search_power.py).
-DELTA_MIN = 10.0
-#: A sinusoid's amplitude from the curve and from the periodogram agree within this.
-AMPLITUDE_FACTOR = 3.0
-
-
-class Step(NamedTuple):
-    """
-    One effect the search added.
-
-    Attributes
-    ----------
-    effect : str
-        Effect name (DESIGN.md), e.g. 'sinusoid'.
-    label : str
-        Fit term label, e.g. 'sinusoid_2'.
-    chi2_drop : float
-        Drop of the GLS chi-square the effect bought at the previous model's weights.
-    rival : str
-        The runner-up explanation and its drop ('' when none qualified).
-    evidence : str
-        Time-domain evidence (periodogram line, ramp likelihood ratio) or ''.
-    fit : AxisFit or None
-        The model after this step (kept for the diagnosis' before/after view).
-
-    """
-
-    effect: str
-    label: str
-    chi2_drop: float
-    rival: str
-    evidence: str
-    fit: AxisFit | None = None
-
-
-class Search(NamedTuple):
-    """
-    Result of :func:`search_axis`.
-
-    Attributes
-    ----------
-    fit : AxisFit
-        The final model (base terms plus every accepted effect); its ``effects`` and
-        ``model_consistent`` say what the search found.
-    base : AxisFit
-        The base model's fit (the diagnosis' 'before').
-    steps : tuple of Step
-        The accepted effects in order.
-
-    """
-
-    fit: AxisFit
-    base: AxisFit
-    steps: tuple
-
-
-def _label_for(effect: str, labels: Sequence[str]) -> str | None:
-    """Fit label of an effect to add, or None when it cannot be added again."""
-    term = EFFECT_TERM[effect]
-    if effect == 'white' and 'filtered_white' in labels:
-        return None
-    if effect in ('gauss_markov', 'sinusoid'):
-        used = [lb for lb in labels if lb == term or lb.startswith(term + '_')]
-        if len(used) >= MAX_REPEATS:
-            return None
-        return term if term not in labels else f'{term}_{len(used) + 1}'
-    return None if term in labels else term
-
-
-def _sinusoid_evidence(raw, raw_rate_hz: float, f0: float, amp: float,
-                       lines_hz: Sequence[float]) -> tuple[bool, float, str]:
-    """Check a curve-fitted sinusoid against the periodogram (see the module doc)."""
-    peak = periodogram_peak(raw, raw_rate_hz, f0 / 2.0, f0 * 2.0)
-    if peak is None:
-        return True, f0, f'frequency {f0:.3g} Hz beyond the raw samples; not checked'
-    if not peak.significant or not (
-            1.0 / AMPLITUDE_FACTOR <= peak.band_amplitude / amp <= AMPLITUDE_FACTOR):
-        return False, f0, (f'sinusoid at {f0:.3g} Hz (A {amp:.2g}) fits the curve but the '
-                           f'periodogram does not confirm it (line {peak.ratio:.0f} x '
-                           f'background, needs {peak.threshold:.0f}; amplitude '
-                           f'{peak.band_amplitude:.2g}); not added')
-    for f_line in lines_hz:
-        if abs(f_line - peak.f0_hz) <= max(3.0 * peak.bin_hz, 0.05 * peak.f0_hz):
-            return False, f0, (f'a further sinusoid near {peak.f0_hz:.3g} Hz would model '
-                               'the same periodogram line again; not added')
-    return True, peak.f0_hz, (f'periodogram line at {peak.f0_hz:.4g} Hz ({peak.ratio:.0f} x '
-                              f'background; curve fit {f0:.3g} Hz), amplitude '
-                              f'{peak.band_amplitude:.3g} (curve fit {amp:.3g})')
-
-
-#: Rival effects re-fitted (IRLS) and compared by their full likelihood at each step.
-N_RIVALS = 3
-
-
-def _by_likelihood(fitter, slots_of, labels: list, ranked: list, penalty: float) -> list:
-    """
-    Order the qualifying effects by penalised Gaussian likelihood, best first.
-
-    The first screen scores every effect at the current model's weights.  Rivals can
-    trade roles there (a second Gauss-Markov process against flicker noise, a
-    Gauss-Markov process of very long T against a random walk), and each changes the
-    covariance of the curve in its own way, so the best :data:`N_RIVALS` are re-fitted
-    to convergence and compared by -2 ln L = J + ln det Sigma (GLS chi-square at the
-    model's own covariance plus its log-determinant) + ln(k) per parameter (BIC).
-    """
-    ranked = sorted(ranked, key=lambda r: -r[0])
-    if len(ranked) < 2:
-        return ranked
-    scored = []
-    for r in ranked[:N_RIVALS]:
-        slots = slots_of(labels + [r[3]])
-        sol, _ = fitter.irls(slots, phi0=r[4].phi, local=True)
-        logdet = 2.0 * float(np.sum(np.log(np.abs(np.diag(fitter.data.chol)))))
-        scored.append((sol.j + logdet + _n_params(slots) * penalty, r))
-    scored.sort(key=lambda x: x[0])
-    return [r for _, r in scored] + ranked[N_RIVALS:]
-
-
-def _neg2_loglik(fitter, sol, n_params: int, penalty: float) -> float:
-    """-2 ln L + BIC penalty of a solution at the fitter's current Sigma."""
-    logdet = 2.0 * float(np.sum(np.log(np.abs(np.diag(fitter.data.chol)))))
-    return sol.j + logdet + n_params * penalty
-
-
-def _second_chance(fitter, slots_of, labels: list, sol, sigma, effects, penalty: float):
-    """
-    Re-fit each noise effect with its own weights; return the best step or None.
-
-    Used when the screen at the current weights found nothing but the chi-square still
-    rejects the model.  Sinusoids and ramps need their time-domain evidence and are
-    not tried here.  A step is taken when its penalised -2 ln L (:func:`_by_likelihood`)
-    beats the current model's by :data:`DELTA_MIN`.
-    """
-    fitter.data.set_sigma(sigma)
-    current = _neg2_loglik(fitter, sol, _n_params(slots_of(labels)), penalty)
-    best = None
-    for effect in effects:
-        label = _label_for(effect, labels)
-        if label is None or effect in ('sinusoid', 'rate_ramp'):
-            continue
-        if effect == 'quantization' and not shows_quantization(fitter.data.tau, fitter.data.y):
-            continue
-        slots = slots_of(labels + [label])
-        if _n_params(slots) >= fitter.data.tau.size:
-            continue
-        new, _ = fitter.irls(slots, phi0=list(sol.phi) + [
-            tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)],
-            grid_slots=_grid_slots(effect, slots))
-        if new.coef[-1] <= 0:
-            continue
-        value = _neg2_loglik(fitter, new, _n_params(slots), penalty)
-        if current - value > DELTA_MIN and (best is None or value < best[0]):
-            best = (value, (float(current - value), effect, label, new, '',
-                            'chosen by likelihood with its own weights'))
-    return None if best is None else best[1]
 
 
 def _short_sinusoid(slot, tau: np.ndarray):
@@ -236,81 +37,8 @@ def _short_sinusoid(slot, tau: np.ndarray):
     return replace(slot, bounds=((max(lo, 2.0 / tau.max()), hi),))
 
 
-def _grid_slots(effect: str, slots) -> list | None:
-    """Slots whose parameters a fit with an added effect (the last slot) grids anew."""
-    # Interchangeable Gauss-Markov terms keep their order (shortest T first), so a
-    # further one may need to take the other's place: grid them all.
-    family = effect == 'gauss_markov' and any(
-        x.term.name in ('gauss_markov', 'bias_instability') for x in slots[:-1])
-    return None if family else [len(slots) - 1]
-
-
 def _noise_terms(slots, coef, phi, scale: float) -> list:
     return [(s.term.name, float(c) * scale, tuple(p)) for s, c, p in zip(slots, coef, phi)]
-
-
-def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
-                raw_rate_hz: float | None = None, unit: str = 'unit',
-                effects: Sequence[str] = SEARCH_EFFECTS,
-                base_labels: Sequence[str] = BASE_LABELS,
-                keep_steps: bool = False) -> Search:
-    """
-    Fit the base model of one axis and add every effect the data name.
-
-    Parameters
-    ----------
-    tau_s, avar, edf : array_like
-        Shape (k,), the overlapping Allan curve: averaging times [s], AVAR [unit^2],
-        equivalent degrees of freedom.
-    rate_hz : float
-        Sample rate [Hz].
-    n_samples : int
-        Samples behind the curve.
-    raw : array_like, optional
-        Shape (n,), raw or block-averaged samples of the axis (periodogram and ramp
-        evidence); without them sinusoids and ramps are named from the curve alone.
-    raw_rate_hz : float, optional
-        Rate of ``raw`` [Hz]; default ``rate_hz``.
-    unit : str
-        Unit of the samples.
-    effects : sequence of str
-        Effects the search may add (names of :data:`SEARCH_EFFECTS`).
-    base_labels : sequence of str
-        Fit labels of the base model.
-    keep_steps : bool
-        Fit and keep the full model after every step (the diagnosis shows them).
-
-    Returns
-    -------
-    Search
-        The final fit, the base fit and the accepted steps.
-
-    Raises
-    ------
-    InputError
-        Unknown effects, or a curve the fit cannot use.
-
-    """
-    for e in effects:
-        if e not in EFFECT_TERM:
-            raise InputError(f'unknown effect {e!r}; known: {", ".join(EFFECT_TERM)}')
-    # Tiny matrices: OpenBLAS threads only add overhead (see fit_axis).
-    with _single_thread_blas():
-        return _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit,
-                       effects, base_labels, keep_steps)
-
-
-def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effects,
-            base_labels, keep_steps) -> Search:
-    """Body of :func:`search_axis` (same arguments)."""
-    run = _Run(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, tuple(effects))
-    run.base(base_labels)
-    run.ramp_first()
-    run.forward()
-    run.backward()
-    fit = run.final()
-    steps = run.step_fits(fit) if keep_steps else run.steps
-    return Search(_finish(fit, steps, run.notes, unit), run.base_fit, tuple(steps))
 
 
 class _Run:

@@ -1,0 +1,254 @@
+"""
+The node's input side without ROS: buffer, decode, session, resume and snapshots.
+
+:class:`LiveInput` holds everything between the subscription callback and the fit: the
+buffer of serialized messages (the callback only appends), their vectorised decoding,
+the pipeline :class:`~imu_allan.pipeline.session.Session`, the resume from a checkpoint
+(and its rate check), the block-averaged raw copy for the effect search's evidence, and
+consistent snapshots for fits on a worker thread.  It imports no rclpy, so it can be
+driven and tested with plain bytes; :class:`~imu_allan.ros.node.ImuAllanNode` adds the
+parameters, topics, services and timers.
+"""
+
+from collections import deque
+import copy
+import os
+from pathlib import Path
+import threading
+import time
+
+import numpy as np
+
+from imu_allan import AXES
+from imu_allan.core.diagnose import RawKeeper
+from imu_allan.errors import InputError
+from imu_allan.io.imu_cdr import decode_imu_cdr, imu_frame_id
+from imu_allan.pipeline.analysis import CONFIDENCE
+from imu_allan.pipeline.session import Session
+from imu_allan.ros.params import session_config
+
+CHECKPOINT = 'checkpoint.npz'
+#: Samples a resumed session waits for before it compares their rate with the checkpoint.
+_RESUME_CHECK_SAMPLES = 50
+#: The timer hands the pipeline at least this many messages (or whatever is there after
+#: _MAX_HOLD_S): its rate-change check needs 50 stamp steps in one block.
+_MIN_BLOCK = 64
+_MAX_HOLD_S = 2.0
+
+
+class SessionView:
+    """
+    A frozen view of a session for :func:`~imu_allan.pipeline.analysis.analyze`.
+
+    Taken under the input lock in milliseconds (the Allan curve plus the counters), so
+    that the fit, which takes seconds, runs without holding up the input.
+    """
+
+    def __init__(self, session: Session):
+        self._curve = session.curve(confidence=CONFIDENCE)
+        self.stats = copy.deepcopy(session.stats)
+        self.rate_hz = session.rate_hz
+        self.duration_s = session.duration_s
+        self.warnings = session.warnings
+
+    def curve(self, confidence: float = CONFIDENCE):
+        """Return the Allan curve taken with the snapshot."""
+        return self._curve
+
+
+# Long by design: buffer, decode, resume and snapshots share one lock and one session;
+# each step is a short method.
+class LiveInput:
+    """
+    Buffer, decode and accumulate serialized sensor_msgs/Imu messages as they arrive.
+
+    Parameters
+    ----------
+    values : dict
+        The node's parameter values (:data:`imu_allan.ros.params.PARAMS`); read, and
+        changes seen, at every use.
+    output_dir : Path
+        Where the checkpoint lives.
+    logger : object
+        Has ``info``, ``warning`` and ``error`` taking one string (an rclpy logger or a
+        :class:`logging.Logger`).
+
+    """
+
+    def __init__(self, values: dict, output_dir: Path, logger):
+        self.values, self.output_dir, self.log = values, Path(output_dir), logger
+        # lock guards the session; process_lock keeps blocks in stamp order when process
+        # runs from the timer and from a service or save on another thread.
+        self.lock = threading.Lock()
+        self.process_lock = threading.Lock()
+        self.buffer: deque = deque()
+        self.n_received = 0
+        self.n_buffer_dropped = 0
+        self.frame_id = ''
+        self.last_rx: float | None = None
+        self._last_handover = time.monotonic()
+        self._resume_hold: list | None = None   # blocks held until the resume is judged
+        # Block-averaged copy of the samples for the effect search's periodogram, and
+        # the session it belongs to (a new session starts a new copy).
+        self._raw: tuple[Session, RawKeeper] | None = None
+        self.session = self._new_session(resume=values['resume'])
+
+    @property
+    def checkpoint_path(self) -> Path:
+        """Return the checkpoint file in output_dir."""
+        return self.output_dir / CHECKPOINT
+
+    # ------------------------------------------------------------- input
+    def append(self, raw: bytes) -> None:
+        """Take one serialized message (the only per-message work)."""
+        self.n_received += 1
+        self.last_rx = time.monotonic()
+        self.buffer.append(raw)
+
+    def due(self) -> bool:
+        """Whether the buffer should be handed to the pipeline now."""
+        return (len(self.buffer) >= _MIN_BLOCK
+                or time.monotonic() - self._last_handover >= _MAX_HOLD_S)
+
+    def process(self) -> None:
+        """Decode the buffered messages and add them to the session, in stamp order."""
+        self._last_handover = time.monotonic()
+        with self.process_lock:
+            self._process_locked()
+
+    def _take_buffer(self) -> list:
+        n = len(self.buffer)
+        limit = self.values['max_buffer_messages']
+        if n > limit:
+            for _ in range(n - limit):
+                self.buffer.popleft()
+            self.n_buffer_dropped += n - limit
+            self.log.warning(f'{n - limit} messages dropped by a full buffer '
+                             f'(max_buffer_messages = {limit})')
+            n = limit
+        return [self.buffer.popleft() for _ in range(n)]
+
+    def _process_locked(self) -> None:
+        raws = self._take_buffer()
+        if not raws:
+            return
+        self.frame_id = imu_frame_id(raws[-1]) or self.frame_id
+        try:
+            stamp_ns, samples = decode_imu_cdr(raws)
+        except InputError as exc:
+            self.log.error(f'undecodable Imu messages dropped: {exc}')
+            return
+        with self.lock:
+            if self._resume_hold is not None:
+                stamp_ns, samples = self._check_resume(stamp_ns, samples)
+            if stamp_ns.size:
+                self.session.add(stamp_ns, samples)
+                self._keep_raw(samples)
+
+    def _keep_raw(self, samples: np.ndarray) -> None:
+        rows = self.values['diagnose_raw_samples']
+        if rows < 2:
+            return
+        if self._raw is None or self._raw[0] is not self.session:
+            # The rate is known after a few blocks; the copy keeps every sample anyway.
+            self._raw = (self.session, RawKeeper(None, len(AXES), rows))
+        self._raw[1].add(samples[np.isfinite(samples).all(axis=1)])
+
+    # ----------------------------------------------------- session, resume
+    def _new_session(self, resume: bool) -> Session:
+        config = session_config(self.values)
+        path = self.checkpoint_path
+        if resume and path.exists():
+            try:
+                session = Session.load_state(path, config, on_warning=self.log.warning)
+            except InputError as exc:
+                self._set_aside(str(exc))
+            else:
+                # Samples after the last checkpoint are lost: no Allan term may span them,
+                # and the step to the first new stamp is not a step of the sensor clock.
+                # The samples the checkpoint held for the motion check count from here.
+                session.break_segment()
+                session.last_stamp_ns = None
+                self.log.info(
+                    f'resumed from {path}: {session.stats.n_used} samples, '
+                    f'{session.duration_s / 3600:.3f} h at {session.rate_hz:.2f} Hz, '
+                    'split from the new samples'
+                    + ('' if config.rate_hz > 0 else
+                       '; the rate of the incoming data is checked against it'))
+                if config.rate_hz <= 0:
+                    self._resume_hold = []
+                return session
+        elif resume:
+            self.log.info(f'resume requested but {path} does not exist: starting fresh')
+        return Session(config, on_warning=self.log.warning)
+
+    def _set_aside(self, why: str) -> None:
+        path = self.checkpoint_path
+        kept = path.with_name(f'checkpoint.{time.strftime("%Y%m%d-%H%M%S")}.npz')
+        os.replace(path, kept)
+        self.log.warning(f'not resuming: {why}; starting fresh, old state kept as {kept}')
+
+    def _check_resume(self, stamp_ns: np.ndarray, samples: np.ndarray) -> tuple:
+        """Hold the first samples after a resume; compare their rate with the checkpoint."""
+        held = self._resume_hold if self._resume_hold is not None else []
+        held.append((stamp_ns, samples))
+        t = np.concatenate([b[0] for b in held])
+        if t.size < _RESUME_CHECK_SAMPLES:
+            return t[:0], samples[:0]
+        y = np.concatenate([b[1] for b in held])
+        self._resume_hold = None
+        # Judged as the session judges stamps: a reader that has just started often
+        # misses messages, and a gap must not pass for another rate.
+        rate = self.session.stamp_rate_hz(t)
+        saved = self.session.rate_hz
+        if rate <= 0 or abs(rate / saved - 1) > self.values['rate_tolerance']:
+            self._set_aside(f'the checkpoint was taken at {saved:.3f} Hz but the data now '
+                            f'arrive at {rate:.3f} Hz')
+            self.session = Session(session_config(self.values), on_warning=self.log.warning)
+        else:
+            self.log.info(f'resume confirmed: incoming rate {rate:.3f} Hz matches the '
+                          f'checkpoint ({saved:.3f} Hz); continuing')
+        return t, y
+
+    def reset(self) -> None:
+        """Drop the buffer and start a new session (no resume)."""
+        with self.process_lock, self.lock:
+            self._take_buffer()
+            self.session = self._new_session(resume=False)
+            self._resume_hold = None
+
+    # ------------------------------------------------- snapshots, checkpoints
+    def snapshot(self) -> tuple:
+        """Return (session view, copy of its kept samples or None), taken together."""
+        with self.lock:
+            raw = None
+            if self._raw is not None and self._raw[0] is self.session:
+                raw = copy.deepcopy(self._raw[1])
+                raw.rate_hz = raw.rate_hz or (self.session.rate_hz or None)
+            return SessionView(self.session), raw
+
+    def checkpoint(self, flush: bool = False) -> bool:
+        """
+        Write the session's state to the checkpoint file (atomically).
+
+        Parameters
+        ----------
+        flush : bool
+            Process the buffer and flush the session first, and write only when a curve
+            exists (the final save).
+
+        Returns
+        -------
+        bool
+            Whether a checkpoint was written.
+
+        """
+        if flush:
+            self.process()
+        with self.lock:
+            if flush:
+                self.session.flush()
+                if self.session.curve() is None:
+                    return False
+            self.session.save_state(self.checkpoint_path)
+        return True
