@@ -58,10 +58,10 @@ B convention (paper eq. 8): B is the ADEV floor / 0.664; the Gauss-Markov drivin
 is S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B).
 """
 
-from imu_allan.core.fit.axis import (CORE_PARAMS, DEFAULT_TERMS, fit_axis, fit_curve, IC_PENALTY,
-                                     Z95, Z95_ONE_SIDED)
+from imu_allan.core.fit.axis import DEFAULT_TERMS, fit_axis, fit_curve, IC_PENALTY, Z95
 from imu_allan.core.fit.covariance import _CurveCovariance
 from imu_allan.core.fit.nominal import nominal_fit
+from imu_allan.core.fit.params import CORE_PARAMS, Z95_ONE_SIDED
 from imu_allan.core.fit.result import AxisFit, json_floats, json_num, KINDS, Param
 
 __all__ = ['AxisFit', 'CORE_PARAMS', 'DEFAULT_TERMS', 'fit_axis', 'fit_curve', 'IC_PENALTY',

@@ -10,26 +10,19 @@ import math
 from typing import Sequence
 
 import numpy as np
-from scipy.optimize import brentq
-from scipy.special import ndtr
 
 from imu_allan.core.allan import AllanCurve
 from imu_allan.core.allan.blas import _single_thread_blas
-from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.nominal import nominal_fit
-from imu_allan.core.fit.result import _unit, AxisFit, Param
+from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported
+from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter, _Slot, _Solution
-from imu_allan.core.model import base_name, GM_PEAK_TAU, noise_from_terms, TERMS
+from imu_allan.core.model import base_name, noise_from_terms, TERMS
 from imu_allan.core.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.errors import InputError
 
 #: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
 DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
-#: Parameters always reported, with the term they belong to.
-CORE_PARAMS = {'N': 'white', 'B': 'bias_instability', 'T_B': 'bias_instability',
-               'K': 'random_walk'}
-#: The paper's model: always part of the fit that yields the reported intervals.
-_CORE_TERMS = ('white', 'filtered_white', 'bias_instability', 'random_walk')
 #: Symbols reported without a term prefix (others become '<term>.<symbol>').
 _PLAIN = {'quantization': ('Q',), 'white': ('N',), 'filtered_white': ('N', 'T_f'),
           'flicker': ('B',),
@@ -37,7 +30,6 @@ _PLAIN = {'quantization': ('Q',), 'white': ('N',), 'filtered_white': ('N', 'T_f'
 #: Penalty per parameter of the information criterion (AIC).
 IC_PENALTY = 2.0
 Z95 = 1.959963984540054
-Z95_ONE_SIDED = 1.6448536269514722
 
 
 def _slot(label: str, tau: np.ndarray, rate_hz: float) -> _Slot:
@@ -332,82 +324,6 @@ def _profile_threshold(chi2_value: float, dof: int) -> float:
         return chi2_ppf(0.95, 1)
 
 
-def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: float,
-               symbols: dict, unit: str, notes: list) -> tuple[dict, dict]:
-    """Values and 95 % profile intervals of the supported terms (notes appended)."""
-    optimised: dict[str, Param] = {}
-    values: dict[str, dict] = {}
-    for i, s in enumerate(slots):
-        if s.label not in supported:
-            continue
-        c_si = sol.coef[i] * fitter.data.scale
-        params = s.term.to_params(c_si, *sol.phi[i])
-        values[s.label] = params
-        for sym, template in zip(s.term.symbols, s.term.units):
-            v = params[sym]
-            kind = 'estimate'
-            if sym not in s.term.nonlinear:
-                ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold)
-            else:
-                lo_b, hi_b = s.bounds[s.term.nonlinear.index(sym)]
-                ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold,
-                                       (lo_b, hi_b))
-                if ci[1] >= hi_b * 0.999:
-                    kind, ci = 'lower_bound', (ci[0], math.inf)
-                    notes.append(f'{symbols[(s.label, sym)]}: may exceed the longest tau '
-                                 'of the record; only a lower bound')
-                elif ci[0] <= lo_b * 1.001:
-                    notes.append(f'{symbols[(s.label, sym)]}: may lie below the shortest '
-                                 'tau; poorly identified')
-            optimised[symbols[(s.label, sym)]] = Param(
-                float(v), (float(ci[0]), float(ci[1])), kind, _unit(template, unit))
-    return optimised, values
-
-
-def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported: set,
-                 candidates: tuple, requested: bool, symbols: dict, unit: str,
-                 optimised: dict, notes: list) -> None:
-    """
-    Report the candidates the data do not support: a 95 % upper bound, or not identified.
-
-    Only core terms (and every term when the caller chose the candidates) get a bound;
-    ``optimised`` and ``notes`` are filled in place.
-    """
-    for s in slots_all:
-        if s.label in supported:
-            continue
-        if s.term.name not in _CORE_TERMS and not requested:
-            notes.append(f'{s.label}: not supported by the data (left out)')
-            continue
-        others = [i for i, x in enumerate(slots) if x.label != s.label]
-        rest = _Solution(sol.coef[others], tuple(sol.phi[i] for i in others), sol.j)
-        if s.label not in [x.label for x in slots]:    # a requested extra term
-            others, rest = list(range(len(slots))), sol
-        bound = _upper_bound(fitter, [slots[i] for i in others], rest, s)
-        lin_sym = s.term.symbols[0]
-        name = symbols[(s.label, lin_sym)]
-        if math.isfinite(bound) and bound > 0:
-            optimised[name] = Param(bound, (0.0, bound), 'upper_bound',
-                                    _unit(s.term.units[0], unit))
-            notes.append(f'{name}: not supported by the data (too small or the record too '
-                         'short); 95 % upper bound')
-        else:
-            # A degenerate bound (0 or inf): the record cannot constrain the term at all.
-            optimised[name] = Param(math.nan, (math.nan, math.nan), 'not_identified',
-                                    _unit(s.term.units[0], unit))
-            notes.append(f'{name}: the record cannot constrain it (too short); no bound')
-        for sym, template in zip(s.term.symbols[1:], s.term.units[1:]):
-            optimised[symbols[(s.label, sym)]] = Param(
-                math.nan, (math.nan, math.nan), 'not_identified', _unit(template, unit))
-    for sym, base in CORE_PARAMS.items():
-        if sym not in optimised:
-            units = dict(zip(TERMS[base].symbols, TERMS[base].units))
-            optimised[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified',
-                                   _unit(units.get(sym, 'u'), unit))
-            if base not in [base_name(x) for x in candidates]:
-                notes.append(f'{sym}: not modelled (term {base} not among the candidates)')
-
-
 def _dominant_bias_instability(slots: list, sol: _Solution, scale: float) -> list:
     """
     Give the label 'bias_instability' (B, T_B) to the Gauss-Markov term with the largest B.
@@ -432,78 +348,6 @@ def _dominant_bias_instability(slots: list, sol: _Solution, scale: float) -> lis
     out[a] = replace(slots[a], label=slots[b].label, term=slots[b].term)
     out[b] = replace(slots[b], label=slots[a].label, term=slots[a].term)
     return out
-
-
-def _upper_bound(fitter: _Fitter, slots: list, sol: _Solution, extra: _Slot) -> float:
-    """
-    One-sided 95 % upper bound of an unsupported term's level (its first symbol).
-
-    The selected model plus the term is fitted by unconstrained GLS at the selected
-    model's weights, so the term's coefficient is a fixed linear combination
-    c_hat = g^T avar of the Allan estimates.  The bound is the coefficient c0 at which
-    P(c_hat <= observed | c0) = 5 %, with the covariance evaluated *under* c0 (a bound
-    computed with the covariance of a model without the term would be far too tight):
-    c_hat = c0 X + e, X ~ chi2_nu / nu for the term's own part (nu = 2 c0^2 / its
-    variance, Satterthwaite) and e Gaussian with the rest of the variance.  A term with
-    a nonlinear parameter (Gauss-Markov T) takes the largest bound over a grid of it
-    within the observed tau range.
-    """
-    tau = fitter.data.tau
-    grid: list = [()]
-    if extra.bounds:
-        lo, hi = extra.bounds[0]
-        if extra.term.name in ('gauss_markov', 'bias_instability'):
-            lo, hi = tau.min() / GM_PEAK_TAU, tau.max() / GM_PEAK_TAU
-        grid = [(float(g),) for g in np.geomspace(lo, hi, 6)]
-    base = _design(slots, tau, sol.phi)
-    best = 0.0
-    for nl in grid:
-        a = np.column_stack([base, extra.term.shape(tau, *nl)])
-        aw = fitter.data.whiten(a)
-        g = np.linalg.pinv(aw)[-1] @ fitter.data.inv      # c_hat = g @ y (scaled units)
-        c_obs = float(g @ fitter.data.y)
-        terms = [s.term for s in slots] + [extra.term]
-        blocks, active = fitter.cov.blocks(terms, list(sol.phi) + [nl])
-        quad = np.einsum('i,abij,j->ab', g, blocks, g)
-        coef = np.append(sol.coef, 0.0)[active]
-        x = len(terms) - 1
-        v0 = float(coef @ quad @ coef)
-        if x in active:
-            ix = active.index(x)
-            v1 = float(coef @ quad[:, ix])
-            v2 = float(quad[ix, ix])
-        else:
-            v1 = v2 = 0.0
-        c_ub = _one_sided_bound(c_obs, v0, v1, v2)
-        if not math.isfinite(c_ub):
-            return math.inf
-        value = extra.term.to_params(c_ub * fitter.data.scale, *nl)[extra.term.symbols[0]]
-        best = max(best, value)
-    return float(best)
-
-
-def _one_sided_bound(c_obs: float, v0: float, v1: float, v2: float) -> float:
-    """Smallest c0 with P(c0 X + e <= c_obs) <= 5 % (see :func:`_upper_bound`)."""
-    v0 = max(v0, 0.0)
-    if v2 <= 0.0:
-        return max(c_obs, 0.0) + Z95_ONE_SIDED * math.sqrt(v0)
-    nu = 2.0 / v2
-    u = (np.arange(256) + 0.5) / 256.0
-    x = chi2_ppf(u, nu) / nu
-
-    def prob(c0: float) -> float:
-        s_e = math.sqrt(max(v0 + 2.0 * c0 * v1, 1e-300))
-        return float(np.mean(ndtr((c_obs - c0 * x) / s_e)))
-
-    scale = max(abs(c_obs), math.sqrt(v0), 1e-300)
-    lo, hi = 0.0, scale
-    if prob(lo) <= 0.05:
-        return 0.0
-    while prob(hi) > 0.05:
-        lo, hi = hi, hi * 4.0
-        if hi > 1e8 * scale:
-            return math.inf
-    return float(brentq(lambda c: prob(c) - 0.05, lo, hi, xtol=1e-6 * hi))
 
 
 def fit_curve(curve: AllanCurve, axis_index: int, n_samples: int | None = None, *,
