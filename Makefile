@@ -36,6 +36,7 @@ bench: venv
 	$(PY) bench/bench_bag_read.py
 	$(PY) bench/bench_analyze.py
 	$(PY) bench/bench_node.py
+	$(PY) bench/bench_fleet.py
 	$(PY) bench/validate_fit.py --seeds 50 --workers 2
 	$(PY) bench/reproduce_paper.py
 	$(PY) bench/search_power.py --seeds 4

@@ -16,6 +16,8 @@ setup(
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml'],
+    # imu-allan fleet: Dask for the cluster, pyarrow for the Parquet store.
+    extras_require={'fleet': ['dask[distributed]>=2024.1', 'pyarrow>=14']},
     zip_safe=True,
     maintainer='imu_allan developers',
     maintainer_email='imu-allan@example.com',

@@ -12,7 +12,7 @@ import tempfile
 from typing import Callable, IO
 
 
-def write_atomic(path, write: Callable[[IO], None], mode: str = 'wb') -> Path:
+def write_atomic(path, write: Callable[[IO], object], mode: str = 'wb') -> Path:
     """
     Write a file through a temporary sibling and an atomic rename.
 
@@ -21,7 +21,7 @@ def write_atomic(path, write: Callable[[IO], None], mode: str = 'wb') -> Path:
     path : str or Path
         Target file; its folder must exist.
     write : callable
-        ``write(f)`` fills the open temporary file.
+        ``write(f)`` fills the open temporary file (its return value is ignored).
     mode : str
         'wb' or 'w'.
 

@@ -24,9 +24,12 @@ ALLOWED = {
     'pipeline': {'core', 'pipeline'},
     'io': {'core', 'pipeline', 'io'},
     'ros': {'core', 'pipeline', 'io', 'ros'},
-    'cli': {'core', 'pipeline', 'io', 'ros', 'cli'},
+    'fleet': {'core', 'pipeline', 'io', 'fleet'},
+    'cli': {'core', 'pipeline', 'io', 'ros', 'fleet', 'cli'},
 }
 ROS_FREE = ('imu_allan.ros.params',)
+#: The node's input side imports no rclpy (it is driven by plain bytes in tests).
+NO_RCLPY = ('imu_allan.ros.live',)
 FORBIDDEN = ('rclpy', 'rosbags', 'mcap', 'sensor_msgs', 'std_msgs', 'std_srvs',
              'diagnostic_msgs', 'builtin_interfaces', 'matplotlib', 'launch', 'lz4',
              'zstandard', 'dask', 'distributed')
@@ -111,3 +114,17 @@ def test_layer_check_can_fail(tmp_path):
     targets = list(_imports(src, 'imu_allan.core.x'))
     assert targets == ['imu_allan.ros.node', 'imu_allan.io']
     assert all(_layer(t) not in ALLOWED['core'] for t in targets)
+
+
+def test_live_input_and_fleet_free_of_what_they_must_not_need():
+    # The node's input side runs without rclpy; the node and the core never import Dask.
+    script = SCRIPT.replace(
+        f'FORBIDDEN = {FORBIDDEN!r}',
+        "FORBIDDEN = ('rclpy', 'sensor_msgs', 'std_msgs', 'dask', 'distributed', 'pyarrow')"
+    ).replace(f'names = list({ROS_FREE!r})', f'names = list({NO_RCLPY!r})').replace(
+        'for pkg in (imu_allan.core, imu_allan.pipeline):', 'for pkg in ():')
+    out = subprocess.run([sys.executable, '-c', script], cwd=REPO, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    node = (PKG / 'ros' / 'node.py').read_text()
+    assert 'fleet' not in node and 'dask' not in node

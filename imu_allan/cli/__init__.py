@@ -14,7 +14,7 @@ import sys
 from imu_allan import __version__
 from imu_allan.errors import InputError
 
-SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'demo')
+SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'fleet', 'demo')
 #: Every command: (module in SUBCOMMANDS, one-line help).  Only the module of the command
 #: that runs is imported, so ``imu-allan --help`` loads neither numpy nor scipy.
 COMMANDS = {
@@ -23,6 +23,7 @@ COMMANDS = {
     'simulate': ('simulate', 'simulate an IMU record from a noise-parameter YAML'),
     'csv-to-bag': ('simulate', 'convert a CSV IMU log into a bag of sensor_msgs/Imu'),
     'diagnose': ('diagnose', 'find what the noise model misses (simulation vs measurement)'),
+    'fleet': ('fleet', 'characterise many IMUs on Dask; flag changes and outliers'),
     'demo': ('demo', 'run the node on a simulated IMU (make demo)'),
 }
 

@@ -5,28 +5,25 @@ Every input (rosbag2 directory, .mcap, .db3, ROS 1 .bag, CSV) is streamed throug
 same :class:`~imu_allan.pipeline.Session` the node uses, fitted, and written as a
 report; several inputs are analysed in parallel and compared.
 
-The input plumbing (open_input, stream_input, Progress, raw_tap) lives in
-:mod:`imu_allan.io.inputs`; :func:`analyze_input` adds the fit.
+The input plumbing (open_input, stream_input, analyze_input) lives in
+:mod:`imu_allan.io.inputs`.
 """
 
 import argparse
 from concurrent.futures import as_completed, ProcessPoolExecutor
-from dataclasses import replace
 import json
 import math
 import os
 from pathlib import Path
 import statistics
 import sys
-import time
 
 import numpy as np
 
 from imu_allan import AXES
 from imu_allan.core.fit import json_num
 from imu_allan.errors import InputError
-from imu_allan.io.inputs import check_path, open_input, Progress, raw_tap, stream_input
-from imu_allan.pipeline.analysis import analyze, start_workers
+from imu_allan.io.inputs import analyze_input, check_path, Progress
 from imu_allan.pipeline.session import SessionConfig
 
 
@@ -63,84 +60,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         'axes (default: the number of cores, at most 2 for one input)')
     p.set_defaults(run=run)
     return p
-
-
-def analyze_input(path: Path, topic: str | None, config: SessionConfig,
-                  quiet: bool = False, progress: bool | None = None, workers: int = 1):
-    """
-    Stream one input through a Session and fit it.
-
-    Parameters
-    ----------
-    path : Path
-        The input.
-    topic : str or None
-        Imu topic of a bag.
-    config : SessionConfig
-        Session settings.
-    quiet : bool
-        Do not print warnings on stderr (they are in the result anyway).
-    progress : bool, optional
-        Show a progress line on stderr for long inputs (default: not ``quiet``).
-    workers : int
-        Processes for the axes' effect searches (see
-        :func:`imu_allan.pipeline.analysis.analyze`).
-
-    Returns
-    -------
-    tuple
-        (AnalysisResult, seconds spent).
-
-    """
-    start = time.monotonic()
-    path = Path(path)
-    if workers > 1:
-        start_workers()     # its start-up overlaps the reading
-
-    def warn(text):
-        if not quiet:
-            print(f'imu-allan: warning: {path.name}: {text}', file=sys.stderr)
-
-    show = (not quiet) if progress is None else progress
-    tap, keeper = raw_tap()
-    with open_input(path, topic) as source:
-        bar = Progress(path.name, source.n_messages) if show else None
-        try:
-            session = stream_input(source, config, on_warning=warn, progress=bar, tap=tap)
-            reader_warnings = list(source.warnings)
-            for text in reader_warnings:
-                warn(text)
-            if session.stats.n_received == 0:
-                raise InputError(f'{path}: no Imu samples in the input')
-            if bar is not None:
-                bar.set_stage('fitting the noise model of')
-            result = analyze(session, source=source.label, raw=keeper,
-                             topic=source.topic or '', workers=workers)
-        finally:
-            if bar is not None:
-                bar.close()
-    if result is None:
-        raise InputError(f'{path}: too few usable samples ({session.stats.n_used} of '
-                         f'{session.stats.n_received}) for any Allan deviation'
-                         + (f' ({session.warnings[0]})' if session.warnings else ''))
-    extra = list(reader_warnings)
-    stats = session.stats
-    if stats.n_motion_events:
-        share = stats.n_motion_dropped / max(stats.n_received, 1)
-        kept = ('samples kept (on_motion=warn)' if config.on_motion == 'warn' else
-                f'{100 * share:.2g}% of the samples dropped')
-        if share >= 0.2 or config.on_motion == 'warn':
-            extra.append(f'NOT STATIONARY: motion in {stats.n_motion_events} episode(s), '
-                         f'{kept}; the numbers rest on {stats.n_used} samples '
-                         f'({session.duration_s:.0f} s) and describe a still IMU only if '
-                         'those were still')
-        else:
-            extra.append(f'brief motion or outliers in {stats.n_motion_events} episode(s): '
-                         f'{kept}, {stats.n_used} samples used')
-        warn(extra[-1])
-    if extra:
-        result = replace(result, warnings=tuple(extra) + result.warnings)
-    return result, time.monotonic() - start
 
 
 def _job(args):

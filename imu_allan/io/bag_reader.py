@@ -130,6 +130,8 @@ class ImuSource:
     warnings : list of str
         Problems met so far (truncation, skipped messages, unfilled headers ...);
         complete once ``blocks()`` has been consumed.
+    frame_id : str
+        header.frame_id of the first message read ('' before any).
 
     """
 
@@ -141,6 +143,7 @@ class ImuSource:
         self.n_messages = topic.n_messages
         self.storage = backend.storage
         self.warnings = warnings
+        self.frame_id = ''
         self._backend = backend
         self._topic = topic
 
@@ -172,6 +175,7 @@ class ImuSource:
             if not piece.recv_ns.size:
                 continue
             n_zero += int(np.count_nonzero(piece.stamp_ns == 0))
+            self.frame_id = self.frame_id or piece.frame_id
             pending.append(piece)
             n_pending += piece.recv_ns.size
             while n_pending >= block_size:

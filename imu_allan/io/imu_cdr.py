@@ -328,6 +328,30 @@ def imu_frame_id(raw: bytes) -> str | None:
     return raw[16:16 + frame_len - 1].decode('utf-8', errors='replace')
 
 
+def payload_frame_id(payload: bytes, encoding: str) -> str:
+    """
+    Return header.frame_id of one serialised Imu payload ('' when unreadable).
+
+    Parameters
+    ----------
+    payload : bytes
+        One message as stored: CDR (ROS 2) or the ROS 1 serialisation.
+    encoding : str
+        'ros1' for ROS 1 payloads; anything else is read as CDR.
+
+    Returns
+    -------
+    str
+        The frame_id.
+
+    """
+    if encoding != 'ros1':
+        return imu_frame_id(payload) or ''
+    # ROS 1: seq, secs, nsecs (uint32 each), then a uint32 length and the bytes.
+    n = int.from_bytes(payload[12:16], 'little') if len(payload) >= 16 else 0
+    return payload[16:16 + n].decode('utf-8', errors='replace') if n <= 255 else ''
+
+
 class CovariancePatch:
     """
     Write two fixed covariances into single serialised Imu messages (ROS 2 CDR).

@@ -8,6 +8,7 @@ ahead on a thread; :class:`Progress` is the one-line indicator on stderr;
 :func:`raw_tap` keeps the bounded raw copy the effect search's evidence needs.
 """
 
+from dataclasses import replace
 import os
 from pathlib import Path
 import queue
@@ -148,10 +149,16 @@ class InputSource:
 
     def __init__(self, path: Path, label: str, kind: str, topic: str | None,
                  n_messages: int | None, blocks: Callable[[], Iterator],
-                 warnings: list, close: Callable[[], None] = lambda: None):
+                 warnings: list, close: Callable[[], None] = lambda: None,
+                 frame_id: Callable[[], str] = lambda: ''):
         self.path, self.label, self.kind, self.topic = path, label, kind, topic
         self.n_messages, self.warnings = n_messages, warnings
-        self._blocks, self._close = blocks, close
+        self._blocks, self._close, self._frame_id = blocks, close, frame_id
+
+    @property
+    def frame_id(self) -> str:
+        """Return header.frame_id of the first message read ('' for CSV or before)."""
+        return self._frame_id()
 
     def blocks(self) -> Iterator[tuple]:
         """
@@ -243,13 +250,15 @@ def open_input(path, topic: str | None = None) -> InputSource:
         for block in source.blocks():
             yield block.stamp_ns, block.samples
     return InputSource(path, f'{path.name} {source.topic}', source.storage, source.topic,
-                       source.n_messages, bag_blocks, source.warnings, source.close)
+                       source.n_messages, bag_blocks, source.warnings, source.close,
+                       lambda: source.frame_id)
 
 
 def stream_input(source: InputSource, config: SessionConfig,
                  on_warning: Callable[[str], None] | None = None,
                  progress: Progress | None = None,
-                 tap: Callable[[Session, np.ndarray], None] | None = None) -> Session:
+                 tap: Callable[[Session, np.ndarray], None] | None = None,
+                 prefetch: bool = True) -> Session:
     """
     Feed every block of an input through a new pipeline Session (the node's object).
 
@@ -265,6 +274,9 @@ def stream_input(source: InputSource, config: SessionConfig,
         Updated with the number of samples read.
     tap : callable, optional
         Called as tap(session, samples) after each block, samples (n, 6) as read.
+    prefetch : bool
+        Read the next block on a thread while this one is processed (two cores for one
+        input); False where every core already runs an input (fleet workers).
 
     Returns
     -------
@@ -275,7 +287,8 @@ def stream_input(source: InputSource, config: SessionConfig,
     """
     session = Session(config, on_warning=on_warning)
     done = 0
-    for stamp_ns, samples in _prefetch(source.blocks()):
+    blocks = _prefetch(source.blocks()) if prefetch else source.blocks()
+    for stamp_ns, samples in blocks:
         session.add(stamp_ns, samples)
         if tap is not None:
             tap(session, samples)
@@ -346,3 +359,87 @@ def raw_tap() -> tuple:
     def tap(session, samples) -> None:
         keeper.add(samples[np.isfinite(samples).all(axis=1)])
     return tap, keeper
+
+
+def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
+                  quiet: bool = False, progress: bool | None = None, workers: int = 1,
+                  prefetch: bool = True):
+    """
+    Stream one input through a Session and fit it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The input.
+    topic : str or None
+        Imu topic of a bag.
+    config : SessionConfig
+        Session settings.
+    quiet : bool
+        Do not print warnings on stderr (they are in the result anyway).
+    progress : bool, optional
+        Show a progress line on stderr for long inputs (default: not ``quiet``).
+    workers : int
+        Processes for the axes' effect searches (see
+        :func:`imu_allan.pipeline.analysis.analyze`).
+    prefetch : bool
+        See :func:`stream_input`.
+
+    Returns
+    -------
+    tuple
+        (AnalysisResult with the recording's first stamp and frame_id, seconds spent).
+
+    """
+    from imu_allan.pipeline.analysis import analyze, start_workers  # the fit: scipy
+
+    start = time.monotonic()
+    path = Path(path)
+    if workers > 1:
+        start_workers()     # its start-up overlaps the reading
+
+    def warn(text):
+        if not quiet:
+            print(f'imu-allan: warning: {path.name}: {text}', file=sys.stderr)
+
+    show = (not quiet) if progress is None else progress
+    tap, keeper = raw_tap()
+    with open_input(path, topic) as source:
+        bar = Progress(path.name, source.n_messages) if show else None
+        try:
+            session = stream_input(source, config, on_warning=warn, progress=bar, tap=tap,
+                                   prefetch=prefetch)
+            reader_warnings = list(source.warnings)
+            for text in reader_warnings:
+                warn(text)
+            if session.stats.n_received == 0:
+                raise InputError(f'{path}: no Imu samples in the input')
+            if bar is not None:
+                bar.set_stage('fitting the noise model of')
+            result = analyze(session, source=source.label, raw=keeper,
+                             topic=source.topic or '', workers=workers)
+        finally:
+            if bar is not None:
+                bar.close()
+    if result is None:
+        raise InputError(f'{path}: too few usable samples ({session.stats.n_used} of '
+                         f'{session.stats.n_received}) for any Allan deviation'
+                         + (f' ({session.warnings[0]})' if session.warnings else ''))
+    extra = list(reader_warnings)
+    stats = session.stats
+    if stats.n_motion_events:
+        share = stats.n_motion_dropped / max(stats.n_received, 1)
+        kept = ('samples kept (on_motion=warn)' if config.on_motion == 'warn' else
+                f'{100 * share:.2g}% of the samples dropped')
+        if share >= 0.2 or config.on_motion == 'warn':
+            extra.append(f'NOT STATIONARY: motion in {stats.n_motion_events} episode(s), '
+                         f'{kept}; the numbers rest on {stats.n_used} samples '
+                         f'({session.duration_s:.0f} s) and describe a still IMU only if '
+                         'those were still')
+        else:
+            extra.append(f'brief motion or outliers in {stats.n_motion_events} episode(s): '
+                         f'{kept}, {stats.n_used} samples used')
+        warn(extra[-1])
+    result = replace(result, warnings=tuple(extra) + result.warnings,
+                     start_ns=session.first_stamp_ns, frame_id=source.frame_id)
+    return result, time.monotonic() - start

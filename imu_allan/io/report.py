@@ -33,10 +33,7 @@ FILES = {
 
 def _atomic_write(path: Path, text: str) -> Path:
     """Write text to path through a temporary file, so a crash never leaves half a file."""
-    def write(f) -> None:
-        f.write(text)
-
-    return write_atomic(path, write, mode='w')
+    return write_atomic(path, lambda f: f.write(text), mode='w')
 
 
 def summary_text(result: AnalysisResult) -> str:

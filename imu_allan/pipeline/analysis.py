@@ -61,6 +61,10 @@ class AnalysisResult:
         What was analysed (file name, topic).
     topic : str
         The Imu topic the samples came from ('' for a CSV file): Kalibr's ``rostopic``.
+    start_ns : int or None
+        First header stamp of the recording [ns since the epoch] (offline inputs).
+    frame_id : str
+        header.frame_id of the messages ('' for CSV and the node).
 
     """
 
@@ -74,6 +78,8 @@ class AnalysisResult:
     kalman: KalmanModel
     source: str = ''
     topic: str = ''
+    start_ns: int | None = None
+    frame_id: str = ''
 
     def models(self) -> dict:
         """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""

@@ -10,7 +10,7 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from imu_allan.io.imu_cdr import _join, decode_imu_payloads
+from imu_allan.io.imu_cdr import _join, decode_imu_payloads, payload_frame_id
 
 #: Messages per ImuBlock unless asked otherwise.
 DEFAULT_BLOCK_SIZE = 65536
@@ -66,6 +66,7 @@ class _Piece(NamedTuple):
     stamp_ns: np.ndarray
     samples: np.ndarray
     n_bad: int
+    frame_id: str = ''
 
 
 # --------------------------------------------------------------------------------------
@@ -84,9 +85,13 @@ def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns
         u8, starts, lengths = _join(payloads)
     stamp_ns, samples, ok = decode_imu_payloads(u8, starts, lengths, encoding)
     n_bad = int(ok.size - np.count_nonzero(ok))
+    good = np.flatnonzero(ok)
+    # The frame of the piece's first good message: one slice per piece (identity only).
+    frame_id = (payload_frame_id(u8[starts[good[0]]:starts[good[0]] + lengths[good[0]]]
+                                 .tobytes(), encoding) if good.size else '')
     if n_bad:
-        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad)
-    return _Piece(recv_ns, stamp_ns, samples, 0)
+        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, frame_id)
+    return _Piece(recv_ns, stamp_ns, samples, 0, frame_id)
 
 
 class _Backend:

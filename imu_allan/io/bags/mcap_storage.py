@@ -49,6 +49,7 @@ class _McapBackend(_Backend):
         self.file = open(path, 'rb')
         self.mm = mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ)
         self.u8 = np.frombuffer(self.mm, np.uint8)
+        self._released = 0   # pages before this offset were handed back (_release)
         self.schemas: dict[int, str] = {}
         self.channels: dict[int, tuple[str, int, str]] = {}
         self.counts: dict[int, int] | None = None
@@ -350,10 +351,29 @@ class _McapBackend(_Backend):
                 if offsets is None:
                     offsets = self._walk(raw)
                 piece = self._message_piece(buf, offsets, wanted, topic.encoding)
+                self._release(item.body_end)
             else:
                 piece = self._message_piece(self.u8, item, wanted, topic.encoding)
+                self._release(int(item.max()) if item.size else 0)
             if piece is not None:
                 yield piece
+
+    def _release(self, pos: int) -> None:
+        """
+        Drop the pages before ``pos`` from this process's memory (not from the page cache).
+
+        The map is read in file order and a decoded piece holds copies, so pages behind
+        the reader are not needed again; without this the whole bag counts in the
+        process's resident size (a night's bag: 0.9 GB), which is what a Dask worker's
+        memory limit watches.
+        """
+        end = pos - pos % mmap.PAGESIZE
+        if end > self._released and hasattr(mmap, 'MADV_DONTNEED'):
+            try:
+                self.mm.madvise(mmap.MADV_DONTNEED, self._released, end - self._released)
+            except (OSError, ValueError):
+                return
+            self._released = end
 
     def close(self) -> None:
         """Release the memory map and the file."""
