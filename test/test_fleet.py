@@ -5,6 +5,7 @@ The cluster's worker processes talk over loopback; the inputs are simulated MCAP
 several IMUs; the Parquet store and the fleet views are checked on what it produced.
 """
 
+import json
 import math
 import os
 from pathlib import Path
@@ -242,3 +243,18 @@ def test_the_store_replaces_a_failure_by_its_result(tmp_path):
     rows = store.rows()
     assert len(rows) == 6 and rows[0]['N'] == 1.0 and math.isnan(rows[0]['B'])
     assert not list(tmp_path.glob('results/.*'))   # no temporary files left
+
+
+def test_the_command_reports_a_store_and_fails_in_one_line(fleet_run, tmp_path, capsys):
+    from imu_allan.cli import main
+
+    _, store, _ = fleet_run
+    assert main(['fleet', '--store', str(store.root), '--report-only', '--format', 'json',
+                 '--no-plot', '--report', str(tmp_path / 'r')]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc['run'] is None and doc['views']['inputs']['failed'] == 2
+    assert main(['fleet', '--store', str(tmp_path / 'empty'), '--report-only']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'holds no results yet' in err[0]
+    assert main(['fleet', str(tmp_path / 'nothing*.mcap'), '--store', str(tmp_path / 's')]) == 2
+    assert 'no input matches' in capsys.readouterr().err
