@@ -11,6 +11,7 @@ The input plumbing (open_input, stream_input, analyze_input) lives in
 
 import argparse
 from concurrent.futures import as_completed, ProcessPoolExecutor
+from dataclasses import replace
 import json
 import math
 import os
@@ -179,6 +180,8 @@ def run(args) -> int:
         from imu_allan.io.report import write_outputs
         # One input: its six axes are searched on the cores (several inputs: one each).
         workers = args.jobs or min(2, os.cpu_count() or 1)
+        if workers > 1:   # and the accumulator shares its passes with a helper thread
+            config = replace(config, accumulator_threads=2)
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers)
         with Progress(paths[0].name) as bar:
             bar.set_stage('writing the report of')

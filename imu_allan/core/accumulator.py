@@ -49,6 +49,8 @@ second difference, so |X| is bounded by the window length times the *local*
 variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 """
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from imu_allan.core.accumulator_state import _Persistence
@@ -120,6 +122,10 @@ class AllanAccumulator(_Persistence):
         taus use the decimated estimator described in the module docstring.
     per_decade : int
         Taus per decade of the log grid.
+    threads : int
+        Threads that share the exact taus of each chunk (1 or 2; numpy releases the GIL
+        in these passes).  Every tau's sum is computed by exactly one thread, so the
+        result is bit-identical for any value.
 
     Notes
     -----
@@ -145,7 +151,7 @@ class AllanAccumulator(_Persistence):
     """
 
     def __init__(self, n_axes: int, rate_hz: float, exact_max_m: int = 8192,
-                 per_decade: int = 10):
+                 per_decade: int = 10, threads: int = 1):
         n_axes, exact_max_m, per_decade = int(n_axes), int(exact_max_m), int(per_decade)
         rate_hz = float(rate_hz)
         if n_axes < 1:
@@ -157,6 +163,9 @@ class AllanAccumulator(_Persistence):
                              f'{_M_LO}..{_MAX_EXACT_M}, not {exact_max_m}')
         if not 1 <= per_decade <= 100:
             raise InputError(f'per_decade must lie in 1..100, not {per_decade}')
+        if threads not in (1, 2):
+            raise InputError(f'threads must be 1 or 2, not {threads}')
+        self.threads = int(threads)
         self.n_axes = n_axes
         self.rate_hz = rate_hz
         self.exact_max_m = exact_max_m
@@ -176,6 +185,7 @@ class AllanAccumulator(_Persistence):
         self._sums = np.zeros((self._m.size, n_axes))
         self._counts = np.zeros(self._m.size, dtype=np.int64)
         self._work: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._work2: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ grid
     def _build_grid(self) -> None:
@@ -312,7 +322,10 @@ class AllanAccumulator(_Persistence):
         x_all, t_all, d_all = self._work_arrays()
         x = x_all[:, :w + 1]
         r = _phase(buf[:, :w], x)
-        _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, t_all, d_all)
+        if self.threads > 1:
+            self._accumulate_split(x, h + 1, w, t_all, d_all)
+        else:
+            _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, t_all, d_all)
         # Cluster sums for level 1 end at segment indices that are multiples of D_1.
         base = self._seg_n - h
         if self._levels:
@@ -326,6 +339,19 @@ class AllanAccumulator(_Persistence):
         self._h0, self._pending = keep, 0
         if self._levels and clusters.shape[1]:
             self._push(0, clusters)
+
+    def _accumulate_split(self, x: np.ndarray, j_first: int, j_last: int, t_all: np.ndarray,
+                          d_all: np.ndarray) -> None:
+        """Level 0's taus in two halves of equal cost, the second on the helper thread."""
+        ms = self._m0
+        cost = np.cumsum(np.maximum(j_last - np.maximum(j_first, 2 * ms) + 1, 0) + ms)
+        half = int(np.searchsorted(cost, cost[-1] / 2.0)) + 1 if ms.size else 0
+        if self._work2 is None:
+            self._work2 = (np.empty_like(t_all), np.empty_like(d_all))
+        job = _helper().submit(_accumulate, x, j_first, j_last, ms[half:], self._sums,
+                               self._counts, half, *self._work2)
+        _accumulate(x, j_first, j_last, ms[:half], self._sums, self._counts, 0, t_all, d_all)
+        job.result()
 
     def _push(self, k: int, values: np.ndarray) -> None:
         """Feed cluster sums (n_axes, c) to decimated level k (and on upwards)."""
@@ -413,6 +439,17 @@ class AllanAccumulator(_Persistence):
         return AllanCurve(tau_s, m, avar, n_terms, edf, alpha_arr, np.asarray(adev_lo),
                           np.asarray(adev_hi), float(confidence), 'overlapping',
                           self.rate_hz)
+
+
+_HELPER: ThreadPoolExecutor | None = None
+
+
+def _helper() -> ThreadPoolExecutor:
+    """Return the one helper thread of every accumulator with threads=2 (made on demand)."""
+    global _HELPER
+    if _HELPER is None:
+        _HELPER = ThreadPoolExecutor(1, thread_name_prefix='imu-allan-accumulate')
+    return _HELPER
 
 
 def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
