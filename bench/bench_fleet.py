@@ -46,13 +46,18 @@ from imu_allan.io.bag_writer import write_imu_bag  # noqa: E402
 from imu_allan.pipeline.session import SessionConfig  # noqa: E402
 
 
+def _spec() -> NoiseSpec:
+    """Return the simulated IMU of every bag: a MEMS-grade gyro and accelerometer."""
+    gyro = AxisNoise(N=2.5e-4, B=1.5e-5, T_B=40.0, K=3e-6)
+    accel = AxisNoise(N=1.2e-3, B=8e-5, T_B=60.0, K=4e-5)
+    return NoiseSpec('bench', {a: gyro if a.startswith('gyro') else accel for a in AXES})
+
+
 def _bags(args) -> Path:
     root = Path(args.cache) / f'{args.imus}x{args.nights}_{args.rate:g}_{args.minutes:g}-' \
         f'{args.long_minutes:g}'
     n_bags = args.imus * args.nights
-    gyro = AxisNoise(N=2.5e-4, B=1.5e-5, T_B=40.0, K=3e-6)
-    accel = AxisNoise(N=1.2e-3, B=8e-5, T_B=60.0, K=4e-5)
-    spec = NoiseSpec('bench', {a: gyro if a.startswith('gyro') else accel for a in AXES})
+    spec = _spec()
     for imu in range(args.imus):
         for night in range(args.nights):
             path = root / f'robot{imu}' / f'night{night}.mcap'
@@ -74,10 +79,7 @@ def _one_night(args) -> tuple:
 
     path = Path(args.cache) / f'night_{args.hours:g}h_{args.rate:g}.mcap'
     if not path.exists():
-        gyro = AxisNoise(N=2.5e-4, B=1.5e-5, T_B=40.0, K=3e-6)
-        accel = AxisNoise(N=1.2e-3, B=8e-5, T_B=60.0, K=4e-5)
-        spec = NoiseSpec('bench', {a: gyro if a.startswith('gyro') else accel for a in AXES})
-        t, y = simulate_imu(spec, args.rate, 3600.0 * args.hours, seed=7)
+        t, y = simulate_imu(_spec(), args.rate, 3600.0 * args.hours, seed=7)
         y[:, 5] += 9.81
         write_imu_bag(path, 1_700_000_000 * 10 ** 9 + np.round(t * 1e9).astype(np.int64), y)
         del t, y

@@ -126,6 +126,9 @@ def _keys(client, inputs: list[FleetInput], store: FleetStore) -> dict[str, str 
             keys[path] = new[signatures[path]] = fut.result()
         except InputError as exc:
             keys[path] = exc
+        except Exception as exc:  # noqa: B902 - a worker lost while hashing: one line
+            keys[path] = InputError(f'{path}: not hashed ({type(exc).__name__}: {exc})'
+                                    .splitlines()[0])
     if new:
         store.remember_keys(new)
     return keys
