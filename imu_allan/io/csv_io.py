@@ -116,18 +116,22 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _parse_fast(data: bytes, n_cols: int) -> np.ndarray | None:
+def _parse_fast(data: bytes, n_cols: int, path: Path | None = None,
+                skip_lines: int = 0) -> np.ndarray | None:
     """
     Parse the data rows in one C-level call; None when anything is off.
 
     numpy >= 1.23's loadtxt has a C tokenizer: measured 0.9 s for 7 million numbers,
-    faster than fromstring (1.3 s) on this machine.
+    faster than fromstring (1.3 s) on this machine.  Given the path of a plain file it
+    reads the file itself, skipping the ``skip_lines`` lines before the data: 0.37 s
+    for 4 million numbers, against 0.63 s through a Python file object.
     """
+    source = path if path is not None else io.BytesIO(data)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter('ignore')
-            table = np.loadtxt(io.BytesIO(data), delimiter=',', comments='#',
-                               dtype=np.float64, ndmin=2)
+            table = np.loadtxt(source, delimiter=',', comments='#', dtype=np.float64,
+                               ndmin=2, skiprows=skip_lines if path is not None else 0)
     except ValueError:
         return None
     if table.size == 0:
@@ -220,7 +224,8 @@ def read_csv(path: PathLike, columns: Sequence[str] | None = None,
     else:
         has_header = True
     n_cols = len(header)
-    table = _parse_fast(data, n_cols)
+    plain = not path.name.lower().endswith('.gz')
+    table = _parse_fast(data, n_cols, path if plain else None, first_line - 1)
     if table is None:
         table = _parse_careful(data, n_cols, header, path, first_line)
     if table.shape[0] == 0:
