@@ -114,3 +114,19 @@ def test_missing_file_and_columns(tmp_path):
 def test_write_rejects_mismatched_shapes(tmp_path):
     with pytest.raises(InputError, match='do not match'):
         write_csv(tmp_path / 'w.csv', np.arange(3.0), np.zeros((4, 6)), AXES)
+
+
+def test_a_spreadsheet_export_with_byte_order_mark_and_crlf_reads_whole(tmp_path):
+    # Excel's "CSV UTF-8" starts with a byte order mark and ends lines with CRLF: the
+    # header must still be found, and in a file without header no row may be lost.
+    with_header = tmp_path / 'excel.csv'
+    with_header.write_bytes(b'\xef\xbb\xbft,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z\r\n'
+                            + b''.join(f'{k / 100},{k},2,3,4,5,6\r\n'.encode()
+                                       for k in range(5)))
+    data = read_csv(with_header)
+    assert_allclose(data.t_s, np.arange(5) / 100, rtol=0, atol=1e-12)
+    assert_allclose(data.samples[:, 0], np.arange(5), rtol=0, atol=0)
+    bare = tmp_path / 'bare.csv'
+    bare.write_bytes(b'\xef\xbb\xbf1.5\r\n2.5\r\n3.5\r\n')
+    assert_allclose(read_csv(bare, rate_hz=10.0).samples[:, 0], [1.5, 2.5, 3.5], rtol=0,
+                    atol=0)

@@ -67,7 +67,7 @@ def _read_bytes(path: Path) -> bytes:
             raw = gzip.decompress(raw)
     except (OSError, EOFError, zlib.error) as exc:
         raise InputError(f'{path}: cannot read: {exc}') from None
-    return raw
+    return raw.removeprefix(b'\xef\xbb\xbf')   # the UTF-8 mark spreadsheets write
 
 
 def _split_header(raw: bytes, path: Path) -> tuple[list | None, bytes, int]:
