@@ -103,6 +103,23 @@ class RawKeeper:
         return self.rate_hz / self.factor
 
 
+def raw_evidence(raw: RawKeeper | None, session_rate_hz: float | None) -> tuple:
+    """
+    Return (kept samples, their rate [Hz]) for the evidence tests, or (None, None).
+
+    A copy started before the stream's rate was known takes the session's
+    (``session_rate_hz``, None when unknown); fewer than 16 kept rows say nothing and
+    are not used.
+    """
+    rate = (raw.rate_hz or session_rate_hz) if raw is not None else None
+    if raw is None or not rate:
+        return None, None
+    samples = raw.samples
+    if samples.shape[0] < 16:
+        return None, None
+    return samples, float(rate) / raw.factor
+
+
 class PeakCheck(NamedTuple):
     """
     A periodogram peak.

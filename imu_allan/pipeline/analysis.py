@@ -16,6 +16,7 @@ import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve
+from imu_allan.core.evidence import raw_evidence
 from imu_allan.core.exports import driver_yaml, kalibr_yaml, robot_localization_yaml, vins_yaml
 from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.kalman import imu_covariance, kalman_model, KalmanModel
@@ -293,11 +294,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     curve = session.curve(confidence=CONFIDENCE)
     if curve is None or curve.tau_s.size < 3:
         return None
-    samples = raw_rate = None
-    if raw is not None and raw.samples.shape[0] >= 16 and (raw.rate_hz or session.rate_hz):
-        # A copy started before the stream's rate was known takes the session's.
-        samples = raw.samples
-        raw_rate = (raw.rate_hz or float(session.rate_hz)) / raw.factor
+    samples, raw_rate = raw_evidence(raw, session.rate_hz)
     fits = dict.fromkeys(AXES)
     jobs = {}
     for j, axis in enumerate(AXES):

@@ -15,7 +15,7 @@ from imu_allan.core.diagnose.gap import find_bands, gap, gap_z, ln_adev_stderr
 from imu_allan.core.diagnose.replicas import (_Model, _model_from_fit, N_REPLICAS,
                                               simulate_model_avar)
 from imu_allan.core.diagnose.result import AxisDiagnosis, DiagnoseResult, Finding, summary_line
-from imu_allan.core.evidence import RawKeeper
+from imu_allan.core.evidence import raw_evidence, RawKeeper
 from imu_allan.core.fit import AxisFit
 from imu_allan.core.search import EFFECT_TERM as _EFFECT_TERM, search_axis, SEARCH_EFFECTS
 from imu_allan.errors import InputError
@@ -330,10 +330,8 @@ def diagnose_session(session, raw: RawKeeper | None = None, *,
     curve = session.curve(confidence=0.95)
     if curve is None or curve.tau_s.size < 3:
         return None
-    raw_samples = raw_rate = None
-    if raw is not None and raw.samples.shape[0] >= 16 and (raw.rate_hz or session.rate_hz):
-        raw_samples = raw.samples
-        raw_rate = (raw.rate_hz or float(session.rate_hz)) / raw.factor
+    # A duck-typed session may leave out rate_hz when the copy knows its own rate.
+    raw_samples, raw_rate = raw_evidence(raw, getattr(session, 'rate_hz', None))
     return diagnose_curve(curve, int(session.stats.n_used), raw=raw_samples,
                           raw_rate_hz=raw_rate, base_model=base_model, seed=seed,
                           n_replicas=n_replicas, duration_s=float(session.duration_s),
