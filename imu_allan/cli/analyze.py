@@ -11,6 +11,7 @@ The input plumbing (open_input, stream_input, analyze_input) lives in
 
 import argparse
 from concurrent.futures import as_completed, ProcessPoolExecutor
+from contextlib import nullcontext
 from dataclasses import replace
 import json
 import math
@@ -22,10 +23,10 @@ import sys
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.fit import json_num
 from imu_allan.errors import InputError
 from imu_allan.io.inputs import analyze_input, check_path, Progress
 from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.workers import worker_pool
 
 
 def add_input_options(p: argparse.ArgumentParser) -> None:
@@ -98,6 +99,8 @@ def spread_table(results: list, labels: list) -> tuple:
         in SI, None where a run gives no estimate (an upper bound or not identified).
 
     """
+    from imu_allan.core.fit import json_num   # scipy: not on the one-input path
+
     head = ['axis', 'param', 'unit'] + list(labels) + ['mean', 'std', 'CV %', 'min', 'max',
                                                        'n']
     rows = ['| ' + ' | '.join(head) + ' |', '|' + ' --- |' * len(head)]
@@ -177,15 +180,19 @@ def run(args) -> int:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
     else:
-        from imu_allan.io.report import write_outputs
         # One input: its six axes are searched on the cores (several inputs: one each).
         workers = args.jobs or min(2, os.cpu_count() or 1)
         if workers > 1:   # and the accumulator shares its passes with a helper thread
             config = replace(config, accumulator_threads=2)
-        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers)
-        with Progress(paths[0].name) as bar:
+        plot = not args.no_plot
+        # The figures are drawn by workers that loaded matplotlib while the input was read.
+        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
+                                        preload=('imu_allan.io.plot_preload',) if plot else ())
+        from imu_allan.io.report import write_outputs   # scipy: imported while reading
+        with Progress(paths[0].name) as bar, \
+                (worker_pool(workers if plot else 1) or nullcontext()) as pool:
             bar.set_stage('writing the report of')
-            files = write_outputs(result, outs[0], plot=not args.no_plot)
+            files = write_outputs(result, outs[0], plot=plot, pool=pool)
         outcomes = [(result, None, [str(f) for f in files], seconds)]
     failed = [err for (_, err, _, _) in outcomes if err]
     for err in failed:

@@ -66,6 +66,10 @@ _M_LO = 64
 _MAX_M = 2 ** 40
 #: Largest exact_max_m: keeps the state under 1 MB per axis (0.58 MB at this value).
 _MAX_EXACT_M = 2 ** 14
+#: End points per tile of the exact passes: 6 axes x 16384 doubles (768 KiB) stay in
+#: L2; wider tiles cost more alone, narrower ones scale worse on two threads (more GIL
+#: hand-overs per chunk).
+_TILE_COLS = 16384
 
 
 def dense_m_grid(max_m: int, per_decade: int) -> np.ndarray:
@@ -185,7 +189,7 @@ class AllanAccumulator(_Persistence):
         self._sums = np.zeros((self._m.size, n_axes))
         self._counts = np.zeros(self._m.size, dtype=np.int64)
         self._work: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._work2: tuple[np.ndarray, np.ndarray] | None = None
+        self._tile2: np.ndarray | None = None
 
     # ------------------------------------------------------------------ grid
     def _build_grid(self) -> None:
@@ -306,8 +310,8 @@ class AllanAccumulator(_Persistence):
         # Kept between chunks (not state): avoids page-faulting fresh buffers each time.
         if self._work is None:
             a, w = self.n_axes, self._buf.shape[1]
-            self._work = (np.empty((a, w + 1)), np.empty((a, self._chunk + self.exact_max_m)),
-                          np.empty((a, self._chunk)))
+            self._work = (np.empty((a, w + 1)), np.empty((a, w + 1)),
+                          np.empty((a, _TILE_COLS)))
         return self._work
 
     def _flush(self) -> None:
@@ -319,13 +323,14 @@ class AllanAccumulator(_Persistence):
             self._ref = buf[:, h:w].mean(axis=1)
             self._ref_set = True
         buf[:, h:w] -= self._ref[:, None]
-        x_all, t_all, d_all = self._work_arrays()
+        x_all, x2_all, tile = self._work_arrays()
         x = x_all[:, :w + 1]
         r = _phase(buf[:, :w], x)
+        x2 = np.multiply(x, 2.0, out=x2_all[:, :w + 1])
         if self.threads > 1:
-            self._accumulate_split(x, h + 1, w, t_all, d_all)
+            self._accumulate_split(x, x2, h + 1, w, tile)
         else:
-            _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, t_all, d_all)
+            _accumulate(x, x2, h + 1, w, self._m0, self._sums, self._counts, 0, tile)
         # Cluster sums for level 1 end at segment indices that are multiples of D_1.
         base = self._seg_n - h
         if self._levels:
@@ -340,17 +345,17 @@ class AllanAccumulator(_Persistence):
         if self._levels and clusters.shape[1]:
             self._push(0, clusters)
 
-    def _accumulate_split(self, x: np.ndarray, j_first: int, j_last: int, t_all: np.ndarray,
-                          d_all: np.ndarray) -> None:
+    def _accumulate_split(self, x: np.ndarray, x2: np.ndarray, j_first: int, j_last: int,
+                          tile: np.ndarray) -> None:
         """Level 0's taus in two halves of equal cost, the second on the helper thread."""
         ms = self._m0
         cost = np.cumsum(np.maximum(j_last - np.maximum(j_first, 2 * ms) + 1, 0) + ms)
         half = int(np.searchsorted(cost, cost[-1] / 2.0)) + 1 if ms.size else 0
-        if self._work2 is None:
-            self._work2 = (np.empty_like(t_all), np.empty_like(d_all))
-        job = _helper().submit(_accumulate, x, j_first, j_last, ms[half:], self._sums,
-                               self._counts, half, *self._work2)
-        _accumulate(x, j_first, j_last, ms[:half], self._sums, self._counts, 0, t_all, d_all)
+        if self._tile2 is None:
+            self._tile2 = np.empty_like(tile)
+        job = _helper().submit(_accumulate, x, x2, j_first, j_last, ms[half:], self._sums,
+                               self._counts, half, self._tile2)
+        _accumulate(x, x2, j_first, j_last, ms[:half], self._sums, self._counts, 0, tile)
         job.result()
 
     def _push(self, k: int, values: np.ndarray) -> None:
@@ -361,7 +366,7 @@ class AllanAccumulator(_Persistence):
             win = np.concatenate((level.hist[:, level.capacity - h:], values), axis=1)
             x = np.empty((self.n_axes, h + c + 1))
             r = _phase(win, x)
-            _accumulate(x, h + 1, h + c, level.m_prime, self._sums, self._counts,
+            _accumulate(x, 2.0 * x, h + 1, h + c, level.m_prime, self._sums, self._counts,
                         level.index[0] if level.index.size else 0)
             # Pairs of this level's values form the next level's cluster sums.
             first = (level.n // 2 + 1) * 2
@@ -477,9 +482,9 @@ def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
     return r
 
 
-def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray,
+def _accumulate(x: np.ndarray, x2: np.ndarray, j_first: int, j_last: int, ms: np.ndarray,
                 sums: np.ndarray, counts: np.ndarray, row0: int,
-                t_buf: np.ndarray | None = None, d_buf: np.ndarray | None = None) -> None:
+                tile: np.ndarray | None = None) -> None:
     """
     Add the squared second differences that end at x[:, j_first:j_last + 1].
 
@@ -487,6 +492,8 @@ def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray,
     ----------
     x : np.ndarray
         Shape (n_axes, w + 1), running sum; index 0 is the oldest point held.
+    x2 : np.ndarray
+        Shape (n_axes, w + 1), ``2 * x`` (computed once for every tau).
     j_first, j_last : int
         First and last new end points (local indices into x).
     ms : np.ndarray
@@ -495,21 +502,26 @@ def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray,
         Shapes (K, n_axes) and (K,), updated in place at rows row0 .. row0 + k - 1.
     row0 : int
         Row of ms[0] in sums and counts.
-    t_buf, d_buf : np.ndarray, optional
-        Scratch arrays of at least (n_axes, j_last - j_first + 1 + max(ms)) and
-        (n_axes, j_last - j_first + 1).
+    tile : np.ndarray, optional
+        Scratch array of shape (n_axes, c), c >= 1: the end points are taken c at a time.
 
     """
+    if tile is None:
+        tile = np.empty((x.shape[0], min(_TILE_COLS, max(j_last - j_first + 1, 1))))
+    width = tile.shape[1]
     for k, m in enumerate(ms.tolist()):
         j0 = max(j_first, 2 * m)
-        n = j_last - j0 + 1
-        if n <= 0:
+        if j0 > j_last:
             continue
-        # d_j = T[j] - T[j - m] with T[j] = X[j] - X[j - m] (cluster sums): 3 passes.
-        t = np.subtract(x[:, j0 - m:j_last + 1], x[:, j0 - 2 * m:j_last + 1 - m],
-                        out=None if t_buf is None else t_buf[:, :n + m])
-        d = np.subtract(t[:, m:], t[:, :n], out=None if d_buf is None else d_buf[:, :n])
-        # einsum, not np.dot/vecdot: OpenBLAS threads its ddot, which stalls badly on a
-        # busy machine; numpy's own loop is as fast single-threaded.
-        sums[row0 + k] += np.einsum('ij,ij->i', d, d)
-        counts[row0 + k] += n
+        total = np.zeros(x.shape[0])
+        # d_j = X[j] + X[j - 2m] - 2 X[j - m], a tile of end points at a time: the
+        # temporary stays in the core's cache.
+        for s in range(j0, j_last + 1, width):
+            e = min(s + width, j_last + 1)
+            d = np.add(x[:, s:e], x[:, s - 2 * m:e - 2 * m], out=tile[:, :e - s])
+            np.subtract(d, x2[:, s - m:e - m], out=d)
+            # einsum, not np.dot/vecdot: OpenBLAS threads its ddot, which stalls badly on
+            # a busy machine; numpy's own loop is as fast single-threaded.
+            total += np.einsum('ij,ij->i', d, d)
+        sums[row0 + k] += total
+        counts[row0 + k] += j_last - j0 + 1

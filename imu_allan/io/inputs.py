@@ -9,6 +9,7 @@ ahead on a thread; :class:`Progress` is the one-line indicator on stderr;
 """
 
 from dataclasses import replace
+import importlib
 import os
 from pathlib import Path
 import queue
@@ -23,6 +24,7 @@ import numpy as np
 from imu_allan import AXES
 from imu_allan.errors import InputError
 from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.workers import start_workers
 
 CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
 #: Samples handed to the Session at a time for CSV input.
@@ -352,18 +354,20 @@ def raw_tap() -> tuple:
         needs it.
 
     """
-    from imu_allan.core.evidence import RawKeeper
+    from imu_allan.core.raw import RawKeeper
     # Every sample from the first on; the rate comes from the session at analysis time.
     keeper = RawKeeper(None, len(AXES))
 
     def tap(session, samples) -> None:
-        keeper.add(samples[np.isfinite(samples).all(axis=1)])
+        if not np.isfinite(samples).all():      # a copy only where rows must go
+            samples = samples[np.isfinite(samples).all(axis=1)]
+        keeper.add(samples)
     return tap, keeper
 
 
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
-                  prefetch: bool = True):
+                  prefetch: bool = True, preload: tuple = ()):
     """
     Stream one input through a Session and fit it.
 
@@ -384,6 +388,9 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         :func:`imu_allan.pipeline.analysis.analyze`).
     prefetch : bool
         See :func:`stream_input`.
+    preload : tuple of str
+        Further modules the worker processes import while the input is read (see
+        :func:`imu_allan.pipeline.workers.start_workers`), when workers > 1.
 
     Returns
     -------
@@ -391,12 +398,14 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         (AnalysisResult with the recording's first stamp and frame_id, seconds spent).
 
     """
-    from imu_allan.pipeline.analysis import analyze, start_workers  # the fit: scipy
-
     start = time.monotonic()
     path = Path(path)
     if workers > 1:
-        start_workers()     # its start-up overlaps the reading
+        start_workers(preload)      # its start-up overlaps the reading
+    # The fit's modules (scipy: half a second) are imported while the input is read.
+    fit_import = threading.Thread(target=importlib.import_module, name='imu-allan-import',
+                                  args=('imu_allan.pipeline.analysis',), daemon=True)
+    fit_import.start()
 
     def warn(text):
         if not quiet:
@@ -416,6 +425,8 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                 raise InputError(f'{path}: no Imu samples in the input')
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
+            fit_import.join()
+            from imu_allan.pipeline.analysis import analyze
             result = analyze(session, source=source.label, raw=keeper,
                              topic=source.topic or '', workers=workers)
         finally:

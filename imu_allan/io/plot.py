@@ -17,6 +17,8 @@ from imu_allan.core.model import base_name, TERMS
 
 _COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
 _PANELS = ((GYRO_AXES, 'gyro ADEV [rad/s]'), (ACCEL_AXES, 'accel ADEV [m/s\u00b2]'))
+#: The files of every figure.
+FORMATS = ('png', 'svg')
 
 
 def _subplots(nrows: int, ncols: int, **kwargs):
@@ -45,11 +47,23 @@ def _plain_log_labels(fig) -> None:
                 axis.set_minor_formatter(NullFormatter())
 
 
-def _save(fig, base: Path, tight: bool = True) -> list:
-    """Write base.png and base.svg; ``tight`` crops to the artists (one more draw each)."""
+def warm_fonts() -> None:
+    """
+    Load the font the figures use (a quarter of a second on the first text drawn).
+
+    Called where the fork server of the workers starts, so that every worker forked
+    from it draws at once (see :mod:`imu_allan.io.plot_preload`).
+    """
+    from matplotlib.font_manager import FontProperties, findfont, get_font
+
+    get_font(findfont(FontProperties()))
+
+
+def _save(fig, base: Path, tight: bool = True, formats: tuple = FORMATS) -> list:
+    """Write base.png and/or base.svg; ``tight`` crops to the artists (one more draw each)."""
     _plain_log_labels(fig)
     paths = []
-    for ext in ('png', 'svg'):
+    for ext in formats:
         path = base.with_suffix(f'.{ext}')
         fig.savefig(path, dpi=130 if ext == 'png' else None,
                     bbox_inches='tight' if tight else None)
@@ -57,7 +71,7 @@ def _save(fig, base: Path, tight: bool = True) -> list:
     return paths
 
 
-def plot_result(result, base) -> list:
+def plot_result(result, base, formats: tuple = FORMATS) -> list:
     """
     Draw the measured ADEV of the six axes with the fitted model and its terms.
 
@@ -66,12 +80,15 @@ def plot_result(result, base) -> list:
     result : imu_allan.pipeline.analysis.AnalysisResult
         The analysis to draw.
     base : str or Path
-        Output path without suffix; ``.png`` and ``.svg`` are written.
+        Output path without suffix.
+    formats : tuple of str
+        The files to write, ``.png`` and ``.svg`` by default (two processes may each
+        draw one).
 
     Returns
     -------
     list of Path
-        The two files.
+        The files written.
 
     """
     curve = result.curve
@@ -126,7 +143,7 @@ def plot_result(result, base) -> list:
                  fontsize=10)
     # A fixed layout: every analysis draws this figure, and cropping costs a draw.
     fig.subplots_adjust(left=0.06, right=0.985, bottom=0.1, top=0.9, wspace=0.2)
-    return _save(fig, Path(base), tight=False)
+    return _save(fig, Path(base), tight=False, formats=formats)
 
 
 def plot_comparison(results: list, labels: list, base) -> list:

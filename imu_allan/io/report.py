@@ -8,6 +8,7 @@ a human summary and the ADEV plot (docs/outputs.md).
 Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
 """
 
+from concurrent.futures import Executor
 import json
 from pathlib import Path
 
@@ -67,8 +68,14 @@ def covariance_yaml(result: AnalysisResult) -> str:
     return header + yaml.safe_dump(result.imu_covariances(), sort_keys=False)
 
 
+def _draw(result: AnalysisResult, base: Path, ext: str) -> list:
+    """Draw the ADEV figure as one file (in a worker: matplotlib is imported there)."""
+    from imu_allan.io.plot import plot_result
+    return plot_result(result, base, (ext,))
+
+
 def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
-                  imu_topic: str | None = None) -> list:
+                  imu_topic: str | None = None, pool: Executor | None = None) -> list:
     """
     Write every output file of one analysis into ``out_dir``.
 
@@ -83,6 +90,9 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
     imu_topic : str, optional
         The topic robot_localization should fuse (the node's republished topic);
         default the analysed one.
+    pool : concurrent.futures.Executor, optional
+        Worker processes (:func:`imu_allan.pipeline.workers.worker_pool`): the PNG and
+        the SVG are then drawn in two of them while this process writes the rest.
 
     Returns
     -------
@@ -92,6 +102,9 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
     """
     out = Path(out_dir).expanduser()
     out.mkdir(parents=True, exist_ok=True)
+    figures = []
+    if plot and pool is not None:
+        figures = [pool.submit(_draw, result, out / 'adev', ext) for ext in ('png', 'svg')]
     spec = NoiseSpec(name=f'fitted from {result.source or "input"}', axes=result.models())
     written = [
         _atomic_write(out / FILES['json'], json.dumps(result.to_json(), indent=1) + '\n'),
@@ -105,7 +118,9 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
         _atomic_write(out / FILES['driver'], result.driver_yaml()),
         _atomic_write(out / FILES['vins'], result.vins_yaml()),
     ]
-    if plot:
+    if plot and pool is None:
         from imu_allan.io.plot import plot_result
         written += plot_result(result, out / 'adev')
+    for job in figures:
+        written += job.result()
     return written

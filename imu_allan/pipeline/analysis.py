@@ -7,10 +7,8 @@ Kalman matrices, the Kalibr file and the Imu covariances in one frozen
 DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
 """
 
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 import math
-import multiprocessing
 
 import numpy as np
 
@@ -24,6 +22,7 @@ from imu_allan.core.noise_params import AxisNoise
 from imu_allan.core.search import search_axis
 from imu_allan.core.units import format_quoted, sensor_of
 from imu_allan.errors import InputError
+from imu_allan.pipeline.workers import worker_pool
 
 #: Confidence of the reported Allan bands and parameter intervals.
 CONFIDENCE = 0.95
@@ -231,32 +230,12 @@ def _search_job(job: tuple) -> AxisFit | None:
         return None
 
 
-def start_workers() -> None:
-    """
-    Start the fork server of :func:`analyze`'s worker processes now, in the background.
-
-    The search is pure Python and numpy on tiny matrices (GIL-bound): it runs in
-    processes, not threads.  They fork from a server process that has imported the
-    package once (forking a process with threads, the reader and the progress line,
-    can deadlock the child).  Called before the input is read, the server's start-up
-    (about a second) overlaps the reading.
-    """
-    if 'forkserver' not in multiprocessing.get_all_start_methods():
-        return      # Windows: the axes are searched one after another
-    ctx = multiprocessing.get_context('forkserver')
-    ctx.set_forkserver_preload(['imu_allan.pipeline.analysis'])
-    from multiprocessing import forkserver
-    forkserver.ensure_running()
-
-
 def _map_axes(jobs: list, workers: int) -> list:
     """Run :func:`_search_job` over the axes, in worker processes when workers > 1."""
-    if (workers <= 1 or len(jobs) < 2
-            or 'forkserver' not in multiprocessing.get_all_start_methods()):
+    pool = worker_pool(min(workers, len(jobs)))
+    if pool is None:
         return [_search_job(job) for job in jobs]
-    start_workers()
-    ctx = multiprocessing.get_context('forkserver')
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
+    with pool:
         return list(pool.map(_search_job, jobs))
 
 

@@ -16,6 +16,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from imu_allan.core.accumulator import AllanAccumulator
+    from imu_allan.pipeline.feed import BackgroundAccumulator
     from imu_allan.pipeline.session import HygieneStats, SessionConfig
 
 
@@ -28,7 +29,7 @@ class _Parts:
 
     config: SessionConfig
     stats: HygieneStats
-    acc: AllanAccumulator | None
+    acc: AllanAccumulator | BackgroundAccumulator | None
     rate_hz: float
     first_stamp_ns: int | None
     last_stamp_ns: int | None

@@ -20,6 +20,7 @@ from imu_allan.core.allan import AllanCurve
 from imu_allan.errors import InputError
 from imu_allan.pipeline.checks import _SampleChecks, _split_runs
 from imu_allan.pipeline.clock import _StampClock
+from imu_allan.pipeline.feed import BackgroundAccumulator
 from imu_allan.pipeline.session_state import _StateFile
 
 N_AXES = len(AXES)
@@ -70,8 +71,9 @@ class SessionConfig:
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
     accumulator_threads : int
-        1, or 2 to share the accumulator's work with a helper thread (one input on two
-        cores: ``imu-allan analyze``); the sums are identical either way.
+        1, or 2 for one input on two cores (``imu-allan analyze``): the accumulator then
+        sums on a thread of its own while the checks go on, and shares its exact taus
+        with a helper thread.  The sums are identical either way.
 
     """
 
@@ -168,7 +170,7 @@ class Session(_StampClock, _SampleChecks, _StateFile):
         self._warn_text: dict[str, str] = {}
         self._warn_count: dict[str, int] = {}
         self.rate_hz = float(config.rate_hz)
-        self.acc: AllanAccumulator | None = None
+        self.acc: AllanAccumulator | BackgroundAccumulator | None = None
         self._pending_t: list[np.ndarray] = []
         self._pending_y: list[np.ndarray] = []
         self.first_stamp_ns: int | None = None
@@ -216,7 +218,11 @@ class Session(_StampClock, _SampleChecks, _StateFile):
         if n == 0:
             return
         self.stats.n_received += n
-        finite = np.isfinite(samples).all(axis=1)
+        # One whole-block reduction first: rows are looked at only when one is bad.
+        if np.isfinite(samples).all():
+            finite = np.ones(n, dtype=bool)
+        else:
+            finite = np.isfinite(samples).all(axis=1)
         if not finite.all():
             bad = int(n - finite.sum())
             self.stats.n_nonfinite += bad
@@ -262,8 +268,10 @@ class Session(_StampClock, _SampleChecks, _StateFile):
 
     def _start_accumulator(self) -> None:
         kwargs = {'exact_max_m': self.config.exact_max_m} if self.config.exact_max_m else {}
-        self.acc = AllanAccumulator(N_AXES, self.rate_hz, threads=self.config.accumulator_threads,
-                                    **kwargs)
+        acc = AllanAccumulator(N_AXES, self.rate_hz, threads=self.config.accumulator_threads,
+                               **kwargs)
+        # Two threads: the accumulator also sums on its own thread while the checks go on.
+        self.acc = acc if self.config.accumulator_threads < 2 else BackgroundAccumulator(acc)
 
     def break_segment(self) -> None:
         """
@@ -283,6 +291,9 @@ class Session(_StampClock, _SampleChecks, _StateFile):
                 self._pending_t, self._pending_y = [], []
         self._refine_rate()
         self._flush_motion()
+        if isinstance(self.acc, BackgroundAccumulator):
+            # The end of the recording: its thread stops, later calls run inline.
+            self.acc = self.acc.close()
 
     # ----------------------------------------------------------------- output
     @property

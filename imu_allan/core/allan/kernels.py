@@ -330,13 +330,16 @@ def _is_octave(m: np.ndarray) -> bool:
 
 
 def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarray,
-               method: str, identify: bool) -> tuple[np.ndarray, np.ndarray | None]:
+               method: str, identify: bool,
+               tau_threads: int = 1) -> tuple[np.ndarray, np.ndarray | None]:
     """
     Return the sums of squared phase differences and maybe alpha of axis a, (k,) each.
 
     col (M,) is the axis' contiguous copy and gets overwritten.  Its mean is removed
     first: the variances ignore a constant offset, and without it the running sums of
     an accelerometer at 9.81 m/s^2 with 1e-4 m/s^2 of noise would lose their digits.
+    With ``tau_threads`` > 1 the taus of the running-sum path are shared by threads
+    (one axis on several cores).
     """
     order = _DIFF_ORDER[method]
     out = np.empty(m.size)
@@ -366,12 +369,17 @@ def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarr
         col -= mean
         x = _phase_row(col)
         cache.append(x)
-        for k, m_k in enumerate(m.tolist()):
-            if method == 'nonoverlapping':
-                d = np.diff(x[::m_k], 2)
-                out[k] = float(np.dot(d, d))
-            else:
-                out[k] = _diff_sumsq(x, m_k, order)
+
+        def tau_sums(part: int) -> None:
+            # Every tau is summed by one thread alone: the same result for any count.
+            for k in range(part, m.size, tau_threads):
+                m_k = int(m[k])
+                if method == 'nonoverlapping':
+                    d = np.diff(x[::m_k], 2)
+                    out[k] = float(np.dot(d, d))
+                else:
+                    out[k] = _diff_sumsq(x, m_k, order)
+        _map_threads(tau_sums, tau_threads, tau_threads)
 
         def cluster_means(j: int) -> np.ndarray:
             mj = int(m[j])
@@ -413,9 +421,13 @@ def _curve_core(y2: np.ndarray, m: np.ndarray, method: str,
     n, n_axes = y2.shape
     with _single_thread_blas():
         cols, means = _columns(y2)
+        workers = _workers(n_axes)
+        # Cores left over by the axes share each axis' taus.
+        tau_threads = max(1, min(os.cpu_count() or 1, _MAX_THREADS) // workers)
         results = _map_threads(
-            lambda a: _axis_work(y2, cols[a], a, float(means[a]), m, method, identify),
-            n_axes, _workers(n_axes))
+            lambda a: _axis_work(y2, cols[a], a, float(means[a]), m, method, identify,
+                                 tau_threads),
+            n_axes, workers)
     n_terms = terms_count(m, n, method)
     sums = np.stack([r[0] for r in results], axis=1).reshape(m.size, n_axes)
     var = _normalise(sums, m, n_terms, method)

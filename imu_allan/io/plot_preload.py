@@ -1,0 +1,11 @@
+"""
+Imported by the workers' fork server: matplotlib and its font loaded once.
+
+Every worker forked from the server then draws its figure at once instead of paying
+about 0.6 s of imports and font loading first (see
+:func:`imu_allan.pipeline.workers.start_workers`).
+"""
+
+from imu_allan.io.plot import warm_fonts
+
+warm_fonts()
