@@ -340,24 +340,3 @@ def test_bad_input():
                    {'n_axes': 6, 'rate_hz': 1.0, 'per_decade': 0}):
         with pytest.raises(InputError):
             AllanAccumulator(**kwargs)
-
-
-def test_a_helper_thread_gives_bit_identical_sums():
-    # threads=2 splits each chunk's exact taus between two threads; every tau's sum is
-    # still made by one thread in the same order, so nothing may differ, not even a bit.
-    rng = np.random.default_rng(21)
-    y = rng.standard_normal((300_000, 6)) + np.cumsum(rng.standard_normal((300_000, 6)),
-                                                      axis=0) * 1e-3
-    cuts = np.sort(rng.choice(np.arange(1, y.shape[0]), 40, replace=False))
-    curves = []
-    for threads in (1, 2):
-        acc = AllanAccumulator(6, 200.0, exact_max_m=1024, threads=threads)
-        for k, block in enumerate(np.split(y, cuts)):
-            acc.add(block)
-            if k == 17:
-                acc.break_segment()
-        curves.append(acc.curve())
-    assert_array_equal(curves[0].avar, curves[1].avar)
-    assert_array_equal(curves[0].n_terms, curves[1].n_terms)
-    with pytest.raises(InputError, match='threads must be 1 or 2'):
-        AllanAccumulator(6, 200.0, threads=3)

@@ -182,8 +182,8 @@ def run(args) -> int:
     else:
         # One input: its six axes are searched on the cores (several inputs: one each).
         workers = args.jobs or min(2, os.cpu_count() or 1)
-        if workers > 1:   # and the accumulator shares its passes with a helper thread
-            config = replace(config, accumulator_threads=2)
+        if workers > 1:   # and the accumulator sums on a thread of its own
+            config = replace(config, background_accumulator=True)
         plot = not args.no_plot
         # The figures are drawn by workers that loaded matplotlib while the input was read.
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,

@@ -49,8 +49,6 @@ second difference, so |X| is bounded by the window length times the *local*
 variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 """
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from imu_allan.core.accumulator_state import _Persistence
@@ -67,8 +65,8 @@ _MAX_M = 2 ** 40
 #: Largest exact_max_m: keeps the state under 1 MB per axis (0.58 MB at this value).
 _MAX_EXACT_M = 2 ** 14
 #: End points per tile of the exact passes: 6 axes x 16384 doubles (768 KiB) stay in
-#: L2; wider tiles cost more alone, narrower ones scale worse on two threads (more GIL
-#: hand-overs per chunk).
+#: L2; wider tiles cost more, narrower ones hand the GIL over more often (offline, the
+#: accumulator runs on a thread beside the checks and the reader).
 _TILE_COLS = 16384
 
 
@@ -126,10 +124,6 @@ class AllanAccumulator(_Persistence):
         taus use the decimated estimator described in the module docstring.
     per_decade : int
         Taus per decade of the log grid.
-    threads : int
-        Threads that share the exact taus of each chunk (1 or 2; numpy releases the GIL
-        in these passes).  Every tau's sum is computed by exactly one thread, so the
-        result is bit-identical for any value.
 
     Notes
     -----
@@ -155,7 +149,7 @@ class AllanAccumulator(_Persistence):
     """
 
     def __init__(self, n_axes: int, rate_hz: float, exact_max_m: int = 8192,
-                 per_decade: int = 10, threads: int = 1):
+                 per_decade: int = 10):
         n_axes, exact_max_m, per_decade = int(n_axes), int(exact_max_m), int(per_decade)
         rate_hz = float(rate_hz)
         if n_axes < 1:
@@ -167,9 +161,6 @@ class AllanAccumulator(_Persistence):
                              f'{_M_LO}..{_MAX_EXACT_M}, not {exact_max_m}')
         if not 1 <= per_decade <= 100:
             raise InputError(f'per_decade must lie in 1..100, not {per_decade}')
-        if threads not in (1, 2):
-            raise InputError(f'threads must be 1 or 2, not {threads}')
-        self.threads = int(threads)
         self.n_axes = n_axes
         self.rate_hz = rate_hz
         self.exact_max_m = exact_max_m
@@ -189,7 +180,6 @@ class AllanAccumulator(_Persistence):
         self._sums = np.zeros((self._m.size, n_axes))
         self._counts = np.zeros(self._m.size, dtype=np.int64)
         self._work: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._tile2: np.ndarray | None = None
 
     # ------------------------------------------------------------------ grid
     def _build_grid(self) -> None:
@@ -327,10 +317,7 @@ class AllanAccumulator(_Persistence):
         x = x_all[:, :w + 1]
         r = _phase(buf[:, :w], x)
         x2 = np.multiply(x, 2.0, out=x2_all[:, :w + 1])
-        if self.threads > 1:
-            self._accumulate_split(x, x2, h + 1, w, tile)
-        else:
-            _accumulate(x, x2, h + 1, w, self._m0, self._sums, self._counts, 0, tile)
+        _accumulate(x, x2, h + 1, w, self._m0, self._sums, self._counts, 0, tile)
         # Cluster sums for level 1 end at segment indices that are multiples of D_1.
         base = self._seg_n - h
         if self._levels:
@@ -344,19 +331,6 @@ class AllanAccumulator(_Persistence):
         self._h0, self._pending = keep, 0
         if self._levels and clusters.shape[1]:
             self._push(0, clusters)
-
-    def _accumulate_split(self, x: np.ndarray, x2: np.ndarray, j_first: int, j_last: int,
-                          tile: np.ndarray) -> None:
-        """Level 0's taus in two halves of equal cost, the second on the helper thread."""
-        ms = self._m0
-        cost = np.cumsum(np.maximum(j_last - np.maximum(j_first, 2 * ms) + 1, 0) + ms)
-        half = int(np.searchsorted(cost, cost[-1] / 2.0)) + 1 if ms.size else 0
-        if self._tile2 is None:
-            self._tile2 = np.empty_like(tile)
-        job = _helper().submit(_accumulate, x, x2, j_first, j_last, ms[half:], self._sums,
-                               self._counts, half, self._tile2)
-        _accumulate(x, x2, j_first, j_last, ms[:half], self._sums, self._counts, 0, tile)
-        job.result()
 
     def _push(self, k: int, values: np.ndarray) -> None:
         """Feed cluster sums (n_axes, c) to decimated level k (and on upwards)."""
@@ -444,17 +418,6 @@ class AllanAccumulator(_Persistence):
         return AllanCurve(tau_s, m, avar, n_terms, edf, alpha_arr, np.asarray(adev_lo),
                           np.asarray(adev_hi), float(confidence), 'overlapping',
                           self.rate_hz)
-
-
-_HELPER: ThreadPoolExecutor | None = None
-
-
-def _helper() -> ThreadPoolExecutor:
-    """Return the one helper thread of every accumulator with threads=2 (made on demand)."""
-    global _HELPER
-    if _HELPER is None:
-        _HELPER = ThreadPoolExecutor(1, thread_name_prefix='imu-allan-accumulate')
-    return _HELPER
 
 
 def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:

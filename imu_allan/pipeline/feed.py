@@ -46,6 +46,7 @@ class BackgroundAccumulator:
         object.__setattr__(self, '_acc', acc)
         object.__setattr__(self, '_calls', calls)
         object.__setattr__(self, '_errors', errors)
+        object.__setattr__(self, '_worker', worker)
 
     def _raise(self) -> None:
         if self._errors:
@@ -71,7 +72,7 @@ class BackgroundAccumulator:
         """Wait for the queued calls, stop the worker thread; return the accumulator."""
         acc = self.sync()
         self._calls.put(_STOP)
-        self._calls.join()
+        self._worker.join()
         return acc
 
     def __getattr__(self, name: str):

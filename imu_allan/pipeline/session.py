@@ -70,10 +70,9 @@ class SessionConfig:
         Stillness needed after motion before samples are used again [s].
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
-    accumulator_threads : int
-        1, or 2 for one input on two cores (``imu-allan analyze``): the accumulator then
-        sums on a thread of its own while the checks go on, and shares its exact taus
-        with a helper thread.  The sums are identical either way.
+    background_accumulator : bool
+        The accumulator sums on a thread of its own while the checks go on (one input
+        on two cores: ``imu-allan analyze``).  The sums are identical either way.
 
     """
 
@@ -92,7 +91,7 @@ class SessionConfig:
     on_motion: str = 'pause'
     settle_s: float = 5.0
     exact_max_m: int = 0
-    accumulator_threads: int = 1
+    background_accumulator: bool = False
 
     def __post_init__(self):
         if self.on_motion not in MOTION_POLICIES:
@@ -268,10 +267,8 @@ class Session(_StampClock, _SampleChecks, _StateFile):
 
     def _start_accumulator(self) -> None:
         kwargs = {'exact_max_m': self.config.exact_max_m} if self.config.exact_max_m else {}
-        acc = AllanAccumulator(N_AXES, self.rate_hz, threads=self.config.accumulator_threads,
-                               **kwargs)
-        # Two threads: the accumulator also sums on its own thread while the checks go on.
-        self.acc = acc if self.config.accumulator_threads < 2 else BackgroundAccumulator(acc)
+        acc = AllanAccumulator(N_AXES, self.rate_hz, **kwargs)
+        self.acc = BackgroundAccumulator(acc) if self.config.background_accumulator else acc
 
     def break_segment(self) -> None:
         """
