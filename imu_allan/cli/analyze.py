@@ -26,7 +26,7 @@ from imu_allan import AXES
 from imu_allan.errors import InputError
 from imu_allan.io.inputs import analyze_input, check_path, Progress
 from imu_allan.pipeline.session import SessionConfig
-from imu_allan.pipeline.workers import worker_pool
+from imu_allan.pipeline.workers import keep_large_blocks, worker_pool
 
 
 def add_input_options(p: argparse.ArgumentParser) -> None:
@@ -172,6 +172,7 @@ def run(args) -> int:
     for p in paths:
         check_path(p)
     config = session_config_from_args(args)
+    keep_large_blocks()         # a batch job: freed large blocks are reused, not re-faulted
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]

@@ -10,11 +10,39 @@ overlaps the reading.
 """
 
 from concurrent.futures import ProcessPoolExecutor
+import ctypes
 import multiprocessing
+import os
 from typing import Iterable
 
 #: Modules every server imports before it forks workers.
 _PRELOAD = ('imu_allan.pipeline.analysis',)
+#: glibc's heap settings for a long offline job (bytes): blocks below this stay on the
+#: heap, and the heap keeps this much freed memory (mallopt M_MMAP_THRESHOLD = -3,
+#: M_TRIM_THRESHOLD = -1; the environment variables set them in a new process).
+HEAP_KEEP_BYTES = 1 << 28
+HEAP_ENV = ('MALLOC_MMAP_THRESHOLD_', 'MALLOC_TRIM_THRESHOLD_')
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+
+
+def keep_large_blocks() -> None:
+    """
+    Let this process and the workers it starts reuse freed large blocks (glibc only).
+
+    By default glibc serves every block above a threshold (128 KiB at first) with a
+    fresh mmap and trims freed heap at once: each of the stream's many large numpy
+    temporaries then page-faults anew.  Keeping up to 256 MiB saves about 0.3 s of the
+    3 h bag's 6 s; a process that is not on glibc keeps its defaults.
+    """
+    for name in HEAP_ENV:       # the fork server and its workers, started later
+        os.environ.setdefault(name, str(HEAP_KEEP_BYTES))
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+    mallopt(_M_TRIM_THRESHOLD, HEAP_KEEP_BYTES)
+    mallopt(_M_MMAP_THRESHOLD, HEAP_KEEP_BYTES)
 
 
 def available() -> bool:
