@@ -75,6 +75,19 @@ def _bag(cache: Path, storage: str, hours: float, rate: float) -> Path:
     return bag
 
 
+def _warm(bag: Path) -> None:
+    """
+    Read the bag's files once: every timed run then reads from the page cache.
+
+    This machine's kernel reclaims cold pages (DAMON): a bag not read for a while comes
+    from disk again, and its first run was 3 s slower than the next.
+    """
+    for f in sorted(bag.iterdir()):
+        with open(f, 'rb') as fh:
+            while fh.read(1 << 24):
+                pass
+
+
 def _end_to_end(bag: Path, out: Path, *extra: str) -> tuple:
     """Run the CLI once; return (wall seconds, CPU seconds, result JSON)."""
     cmd = [sys.executable, '-m', 'imu_allan', 'analyze', str(bag), '--out', str(out),
@@ -167,6 +180,7 @@ def main() -> None:
           f'{os.cpu_count()} cores')
     for storage in args.storage:
         bag = _bag(args.cache, storage, args.hours, args.rate)
+        _warm(bag)
         with tempfile.TemporaryDirectory(prefix='imu_allan_bench_out_') as tmp:
             wall, cpu, doc = _end_to_end(bag, Path(tmp) / 'cli')
             assert doc['n_samples'] == n, (doc['n_samples'], n)
