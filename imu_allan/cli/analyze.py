@@ -191,7 +191,7 @@ def run(args) -> int:
                                         preload=('imu_allan.io.plot_preload',) if plot else ())
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, \
-                (worker_pool(workers if plot else 1) or nullcontext()) as pool:
+                (worker_pool(min(workers, 2) if plot else 1) or nullcontext()) as pool:
             bar.set_stage('writing the report of')
             files = write_outputs(result, outs[0], plot=plot, pool=pool)
         outcomes = [(result, None, [str(f) for f in files], seconds)]

@@ -365,6 +365,14 @@ def raw_tap() -> tuple:
     return tap, keeper
 
 
+def _import_quietly(module: str) -> None:
+    """Import a module ahead of use; a failure is left to the import that needs it."""
+    try:
+        importlib.import_module(module)
+    except Exception:  # noqa: B902 - raised again, as one line, where it is used
+        pass
+
+
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
                   prefetch: bool = True, preload: tuple = ()):
@@ -403,7 +411,7 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
     if workers > 1:
         start_workers(preload)      # its start-up overlaps the reading
     # The fit's modules (scipy: half a second) are imported while the input is read.
-    fit_import = threading.Thread(target=importlib.import_module, name='imu-allan-import',
+    fit_import = threading.Thread(target=_import_quietly, name='imu-allan-import',
                                   args=('imu_allan.pipeline.analysis',), daemon=True)
     fit_import.start()
 
