@@ -420,3 +420,19 @@ def test_axes_searched_in_worker_processes_give_the_same_result():
         for sym in a:   # exactly equal, NaN for NaN
             assert_equal((a[sym].value, a[sym].ci95, a[sym].kind),
                          (b[sym].value, b[sym].ci95, b[sym].kind), err_msg=f'{axis} {sym}')
+
+
+def test_window_statistics_and_raw_means_equal_numpy():
+    # The checks' three-pass window statistics against mean/std, at noise scale on a
+    # 9.81 offset and at motion scale; the raw copy's strided means are bit-identical.
+    from imu_allan.core.raw import _means
+    from imu_allan.pipeline.checks import _window_stats
+    rng = np.random.default_rng(8)
+    for scale, offset in ((1e-3, 9.81), (3.0, 0.0)):
+        blocks = rng.standard_normal((40, 400, 6)) * scale + offset
+        means, stds = _window_stats(blocks)
+        assert_allclose(means, blocks.mean(axis=1), rtol=1e-14, atol=1e-14 * scale)
+        assert_allclose(stds, blocks.std(axis=1), rtol=1e-12)
+    y = rng.standard_normal((4096, 6)) * 1e-3 + 9.81
+    for factor in (1, 2, 8, 32):
+        assert_equal(_means(y, factor), y.reshape(-1, factor, 6).mean(axis=1))
