@@ -502,3 +502,21 @@ def test_read_ahead_keeps_order_and_passes_errors_on():
     assert next(reader) == 0
     reader.close()
     assert not [t for t in threading.enumerate() if t.name == 'imu-allan-reader']
+
+
+def test_main_process_of_a_two_worker_analysis_imports_no_scipy(tmp_path, rec):
+    # The search runs in the workers (their fork server imports scipy while the input is
+    # read); the main process only reads, checks, accumulates and reports.
+    stamps, samples = rec
+    path = tmp_path / 'rec.csv'
+    write_csv(path, (stamps - stamps[0]) / 1e9, samples, AXES)
+    code = ('import sys\nfrom imu_allan.cli import main\n'
+            f'assert main(["analyze", {str(path)!r}, "--out", {str(tmp_path / "o")!r}, '
+            '"--format", "json", "--jobs", "2"]) == 0\n'
+            'print(sorted(m for m in sys.modules if m.split(".")[0] == "scipy"), '
+            'file=sys.stderr)\n')
+    res = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.strip().splitlines()[-1] == '[]', res.stderr
+    assert (tmp_path / 'o' / 'adev.png').exists() and (tmp_path / 'o' / 'adev.svg').exists()

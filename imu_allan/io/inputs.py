@@ -9,7 +9,6 @@ ahead on a thread; :class:`Progress` is the one-line indicator on stderr;
 """
 
 from dataclasses import replace
-import importlib
 import os
 from pathlib import Path
 import queue
@@ -365,14 +364,6 @@ def raw_tap() -> tuple:
     return tap, keeper
 
 
-def _import_quietly(module: str) -> None:
-    """Import a module ahead of use; a failure is left to the import that needs it."""
-    try:
-        importlib.import_module(module)
-    except Exception:  # noqa: B902 - raised again, as one line, where it is used
-        pass
-
-
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
                   prefetch: bool = True, preload: tuple = ()):
@@ -406,14 +397,12 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         (AnalysisResult with the recording's first stamp and frame_id, seconds spent).
 
     """
+    from imu_allan.pipeline.analysis import analyze  # the search itself runs in workers
+
     start = time.monotonic()
     path = Path(path)
     if workers > 1:
         start_workers(preload)      # its start-up overlaps the reading
-    # The fit's modules (scipy: half a second) are imported while the input is read.
-    fit_import = threading.Thread(target=_import_quietly, name='imu-allan-import',
-                                  args=('imu_allan.pipeline.analysis',), daemon=True)
-    fit_import.start()
 
     def warn(text):
         if not quiet:
@@ -433,8 +422,6 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                 raise InputError(f'{path}: no Imu samples in the input')
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
-            fit_import.join()
-            from imu_allan.pipeline.analysis import analyze
             result = analyze(session, source=source.label, raw=keeper,
                              topic=source.topic or '', workers=workers)
         finally:

@@ -14,12 +14,11 @@ import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve
-from imu_allan.core.evidence import raw_evidence
 from imu_allan.core.exports import driver_yaml, kalibr_yaml, robot_localization_yaml, vins_yaml
 from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.kalman import imu_covariance, kalman_model, KalmanModel
 from imu_allan.core.noise_params import AxisNoise
-from imu_allan.core.search import search_axis
+from imu_allan.core.raw import raw_evidence
 from imu_allan.core.units import format_quoted, sensor_of
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import worker_pool
@@ -222,6 +221,8 @@ class AnalysisResult:
 
 def _search_job(job: tuple) -> AxisFit | None:
     """Search one axis: (tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit)."""
+    from imu_allan.core.search import search_axis   # scipy: in the workers only
+
     tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit = job
     try:
         return search_axis(tau_s, avar, edf, rate_hz, n_samples, raw=raw,

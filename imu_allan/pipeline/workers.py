@@ -15,8 +15,8 @@ import multiprocessing
 import os
 from typing import Iterable
 
-#: Modules every server imports before it forks workers.
-_PRELOAD = ('imu_allan.pipeline.analysis',)
+#: Modules every server imports before it forks workers: the search and its scipy.
+_PRELOAD = ('imu_allan.pipeline.analysis', 'imu_allan.core.search')
 #: glibc's heap settings for a long offline job (bytes): blocks below this stay on the
 #: heap, and the heap keeps this much freed memory (mallopt M_MMAP_THRESHOLD = -3,
 #: M_TRIM_THRESHOLD = -1; the environment variables set them in a new process).

@@ -58,11 +58,29 @@ B convention (paper eq. 8): B is the ADEV floor / 0.664; the Gauss-Markov drivin
 is S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B).
 """
 
-from imu_allan.core.fit.axis import DEFAULT_TERMS, fit_axis, fit_curve, IC_PENALTY, Z95
-from imu_allan.core.fit.covariance import _CurveCovariance
-from imu_allan.core.fit.nominal import nominal_fit
-from imu_allan.core.fit.params import CORE_PARAMS, Z95_ONE_SIDED
+import importlib
+from typing import TYPE_CHECKING
+
 from imu_allan.core.fit.result import AxisFit, json_floats, json_num, KINDS, Param
+
+if TYPE_CHECKING:
+    from imu_allan.core.fit.axis import DEFAULT_TERMS, fit_axis, fit_curve, IC_PENALTY, Z95
+    from imu_allan.core.fit.covariance import _CurveCovariance
+    from imu_allan.core.fit.nominal import nominal_fit
+    from imu_allan.core.fit.params import CORE_PARAMS, Z95_ONE_SIDED
+
+#: The fitting machinery (scipy.optimize) is imported on first use: a process that only
+#: reports fits made elsewhere (``imu-allan analyze``'s main process) never loads it.
+_LAZY = {'DEFAULT_TERMS': 'axis', 'fit_axis': 'axis', 'fit_curve': 'axis',
+         'IC_PENALTY': 'axis', 'Z95': 'axis', '_CurveCovariance': 'covariance',
+         'nominal_fit': 'nominal', 'CORE_PARAMS': 'params', 'Z95_ONE_SIDED': 'params'}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f'{__name__}.{_LAZY[name]}'), name)
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+
 
 __all__ = ['AxisFit', 'CORE_PARAMS', 'DEFAULT_TERMS', 'fit_axis', 'fit_curve', 'IC_PENALTY',
            'json_floats', 'json_num', 'KINDS', 'nominal_fit', 'Param', 'Z95', 'Z95_ONE_SIDED',

@@ -105,6 +105,9 @@ class AxisFit:
     model_consistent : bool or None
         Whether the final model explains the curve (chi-square p >= 1e-3); None when no
         search ran.
+    p_value : float or None
+        Chi-square p-value of ``chi2`` on ``dof`` (None without degrees of freedom);
+        computed where the fit is made, so a process that only reports it needs no scipy.
 
     """
 
@@ -123,6 +126,11 @@ class AxisFit:
     components: tuple = ()
     effects: tuple = ()
     model_consistent: bool | None = None
+    p_value: float | None = field(init=False, default=None)
+
+    def __post_init__(self) -> None:
+        p_value = float(chi2_sf(self.chi2, self.dof)) if self.dof > 0 else None
+        object.__setattr__(self, 'p_value', p_value)
 
     def avar_at(self, tau_s) -> np.ndarray:
         """
@@ -157,7 +165,6 @@ class AxisFit:
             ``params`` is the optimised fit (DESIGN.md result contract).
 
         """
-        p_value = float(chi2_sf(self.chi2, self.dof)) if self.dof > 0 else None
         return {'params': {k: v.to_json() for k, v in self.optimised.items()},
                 'nominal': {k: v.to_json() for k, v in self.nominal.items()},
                 'terms': list(self.terms), 'notes': list(self.notes),
@@ -165,7 +172,7 @@ class AxisFit:
                             for e in self.effects],
                 'model_consistent': self.model_consistent,
                 'gof': {'chi2': json_num(self.chi2), 'dof': int(self.dof),
-                        'p_value': p_value}}
+                        'p_value': self.p_value}}
 
 
 def _unit(template: str, unit: str) -> str:
