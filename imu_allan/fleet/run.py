@@ -29,6 +29,7 @@ from imu_allan.fleet.inputs import content_key, FleetInput, stat_key
 from imu_allan.fleet.store import FleetStore
 from imu_allan.fleet.task import analyze_job, failed_rows, FleetJob
 from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.workers import HEAP_ENV, HEAP_KEEP_BYTES
 
 
 #: Set in every local worker before it starts.  Dask sets MALLOC_TRIM_THRESHOLD_, and any
@@ -40,8 +41,8 @@ from imu_allan.pipeline.session import SessionConfig
 #: CPU per analysis than in a plain process; a worker's peak stays about 0.3 GB).
 #: The statistical profiler (a stack sample every 10 ms) is off, and the event loop's
 #: watchdog tick and monitors run rarely: each wake-up takes the GIL from the analysis.
-WORKER_CONFIG = {'distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_': 1 << 28,
-                 'distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_': 1 << 28,
+WORKER_CONFIG = {**{f'distributed.nanny.pre-spawn-environ.{name}': HEAP_KEEP_BYTES
+                    for name in HEAP_ENV},
                  'distributed.worker.profile.enabled': False,
                  'distributed.admin.tick.interval': '1s',
                  'distributed.admin.system-monitor.interval': '2s',
