@@ -72,7 +72,8 @@ def _dask():
 
 
 def _warm_up() -> None:
-    """Import the pipeline in a worker before its first input (about a second)."""
+    """Import the pipeline and the search in a worker before its first input (a second)."""
+    import imu_allan.core.search  # noqa: F401
     import imu_allan.io.inputs  # noqa: F401
     import imu_allan.pipeline.analysis  # noqa: F401
 
