@@ -14,11 +14,10 @@ import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
 from imu_allan.core.model import base_name, TERMS
+from imu_allan.io.report import FIGURE_FORMATS
 
 _COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
 _PANELS = ((GYRO_AXES, 'gyro ADEV [rad/s]'), (ACCEL_AXES, 'accel ADEV [m/s\u00b2]'))
-#: The files of every figure.
-FORMATS = ('png', 'svg')
 
 
 def _subplots(nrows: int, ncols: int, **kwargs):
@@ -59,7 +58,7 @@ def warm_fonts() -> None:
     get_font(findfont(FontProperties()))
 
 
-def _save(fig, base: Path, tight: bool = True, formats: tuple = FORMATS) -> list:
+def _save(fig, base: Path, tight: bool = True, formats: tuple = FIGURE_FORMATS) -> list:
     """Write base.png and/or base.svg; ``tight`` crops to the artists (one more draw each)."""
     _plain_log_labels(fig)
     paths = []
@@ -71,7 +70,7 @@ def _save(fig, base: Path, tight: bool = True, formats: tuple = FORMATS) -> list
     return paths
 
 
-def plot_result(result, base, formats: tuple = FORMATS) -> list:
+def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
     """
     Draw the measured ADEV of the six axes with the fitted model and its terms.
 

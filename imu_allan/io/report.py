@@ -30,6 +30,8 @@ FILES = {
     'driver': 'imu_driver_noise.yaml',
     'vins': 'vins_imu.yaml',
 }
+#: The ADEV figure's files, adev.<format> (drawn by :mod:`imu_allan.io.plot`).
+FIGURE_FORMATS = ('png', 'svg')
 
 
 def _atomic_write(path: Path, text: str) -> Path:
@@ -104,7 +106,7 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
     out.mkdir(parents=True, exist_ok=True)
     figures = []
     if plot and pool is not None:
-        figures = [pool.submit(_draw, result, out / 'adev', ext) for ext in ('png', 'svg')]
+        figures = [pool.submit(_draw, result, out / 'adev', ext) for ext in FIGURE_FORMATS]
     spec = NoiseSpec(name=f'fitted from {result.source or "input"}', axes=result.models())
     written = [
         _atomic_write(out / FILES['json'], json.dumps(result.to_json(), indent=1) + '\n'),
