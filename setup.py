@@ -1,7 +1,7 @@
 from glob import glob
 import os
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 package_name = 'imu_allan'
 
@@ -15,10 +15,14 @@ setup(
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
     ],
+    # The core's compiled kernels: plain C called through ctypes (imu_allan/core/native.py),
+    # so no numpy headers are needed.
+    ext_modules=[Extension(f'{package_name}.core._native', ['imu_allan/core/_native.c'],
+                           extra_compile_args=['-O3', '-ffp-contract=off'])],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml'],
     # imu-allan fleet: Dask for the cluster, pyarrow for the Parquet store.
     extras_require={'fleet': ['dask[distributed]>=2024.1', 'pyarrow>=14']},
-    zip_safe=True,
+    zip_safe=False,
     maintainer='imu_allan developers',
     maintainer_email='imu-allan@example.com',
     description='Allan-variance characterisation of IMU noise, live and offline, for ROS 2.',

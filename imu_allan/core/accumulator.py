@@ -51,6 +51,7 @@ variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 
 import numpy as np
 
+from imu_allan.core import native
 from imu_allan.core.accumulator_state import _Persistence
 from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
 from imu_allan.errors import InputError
@@ -316,8 +317,7 @@ class AllanAccumulator(_Persistence):
         x_all, x2_all, tile = self._work_arrays()
         x = x_all[:, :w + 1]
         r = _phase(buf[:, :w], x)
-        x2 = np.multiply(x, 2.0, out=x2_all[:, :w + 1])
-        _accumulate(x, x2, h + 1, w, self._m0, self._sums, self._counts, 0, tile)
+        _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, x2_all, tile)
         # Cluster sums for level 1 end at segment indices that are multiples of D_1.
         base = self._seg_n - h
         if self._levels:
@@ -340,7 +340,7 @@ class AllanAccumulator(_Persistence):
             win = np.concatenate((level.hist[:, level.capacity - h:], values), axis=1)
             x = np.empty((self.n_axes, h + c + 1))
             r = _phase(win, x)
-            _accumulate(x, 2.0 * x, h + 1, h + c, level.m_prime, self._sums, self._counts,
+            _accumulate(x, h + 1, h + c, level.m_prime, self._sums, self._counts,
                         level.index[0] if level.index.size else 0)
             # Pairs of this level's values form the next level's cluster sums.
             first = (level.n // 2 + 1) * 2
@@ -445,8 +445,8 @@ def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
     return r
 
 
-def _accumulate(x: np.ndarray, x2: np.ndarray, j_first: int, j_last: int, ms: np.ndarray,
-                sums: np.ndarray, counts: np.ndarray, row0: int,
+def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray, sums: np.ndarray,
+                counts: np.ndarray, row0: int, x2_buf: np.ndarray | None = None,
                 tile: np.ndarray | None = None) -> None:
     """
     Add the squared second differences that end at x[:, j_first:j_last + 1].
@@ -455,8 +455,6 @@ def _accumulate(x: np.ndarray, x2: np.ndarray, j_first: int, j_last: int, ms: np
     ----------
     x : np.ndarray
         Shape (n_axes, w + 1), running sum; index 0 is the oldest point held.
-    x2 : np.ndarray
-        Shape (n_axes, w + 1), ``2 * x`` (computed once for every tau).
     j_first, j_last : int
         First and last new end points (local indices into x).
     ms : np.ndarray
@@ -465,21 +463,28 @@ def _accumulate(x: np.ndarray, x2: np.ndarray, j_first: int, j_last: int, ms: np
         Shapes (K, n_axes) and (K,), updated in place at rows row0 .. row0 + k - 1.
     row0 : int
         Row of ms[0] in sums and counts.
-    tile : np.ndarray, optional
-        Scratch array of shape (n_axes, c), c >= 1: the end points are taken c at a time.
+    x2_buf, tile : np.ndarray, optional
+        Scratch arrays of the numpy path, shapes (n_axes, >= w + 1) and (n_axes, c)
+        with c >= 1 (the end points are taken c at a time).
 
     """
+    j0 = np.maximum(j_first, 2 * ms)
+    live = j0 <= j_last
+    counts[row0:row0 + ms.size] += np.where(live, j_last - j0 + 1, 0)
+    if native.LIB is not None:
+        sums[row0:row0 + ms.size] += native.acc_sums(x, j_first, j_last, ms)
+        return
+    w = x.shape[1]
+    x2 = np.multiply(x, 2.0, out=None if x2_buf is None else x2_buf[:, :w])
     if tile is None:
         tile = np.empty((x.shape[0], min(_TILE_COLS, max(j_last - j_first + 1, 1))))
     width = tile.shape[1]
-    for k, m in enumerate(ms.tolist()):
-        j0 = max(j_first, 2 * m)
-        if j0 > j_last:
-            continue
+    for k in np.flatnonzero(live).tolist():
+        m, start = int(ms[k]), int(j0[k])
         total = np.zeros(x.shape[0])
         # d_j = X[j] + X[j - 2m] - 2 X[j - m], a tile of end points at a time: the
         # temporary stays in the core's cache.
-        for s in range(j0, j_last + 1, width):
+        for s in range(start, j_last + 1, width):
             e = min(s + width, j_last + 1)
             d = np.add(x[:, s:e], x[:, s - 2 * m:e - 2 * m], out=tile[:, :e - s])
             np.subtract(d, x2[:, s - m:e - m], out=d)
@@ -487,4 +492,3 @@ def _accumulate(x: np.ndarray, x2: np.ndarray, j_first: int, j_last: int, ms: np
             # a busy machine; numpy's own loop is as fast single-threaded.
             total += np.einsum('ij,ij->i', d, d)
         sums[row0 + k] += total
-        counts[row0 + k] += j_last - j0 + 1

@@ -13,6 +13,7 @@ import os
 
 import numpy as np
 
+from imu_allan.core import native
 from imu_allan.core.allan.blas import _single_thread_blas
 from imu_allan.core.allan.noise_id import _ACF_MAX_POINTS, _fill_unknown, _identify_axis
 from imu_allan.core.allan.taus import _as_2d, _check_m, _check_method, _DIFF_ORDER, terms_count
@@ -71,17 +72,25 @@ def _columns(y2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     blocks = [np.zeros(n_axes)] + sum(_map_threads(copy, workers, workers), [])
     means = np.sum(blocks, axis=0) / max(n, 1)
     if not np.isfinite(means).all():
-        # Only an inf or NaN (or sums beyond 1e308) makes a mean non-finite.
-        bad = int(np.flatnonzero(~np.isfinite(y2).all(axis=1))[0])
-        raise InputError(f'sample {bad} is not a finite number')
+        _means(y2)  # only an inf or NaN (or sums beyond 1e308) gets here: names the row
     return cols, means
 
 
-def _phase_row(col: np.ndarray) -> np.ndarray:
-    """Return the running sum X (M + 1,) of one centred axis col (M,): phase / tau0."""
+def _means(y2: np.ndarray) -> np.ndarray:
+    """Per-axis means (n_axes,) of the samples (M, n_axes); InputError if not finite."""
+    means = y2.sum(axis=0) / max(y2.shape[0], 1)
+    if not np.isfinite(means).all():
+        bad = int(np.flatnonzero(~np.isfinite(y2).all(axis=1))[0])
+        raise InputError(f'sample {bad} is not a finite number')
+    return means
+
+
+def _phase_row(col: np.ndarray, mean: float = 0.0) -> np.ndarray:
+    """Return the running sum X (M + 1,) of one axis col (M,) less mean: phase / tau0."""
     x = np.empty(col.size + 1)
     x[0] = 0.0
-    np.cumsum(col, out=x[1:])
+    np.subtract(col, mean, out=x[1:])
+    np.cumsum(x[1:], out=x[1:])
     return x
 
 
@@ -114,6 +123,8 @@ def _diff_sumsq(x: np.ndarray, m: int, order: int) -> float:
     n_terms = n - order * m
     if n_terms <= 0:
         return math.nan
+    if native.LIB is not None:
+        return native.diff_sumsq(x, m, order)
     rows = n // m
     full = rows - order  # rows of terms lying wholly inside the matrix
     total = 0.0
@@ -329,15 +340,16 @@ def _is_octave(m: np.ndarray) -> bool:
     return bool(m.size) and bool(np.all((m & (m - 1)) == 0))
 
 
-def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarray,
+def _axis_work(y2: np.ndarray, col: np.ndarray | None, a: int, mean: float, m: np.ndarray,
                method: str, identify: bool,
                tau_threads: int = 1) -> tuple[np.ndarray, np.ndarray | None]:
     """
     Return the sums of squared phase differences and maybe alpha of axis a, (k,) each.
 
-    col (M,) is the axis' contiguous copy and gets overwritten.  Its mean is removed
-    first: the variances ignore a constant offset, and without it the running sums of
-    an accelerometer at 9.81 m/s^2 with 1e-4 m/s^2 of noise would lose their digits.
+    col (M,) is the axis' contiguous copy that the octave kernels overwrite (None on
+    the other paths, which read y2).  The mean is removed first: the variances ignore
+    a constant offset, and without it the running sums of an accelerometer at 9.81
+    m/s^2 with 1e-4 m/s^2 of noise would lose their digits.
     With ``tau_threads`` > 1 the taus of the running-sum path are shared by threads
     (one axis on several cores).
     """
@@ -347,10 +359,10 @@ def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarr
 
     def phase() -> np.ndarray:
         if not cache:
-            cache.append(_phase_row(y2[:, a] - mean))
+            cache.append(_phase_row(y2[:, a], mean))
         return cache[0]
 
-    if method == 'overlapping' and _is_octave(m) and m.size > 2:
+    if col is not None:
         # The fast octave kernels never need the running sum X (a pass and a copy the
         # size of the record) unless they cancel too much or B1 asks for R(n).
         blocks: list | None = [] if identify else None
@@ -366,9 +378,7 @@ def _axis_work(y2: np.ndarray, col: np.ndarray, a: int, mean: float, m: np.ndarr
             assert blocks is not None  # kept when identify asks for them
             return blocks[pick[j]] / float(m[j])
     else:
-        col -= mean
-        x = _phase_row(col)
-        cache.append(x)
+        x = phase()
 
         def tau_sums(part: int) -> None:
             # Every tau is summed by one thread alone: the same result for any count.
@@ -420,13 +430,17 @@ def _curve_core(y2: np.ndarray, m: np.ndarray, method: str,
     """
     n, n_axes = y2.shape
     with _single_thread_blas():
-        cols, means = _columns(y2)
+        if method == 'overlapping' and _is_octave(m) and m.size > 2:
+            cols, means = _columns(y2)
+        else:
+            # The running-sum path reads y2 itself: no axis-major copy.
+            cols, means = None, _means(y2)
         workers = _workers(n_axes)
         # Cores left over by the axes share each axis' taus.
         tau_threads = max(1, min(os.cpu_count() or 1, _MAX_THREADS) // workers)
         results = _map_threads(
-            lambda a: _axis_work(y2, cols[a], a, float(means[a]), m, method, identify,
-                                 tau_threads),
+            lambda a: _axis_work(y2, None if cols is None else cols[a], a, float(means[a]),
+                                 m, method, identify, tau_threads),
             n_axes, workers)
     n_terms = terms_count(m, n, method)
     sums = np.stack([r[0] for r in results], axis=1).reshape(m.size, n_axes)

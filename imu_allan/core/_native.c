@@ -1,0 +1,331 @@
+/*
+ * Compiled kernels of imu_allan's core: the sums of squared phase differences behind
+ * the overlapping Allan and Hadamard variances (NIST SP 1065 eqs. 14 and 20), and a
+ * parser for the numeric fields of a CSV file.
+ *
+ * Plain C99: imu_allan/core/native.py loads this library with ctypes, which releases
+ * the GIL for every call, so threads run these loops in parallel.  The only Python API
+ * is an empty module init, so that importing imu_allan.core._native (as tools that
+ * walk the package do) works.  Every kernel has a numpy twin that is used when the
+ * library is absent; test/test_native.py checks that both give the same results.
+ *
+ * Summation: eight independent partial sums (they keep the adders busy and let the
+ * compiler vectorise without reassociating anything itself), closed every _BLOCK terms
+ * into a running total, so rounding grows with the block count, not the term count.
+ */
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define BLOCK 4096
+#define STRIP 2048
+
+/*
+ * Sum over j in [j0, j1) of d_j^2 with d_j = (x[j] + x[j-2m]) - 2 x[j-m] (order 2) or
+ * (x[j] - x[j-3m]) - 3 (x[j-m] - x[j-2m]) (order 3).  The loops walk pointers with a
+ * count, not long indices: Python's CFLAGS carry -fno-strict-overflow, under which GCC
+ * cannot vectorise index arithmetic (4x slower).
+ */
+#define DIFF2(k) ((a[k] + c[k]) - 2.0 * b[k])
+#define DIFF3(k) ((a[k] - e3[k]) - 3.0 * (b[k] - c[k]))
+#define SUMSQ_BODY(DIFF, ORDER)                                                       \
+    double total = 0.0;                                                               \
+    for (long s = j0; s < j1; s += BLOCK) {                                           \
+        long cnt = (s + BLOCK < j1 ? s + BLOCK : j1) - s;                             \
+        const double *a = x + s, *b = a - m, *c = b - m;                              \
+        const double *e3 = ORDER == 3 ? c - m : c;                                    \
+        double p[8] = {0, 0, 0, 0, 0, 0, 0, 0};                                       \
+        for (; cnt >= 8; cnt -= 8, a += 8, b += 8, c += 8, e3 += 8) {                 \
+            for (int k = 0; k < 8; k++) {                                             \
+                double d = DIFF(k);                                                   \
+                p[k] += d * d;                                                        \
+            }                                                                         \
+        }                                                                             \
+        for (int k = 0; k < cnt; k++) {                                               \
+            double d = DIFF(k);                                                       \
+            p[k] += d * d;                                                            \
+        }                                                                             \
+        total += ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7]));   \
+    }                                                                                 \
+    return total;
+
+static double sumsq2(const double *x, long m, long j0, long j1)
+{
+    SUMSQ_BODY(DIFF2, 2)
+}
+
+static double sumsq3(const double *x, long m, long j0, long j1)
+{
+    SUMSQ_BODY(DIFF3, 3)
+}
+
+static double sumsq(const double *x, long m, int order, long j0, long j1)
+{
+    return order == 3 ? sumsq3(x, m, j0, j1) : sumsq2(x, m, j0, j1);
+}
+
+/*
+ * Streaming accumulator (imu_allan/core/accumulator.py): for every axis a < n_axes
+ * (row a of x, row stride ld) and cluster size ms[i], add the squared second
+ * differences ending at j_first .. j_last (those with j >= 2 ms[i]) to
+ * sums[i * n_axes + a].
+ */
+void imu_allan_acc_sums(const double *x, long ld, long n_axes, long j_first, long j_last,
+                        const int64_t *ms, long k, double *sums)
+{
+    /* Axis by axis: one row (a few hundred kB) stays in L2 for all the taus. */
+    for (long a = 0; a < n_axes; a++) {
+        for (long i = 0; i < k; i++) {
+            long m = (long)ms[i];
+            long j0 = j_first > 2 * m ? j_first : 2 * m;
+            if (j0 <= j_last)
+                sums[i * n_axes + a] += sumsq2(x + a * ld, m, j0, j_last + 1);
+        }
+    }
+}
+
+/*
+ * Batch curve (imu_allan/core/allan/kernels.py): sum over every j in [order m, n) of
+ * the squared order-th lag-m difference of the phase row x (n,), order 2 or 3.
+ * For long lags the row is walked as a (n / m, m) matrix in column strips down the
+ * rows, so the rows j - m, j - 2m (, j - 3m) are still in cache: each sample is read
+ * from memory about once per tau, not order + 1 times.
+ */
+double imu_allan_diff_sumsq(const double *x, long n, long m, long order)
+{
+    long first = order * m;
+    if (first >= n)
+        return NAN;
+    if (m <= 4 * STRIP)
+        return sumsq(x, m, (int)order, first, n);
+    double total = 0.0;
+    for (long c0 = 0; c0 < m; c0 += STRIP) {
+        long w = c0 + STRIP < m ? STRIP : m - c0;
+        for (long r = first + c0; r < n; r += m) {
+            long e = r + w < n ? r + w : n;
+            total += sumsq(x, m, (int)order, r, e);
+        }
+    }
+    return total;
+}
+
+/* ------------------------------------------------------------------ CSV fields */
+
+static int is_blank(char ch)
+{
+    return ch == ' ' || ch == '\t' || ch == '\r';
+}
+
+static int is_digit(char ch)
+{
+    return (unsigned char)(ch - '0') < 10;
+}
+
+/*
+ * The value of the eight ASCII digits at p, or -1 when one of them is not a digit:
+ * one 64-bit load and three multiplies instead of eight dependent steps (the bytes
+ * are paired, then the pairs, then the quads; little-endian byte order).
+ */
+static int64_t eight_digits(const char *p)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    const uint64_t hi = 0xF0F0F0F0F0F0F0F0ULL, zeros = 0x3030303030303030ULL;
+    uint64_t v;
+    memcpy(&v, p, 8);
+    /* Each byte in '0'..'9': high nibble 3, and still 3 after adding 6. */
+    if ((v & hi) != zeros || ((v + 0x0606060606060606ULL) & hi) != zeros)
+        return -1;
+    v -= zeros;
+    v = v * 10 + (v >> 8);
+    v = (((v & 0x000000FF000000FFULL) * (100 + (1000000ULL << 32))) +
+         (((v >> 16) & 0x000000FF000000FFULL) * (1 + (10000ULL << 32)))) >> 32;
+    return (int64_t)v;
+#else
+    (void)p;
+    return -1;
+#endif
+}
+
+/*
+ * Parse [blanks][+-]digits[.digits][(e|E)[+-]digits][blanks] at *pp, stopping at the
+ * first other character (where *pp is left).  Returns -1 when there is no such number
+ * (nan, inf, hex, an empty field, text): the caller then hands the file to numpy's
+ * parser.  Else returns 22 + e and sets *out to a signed integer mantissa below 2^53
+ * (exact in a double): the value is *out * 10^e, which apply_scales() computes in one
+ * correctly rounded operation (Clinger's fast path) for a whole block of fields at
+ * once, so the divisions overlap instead of stalling the parse one by one.  Numbers
+ * outside the fast path (more than 19 digits, a mantissa above 2^53, |e| > 22) are
+ * converted here by glibc's strtod, which rounds correctly, and get 22 (times one).
+ */
+static int parse_number(const char **pp, const char *end, double *out)
+{
+    const char *p = *pp;
+    while (p < end && is_blank(*p))
+        p++;
+    const char *start = p;
+    int neg = 0;
+    if (p < end && (*p == '+' || *p == '-')) {
+        neg = *p == '-';
+        p++;
+    }
+    uint64_t mant = 0;
+    int digits = 0, long_mant = 0, any = 0; /* long_mant: over 19 digits, for strtod */
+    long frac = 0;
+    for (; p < end && *p == '0'; p++)
+        any = 1;
+    for (int64_t d8; digits <= 11 && end - p >= 8 && (d8 = eight_digits(p)) >= 0;
+         p += 8, digits += 8, any = 1)
+        mant = mant * 100000000 + (uint64_t)d8;
+    for (; p < end && is_digit(*p); p++, any = 1) {
+        if (digits < 19) {
+            mant = mant * 10 + (uint64_t)(*p - '0');
+            digits++;
+        } else {
+            long_mant = 1;
+        }
+    }
+    if (p < end && *p == '.') {
+        p++;
+        if (mant == 0)
+            for (; p < end && *p == '0'; p++, frac++)
+                any = 1;
+        for (int64_t d8; digits <= 11 && end - p >= 8 && (d8 = eight_digits(p)) >= 0;
+             p += 8, digits += 8, frac += 8, any = 1)
+            mant = mant * 100000000 + (uint64_t)d8;
+        for (; p < end && is_digit(*p); p++, any = 1) {
+            if (digits < 19) {
+                mant = mant * 10 + (uint64_t)(*p - '0');
+                digits++;
+                frac++;
+            } else {
+                long_mant = 1;
+            }
+        }
+    }
+    if (!any)
+        return -1;
+    long exp10 = 0;
+    if (p < end && (*p == 'e' || *p == 'E')) {
+        int eneg = 0, edig = 0;
+        p++;
+        if (p < end && (*p == '+' || *p == '-')) {
+            eneg = *p == '-';
+            p++;
+        }
+        for (; p < end && is_digit(*p); p++, edig++)
+            if (exp10 < 100000)
+                exp10 = exp10 * 10 + (*p - '0');
+        if (!edig)
+            return -1;
+        if (eneg)
+            exp10 = -exp10;
+    }
+    const char *stop = p;
+    while (p < end && is_blank(*p))
+        p++;
+    *pp = p;
+    long e = exp10 - frac;
+    if (mant == 0 || (mant <= (1ULL << 53) && !long_mant && e >= -22 && e <= 22)) {
+        *out = neg ? -(double)mant : (double)mant;
+        return mant == 0 ? 22 : (int)(22 + e);
+    }
+    {
+        char buf[512];
+        long n = stop - start;
+        if (n >= (long)sizeof buf)
+            return -1;
+        for (long k = 0; k < n; k++)
+            buf[k] = start[k];
+        buf[n] = '\0';
+        char *tail;
+        *out = strtod(buf, &tail);
+        if (tail != buf + n)
+            return -1;
+        return 22;
+    }
+}
+
+/* Fields per block of apply_scales(): their scale indices stay on the stack. */
+#define FIELDS 4096
+
+#define ONES22 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1
+/* Index 22 + e: 10^e for e >= 0 (else 1), and 10^-e for e < 0 (else 1). */
+static const double MUL[45] = {
+    ONES22, 1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12,
+    1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+static const double DIV[45] = {
+    1e22, 1e21, 1e20, 1e19, 1e18, 1e17, 1e16, 1e15, 1e14, 1e13, 1e12, 1e11, 1e10,
+    1e9, 1e8, 1e7, 1e6, 1e5, 1e4, 1e3, 1e2, 1e1, 1, ONES22};
+
+/* values[i] *= 10^(scale[i] - 22): one rounding each, as one of the factors is 1. */
+static void apply_scales(double *values, const signed char *scale, long n)
+{
+    for (long i = 0; i < n; i++)
+        values[i] = values[i] * MUL[scale[i]] / DIV[scale[i]];
+}
+
+/*
+ * Parse the data rows of a CSV text into table (capacity rows of n_cols doubles):
+ * comma-separated fields, '#' starts a comment, blank and comment-only lines are
+ * skipped.  One pass over the text.  Returns the number of rows, or -1 when a row has
+ * another field count, a field is not a plain decimal number, or there are more rows
+ * than capacity.
+ */
+long imu_allan_parse_csv(const char *text, long len, long n_cols, double *table,
+                         long capacity)
+{
+    const char *p = text, *end = text + len;
+    long rows = 0, done = 0; /* fields scaled so far */
+    signed char scale[FIELDS];
+    if (n_cols > FIELDS)
+        return -1;
+    while (p < end) {
+        while (p < end && is_blank(*p))
+            p++;
+        if (p < end && *p != '\n' && *p != '#') {
+            if (rows >= capacity)
+                return -1;
+            if ((rows + 1) * n_cols - done > FIELDS) {
+                apply_scales(table + done, scale, rows * n_cols - done);
+                done = rows * n_cols;
+            }
+            double *row = table + rows * n_cols;
+            for (long col = 0;; col++) {
+                int sc;
+                if (col >= n_cols || (sc = parse_number(&p, end, row + col)) < 0)
+                    return -1;
+                scale[rows * n_cols + col - done] = (signed char)sc;
+                if (p == end || *p == '\n' || *p == '#') {
+                    if (col + 1 != n_cols)
+                        return -1;
+                    break;
+                }
+                if (*p++ != ',')
+                    return -1;
+            }
+            rows++;
+        }
+        while (p < end && *p != '\n')   /* a comment, or the end of the line */
+            p++;
+        p++;
+    }
+    apply_scales(table + done, scale, rows * n_cols - done);
+    return rows;
+}
+
+/* ------------------------------------------------------------- module init */
+
+static struct PyModuleDef native_module = {
+    PyModuleDef_HEAD_INIT, "_native",
+    "Compiled kernels of imu_allan's core, called through ctypes (imu_allan.core.native).",
+    -1, NULL, NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__native(void)
+{
+    return PyModule_Create(&native_module);
+}

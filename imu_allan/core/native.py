@@ -1,0 +1,140 @@
+"""
+The core's compiled kernels (``_native.c``), called through ctypes.
+
+setup.py compiles ``_native.c`` into ``_native<EXT_SUFFIX>`` beside this file whenever
+the package is built (``pip install``, ``colcon build``).  The library uses no Python
+API, so ctypes loads it like any shared object and releases the GIL for every call:
+threads that call these kernels run in parallel.
+
+Each kernel has a numpy twin in the module that uses it (the accumulator, the batch
+curve, the CSV reader).  :data:`LIB` is None when the library was never built (a bare
+source tree) or when the environment sets ``IMU_ALLAN_NATIVE=0``; the twins then do the
+work, with the same results to rounding (test/test_native.py compares them).
+"""
+
+import ctypes
+import importlib.machinery
+import os
+from pathlib import Path
+
+import numpy as np
+
+_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+_LONG = ctypes.c_long
+
+
+def _load() -> ctypes.CDLL | None:
+    """Return the compiled library, or None when it is absent or switched off."""
+    if os.environ.get('IMU_ALLAN_NATIVE', '1') == '0':
+        return None
+    here = Path(__file__).resolve().parent
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        path = here / f'_native{suffix}'
+        if path.is_file():
+            try:
+                lib = ctypes.CDLL(str(path))
+            except OSError:
+                return None
+            lib.imu_allan_acc_sums.restype = None
+            lib.imu_allan_acc_sums.argtypes = [
+                ctypes.c_void_p, _LONG, _LONG, _LONG, _LONG, ctypes.c_void_p, _LONG,
+                ctypes.c_void_p]
+            lib.imu_allan_diff_sumsq.restype = ctypes.c_double
+            lib.imu_allan_diff_sumsq.argtypes = [ctypes.c_void_p, _LONG, _LONG, _LONG]
+            lib.imu_allan_parse_csv.restype = _LONG
+            lib.imu_allan_parse_csv.argtypes = [ctypes.c_void_p, _LONG, _LONG,
+                                                ctypes.c_void_p, _LONG]
+            return lib
+    return None
+
+
+#: The loaded library, or None (then every caller uses its numpy twin).
+LIB = _load()
+
+
+def acc_sums(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray) -> np.ndarray:
+    """
+    Sum the squared second differences of the phase rows ending at j_first .. j_last.
+
+    Parameters
+    ----------
+    x : np.ndarray
+        Shape (n_axes, w + 1), float64 running sums [unit * samples], rows contiguous
+        (any row stride).
+    j_first, j_last : int
+        First and last end points j (local indices into x's rows).
+    ms : np.ndarray
+        Shape (k,), int64 cluster sizes [samples]; a size m counts the terms with
+        j >= 2 m only.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (k, n_axes), sum over j of (x[a, j] + x[a, j - 2m] - 2 x[a, j - m])^2
+        [unit^2 * samples^2] (NIST SP 1065 eq. 14, before normalisation).
+
+    """
+    assert LIB is not None and x.dtype == np.float64 and x.strides[1] == 8
+    ms = np.ascontiguousarray(ms, dtype=np.int64)
+    out = np.zeros((ms.size, x.shape[0]))
+    LIB.imu_allan_acc_sums(x.ctypes.data, x.strides[0] // 8, x.shape[0], j_first, j_last,
+                           ms.ctypes.data, ms.size, out.ctypes.data)
+    return out
+
+
+def diff_sumsq(x: np.ndarray, m: int, order: int) -> float:
+    """
+    Sum the squared order-th lag-m differences of a phase row (order 2 or 3).
+
+    Parameters
+    ----------
+    x : np.ndarray
+        Shape (n,), contiguous float64 running sum [unit * samples].
+    m : int
+        Lag (cluster size) [samples].
+    order : int
+        2 (overlapping Allan, NIST SP 1065 eq. 14) or 3 (Hadamard, eq. 20).
+
+    Returns
+    -------
+    float
+        The sum over the n - order m differences [unit^2 * samples^2]; NaN when there
+        are none.
+
+    """
+    assert LIB is not None and x.dtype == np.float64 and x.flags.c_contiguous
+    return float(LIB.imu_allan_diff_sumsq(x.ctypes.data, x.size, int(m), int(order)))
+
+
+def parse_csv(data: bytes | memoryview, n_cols: int) -> np.ndarray | None:
+    """
+    Parse comma-separated decimal numbers, ``n_cols`` per data row.
+
+    Blank lines and ``#`` comments are skipped; values are correctly rounded (as
+    Python's float() gives them).
+
+    Parameters
+    ----------
+    data : bytes or memoryview
+        The text after any header (read in place, not copied).
+    n_cols : int
+        Fields per row.
+
+    Returns
+    -------
+    np.ndarray or None
+        Shape (rows, n_cols) float64, or None when a row has another field count or a
+        field is anything but a plain decimal number (nan, inf, text, empty): the caller
+        then parses with numpy, which accepts or names the bad row.
+
+    """
+    assert LIB is not None
+    # Every row takes at least two bytes per field; pages never written cost nothing.
+    text = np.frombuffer(data, dtype=np.uint8)
+    capacity = text.size // (2 * n_cols) + 1
+    table = np.empty((capacity, n_cols))
+    rows = LIB.imu_allan_parse_csv(text.ctypes.data, text.size, n_cols, table.ctypes.data,
+                                   capacity)
+    if rows < 0:
+        return None
+    return table[:rows]

@@ -1,0 +1,117 @@
+"""
+The compiled kernels (imu_allan/core/_native.c) against their numpy twins.
+
+``make venv`` builds the library (pip install -e), so it must be there; every kernel
+must agree with the numpy code that runs when it is absent.
+"""
+
+import numpy as np
+from numpy.testing import assert_allclose, assert_array_equal
+import pytest
+
+from imu_allan.core import native
+from imu_allan.core.accumulator import _accumulate, AllanAccumulator
+from imu_allan.core.allan import allan_curve, kernels
+
+
+@pytest.fixture
+def numpy_only(monkeypatch):
+    """Run the numpy twins: the library switched off for this test."""
+    monkeypatch.setattr(native, 'LIB', None)
+
+
+def test_the_library_is_built():
+    assert native.LIB is not None, 'imu_allan/core/_native.c not built: run make venv'
+
+
+def test_accumulator_sums_equal_the_numpy_twin(monkeypatch):
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(size=(6, 20_001)), axis=1)
+    ms = np.array([1, 2, 7, 100, 4096, 8191, 12_000], dtype=np.int64)  # the last: no term
+    got = {}
+    for lib in (native.LIB, None):
+        monkeypatch.setattr(native, 'LIB', lib)
+        sums, counts = np.zeros((ms.size + 2, 6)), np.zeros(ms.size + 2, dtype=np.int64)
+        _accumulate(x, 5_000, 20_000, ms, sums, counts, 2)
+        got[lib is None] = (sums, counts)
+    # Different summation order only: 8 partial sums per block against numpy's pairwise.
+    assert_allclose(got[False][0], got[True][0], rtol=1e-13, atol=0)
+    assert_array_equal(got[False][1], got[True][1])
+    assert not got[False][0][:2].any() and not got[False][0][-1].any()
+
+
+@pytest.mark.parametrize('order', [2, 3])
+@pytest.mark.parametrize('m', [1, 3, 1000, 8192, 8193, 50_000])
+def test_batch_sums_equal_the_numpy_twin(monkeypatch, order, m):
+    rng = np.random.default_rng(m)
+    x = np.cumsum(rng.normal(size=200_003))
+    fast = kernels._diff_sumsq(x, m, order)
+    monkeypatch.setattr(native, 'LIB', None)
+    assert_allclose(fast, kernels._diff_sumsq(x, m, order), rtol=1e-12)
+
+
+def test_batch_sums_without_terms_are_nan():
+    assert np.isnan(native.diff_sumsq(np.zeros(10), 5, 2))
+
+
+def test_streaming_and_batch_curves_match_with_either_kernel(monkeypatch):
+    rng = np.random.default_rng(7)
+    y = rng.normal(size=(300_000, 6)) * 1e-3 + np.array([0, 0, 0, 0, 0, 9.81])
+    curves = {}
+    for lib in (native.LIB, None):
+        monkeypatch.setattr(native, 'LIB', lib)
+        acc = AllanAccumulator(6, 100.0)
+        for s in range(0, y.shape[0], 7_777):
+            acc.add(y[s:s + 7_777])
+        curves[lib is None] = (acc.curve(), allan_curve(y, 100.0, taus='dense'))
+    for k in (0, 1):
+        assert_allclose(curves[False][k].avar, curves[True][k].avar, rtol=1e-12)
+    stream, batch = curves[False]
+    exact = stream.m <= 8192
+    common = np.isin(batch.m, stream.m[exact])
+    assert_allclose(stream.avar[exact][np.isin(stream.m[exact], batch.m)], batch.avar[common],
+                    rtol=1e-10)
+
+
+def _as_text(rows) -> bytes:
+    return ''.join(','.join(r) + '\n' for r in rows).encode()
+
+
+def test_parse_csv_gives_the_values_python_gives():
+    rng = np.random.default_rng(11)
+    values = np.concatenate([rng.normal(size=2000) * 10.0 ** rng.integers(-30, 30, 2000),
+                             rng.integers(-10**6, 10**6, 200), [0.0, -0.0, 1e-320, 5e300]])
+    formats = ['%.9e', '%.17g', '%g', '%.3f', '%r', '%.25e']
+    for fmt in formats:
+        texts = [fmt % v if fmt != '%r' else repr(float(v)) for v in values]
+        table = native.parse_csv(_as_text([[t] for t in texts]), 1)
+        assert table is not None, fmt
+        expected = np.array([float(t) for t in texts])
+        assert_array_equal(table[:, 0], expected, err_msg=fmt)
+
+
+def test_parse_csv_layout():
+    text = (b'# comment\n'
+            b' +1.5 , .25,-7.\r\n'
+            b'\n'
+            b'   \n'
+            b'1e3,2E-2,  3 # trailing comment\n'
+            b'0,-0.0,00012')      # no final newline
+    table = native.parse_csv(text, 3)
+    assert_array_equal(table, [[1.5, 0.25, -7.0], [1000.0, 0.02, 3.0], [0.0, -0.0, 12.0]])
+    assert native.parse_csv(b'', 2).shape == (0, 2)
+
+
+@pytest.mark.parametrize('text', [b'1,2\n3\n', b'1,2\n3,4,5\n', b'nan,1\n', b'inf,1\n',
+                                  b'1e,2\n', b'0x10,1\n', b'1_000,1\n', b',1\n', b'abc,1\n',
+                                  b'1 2,3\n', b'"1",2\n', b'1.2.3,4\n', b'--1,2\n'])
+def test_parse_csv_hands_anything_else_to_numpy(text):
+    assert native.parse_csv(text, 2) is None
+
+
+def test_csv_reader_is_the_same_without_the_library(tmp_path, numpy_only):
+    from imu_allan.io.csv_io import read_csv
+    path = tmp_path / 'x.csv'
+    path.write_text('t,a\n0.0,1.25\n0.01,2.5e-3\n')
+    data = read_csv(path)
+    assert_array_equal(data.samples[:, 0], [1.25, 2.5e-3])
