@@ -19,6 +19,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer as Ros2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 
+from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import ImuBlock, list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
@@ -215,7 +216,10 @@ def _mixed_cdr(seed: int):
     return stamps, samples, msgs, payloads
 
 
-def test_decoder_handles_big_endian_odd_lengths_and_garbage():
+@pytest.mark.parametrize('compiled', [True, False], ids=['compiled', 'numpy'])
+def test_decoder_handles_big_endian_odd_lengths_and_garbage(monkeypatch, compiled):
+    if not compiled:
+        monkeypatch.setattr(native, 'LIB', None)
     stamps, samples, _, payloads = _mixed_cdr(seed=7)
     stamp_ns, values, ok = decode_imu_payloads(
         np.frombuffer(b''.join(payloads), np.uint8),
@@ -226,6 +230,23 @@ def test_decoder_handles_big_endian_odd_lengths_and_garbage():
     assert_array_equal(decode_imu_cdr(payloads[:6])[1], samples)
     with pytest.raises(InputError, match='1 of 7 payloads'):
         decode_imu_cdr(payloads)
+
+
+@pytest.mark.parametrize('compiled', [True, False], ids=['compiled', 'numpy'])
+def test_ros1_payloads_decode_alike(monkeypatch, compiled):
+    if not compiled:
+        monkeypatch.setattr(native, 'LIB', None)
+    stamps, samples = _recording(5, seed=9)
+    payloads = [bytes(ROS1.serialize_ros1(_imu_msg(ROS1, stamps[i], samples[i], 'x' * i), IMU))
+                for i in range(5)]
+    payloads[2] = payloads[2][:40]      # cut short: rosbags cannot decode it either
+    stamp_ns, values, ok = decode_imu_payloads(
+        np.frombuffer(b''.join(payloads), np.uint8),
+        np.cumsum([0] + [len(p) for p in payloads[:-1]]), [len(p) for p in payloads], 'ros1')
+    assert_array_equal(ok, [True, True, False, True, True])
+    assert_array_equal(stamp_ns[ok], stamps[ok])
+    assert_array_equal(values[ok], samples[ok])
+    assert np.isnan(values[2]).all()
 
 
 def test_covariances_are_written_into_the_cdr_bytes():

@@ -318,6 +318,84 @@ long imu_allan_parse_csv(const char *text, long len, long n_cols, double *table,
     return rows;
 }
 
+/* ------------------------------------------------------- sensor_msgs/Imu payloads */
+
+static uint32_t load_u32(const uint8_t *p, int big)
+{
+    uint32_t v;
+    memcpy(&v, p, 4);
+    return big ? __builtin_bswap32(v) : v;
+}
+
+static double load_f64(const uint8_t *p, int big)
+{
+    uint64_t v;
+    double d;
+    memcpy(&v, p, 8);
+    if (big)
+        v = __builtin_bswap64(v);
+    memcpy(&d, &v, 8);
+    return d;
+}
+
+/*
+ * Decode n serialised sensor_msgs/Imu payloads held in buf (size bytes), payload i at
+ * starts[i] with lengths[i] bytes (imu_allan/io/imu_cdr.py: decode_imu_payloads, the
+ * same layout rules).  ROS 2 CDR: encapsulation 0x00 0x00 (big-endian) or 0x00 0x01
+ * (little-endian), stamp sec int32 and nanosec uint32 at byte 4, frame_id length at
+ * byte 12 (at least 1: the NUL), the 37 doubles 8-aligned after the encapsulation;
+ * ROS 1 (ros1 != 0): seq, secs, nsecs uint32, frame_id length at byte 12, the doubles
+ * right after the frame_id, little-endian.  For every payload that fits its layout:
+ * stamp_ns[i], samples[6 i .. 6 i + 5] (angular_velocity, linear_acceleration) and
+ * ok[i] = 1; otherwise ok[i] = 0 and nothing else is written (the caller decodes those
+ * with rosbags).  Returns the number of payloads that did not fit.
+ */
+long imu_allan_decode_imu(const uint8_t *buf, long size, const int64_t *starts,
+                          const int64_t *lengths, long n, long ros1, int64_t *stamp_ns,
+                          double *samples, uint8_t *ok)
+{
+    long misfits = 0;
+    for (long i = 0; i < n; i++) {
+        int64_t start = starts[i], len = lengths[i];
+        ok[i] = 0;
+        if (start < 0 || len < 16 || start > size - len) {
+            misfits++;
+            continue;
+        }
+        const uint8_t *p = buf + start;
+        int big = 0;
+        int64_t frame_len, at;
+        if (ros1) {
+            frame_len = load_u32(p + 12, 0);
+            at = 16 + frame_len;
+        } else {
+            if (p[0] != 0 || p[1] > 1) {
+                misfits++;
+                continue;
+            }
+            big = p[1] == 0;
+            frame_len = load_u32(p + 12, big);
+            if (frame_len < 1) {
+                misfits++;
+                continue;
+            }
+            at = 4 + (12 + frame_len + 7) / 8 * 8;
+        }
+        if (frame_len >= len || at + 37 * 8 > len) {
+            misfits++;
+            continue;
+        }
+        uint32_t sec = load_u32(p + 4, big), nsec = load_u32(p + 8, big);
+        stamp_ns[i] = (ros1 ? (int64_t)sec : (int64_t)(int32_t)sec) * 1000000000LL + nsec;
+        for (int k = 0; k < 3; k++) {
+            samples[6 * i + k] = load_f64(p + at + 104 + 8 * k, big);
+            samples[6 * i + 3 + k] = load_f64(p + at + 200 + 8 * k, big);
+        }
+        ok[i] = 1;
+    }
+    return misfits;
+}
+
 /* ------------------------------------------------------------- module init */
 
 static struct PyModuleDef native_module = {

@@ -44,6 +44,10 @@ def _load() -> ctypes.CDLL | None:
             lib.imu_allan_parse_csv.restype = _LONG
             lib.imu_allan_parse_csv.argtypes = [ctypes.c_void_p, _LONG, _LONG,
                                                 ctypes.c_void_p, _LONG]
+            lib.imu_allan_decode_imu.restype = _LONG
+            lib.imu_allan_decode_imu.argtypes = [
+                ctypes.c_void_p, _LONG, ctypes.c_void_p, ctypes.c_void_p, _LONG, _LONG,
+                ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
             return lib
     return None
 
@@ -138,3 +142,43 @@ def parse_csv(data: bytes | memoryview, n_cols: int) -> np.ndarray | None:
     if rows < 0:
         return None
     return table[:rows]
+
+
+def decode_imu(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
+               ros1: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Decode serialised sensor_msgs/Imu payloads that lie in one byte buffer.
+
+    Parameters
+    ----------
+    u8 : np.ndarray
+        Shape (size,), uint8 buffer (any read-only or writable memory).
+    starts, lengths : np.ndarray
+        Shape (n,), int64 offset and length of each payload [bytes].
+    ros1 : bool
+        ROS 1 serialisation instead of ROS 2 CDR.
+
+    Returns
+    -------
+    stamp_ns : np.ndarray
+        Shape (n,), int64 header.stamp [ns] (0 where not decoded).
+    samples : np.ndarray
+        Shape (n, 6), float64 angular_velocity [rad/s] and linear_acceleration [m/s^2]
+        (NaN where not decoded).
+    ok : np.ndarray
+        Shape (n,), bool: the payload fits the plain layout (see
+        :func:`imu_allan.io.imu_cdr.decode_imu_payloads`, whose twin this is).
+
+    """
+    assert LIB is not None
+    u8 = np.ascontiguousarray(u8, dtype=np.uint8)
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    lengths = np.ascontiguousarray(lengths, dtype=np.int64)
+    n = starts.size
+    stamp_ns = np.zeros(n, np.int64)
+    samples = np.full((n, 6), np.nan)
+    ok = np.zeros(n, np.uint8)
+    LIB.imu_allan_decode_imu(u8.ctypes.data, u8.size, starts.ctypes.data, lengths.ctypes.data,
+                             n, int(ros1), stamp_ns.ctypes.data, samples.ctypes.data,
+                             ok.ctypes.data)
+    return stamp_ns, samples, ok.view(bool)

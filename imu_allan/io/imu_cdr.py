@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from imu_allan.core import native
 from imu_allan.errors import InputError
 
 #: Message type names of sensor_msgs/Imu (ROS 2, ROS 1).
@@ -196,6 +197,23 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     ok = np.zeros(n, bool)
     if n == 0:
         return stamp_ns, samples, ok
+    if native.LIB is not None:
+        stamp_ns, samples, fits = native.decode_imu(u8, starts, lengths, ros1)
+        ok = fits.copy()
+    else:
+        _decode_plain(u8, starts, lengths, ros1, stamp_ns, samples, ok)
+        fits = ok.copy()
+    for i in np.flatnonzero(~fits).tolist():
+        decoded = _fallback_decode(u8[starts[i]:starts[i] + lengths[i]].tobytes(), ros1)
+        if decoded is not None:
+            stamp_ns[i], samples[i] = decoded
+            ok[i] = True
+    return stamp_ns, samples, ok
+
+
+def _decode_plain(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, ros1: bool,
+                  stamp_ns: np.ndarray, samples: np.ndarray, ok: np.ndarray) -> None:
+    """Decode the payloads that fit the plain layout in numpy, into the given arrays."""
     doubles_offset, big, fits = _imu_layout(u8, starts, lengths, ros1)
     # One group per layout (doubles offset, byte order); nearly always a single group.
     key = np.where(fits, doubles_offset * 2 + big, -1)
@@ -223,12 +241,6 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
         samples[idx, :3] = fields['angular_velocity']
         samples[idx, 3:] = fields['linear_acceleration']
         ok[idx] = True
-    for i in np.flatnonzero(~fits).tolist():
-        decoded = _fallback_decode(u8[starts[i]:starts[i] + lengths[i]].tobytes(), ros1)
-        if decoded is not None:
-            stamp_ns[i], samples[i] = decoded
-            ok[i] = True
-    return stamp_ns, samples, ok
 
 
 def decode_imu_cdr(payloads) -> tuple[np.ndarray, np.ndarray]:
