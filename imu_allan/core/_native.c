@@ -54,12 +54,19 @@
     }                                                                                 \
     return total;
 
-static double sumsq2(const double *x, long m, long j0, long j1)
+/* AVX2 where the CPU has it (4 doubles per instruction instead of 2), chosen at load. */
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__linux__)
+#define WIDE __attribute__((target_clones("avx2", "default")))
+#else
+#define WIDE
+#endif
+
+WIDE static double sumsq2(const double *x, long m, long j0, long j1)
 {
     SUMSQ_BODY(DIFF2, 2)
 }
 
-static double sumsq3(const double *x, long m, long j0, long j1)
+WIDE static double sumsq3(const double *x, long m, long j0, long j1)
 {
     SUMSQ_BODY(DIFF3, 3)
 }
@@ -67,6 +74,35 @@ static double sumsq3(const double *x, long m, long j0, long j1)
 static double sumsq(const double *x, long m, int order, long j0, long j1)
 {
     return order == 3 ? sumsq3(x, m, j0, j1) : sumsq2(x, m, j0, j1);
+}
+
+/*
+ * Running sums of centred windows (imu_allan/core/accumulator.py: _phase): for every
+ * axis a, r[a] = mean of win row a (w samples, row stride ld_win), x row a (row stride
+ * ld_x) gets x[0] = 0 and x[j + 1] = x[j] + (win[j] - r[a]).
+ */
+void imu_allan_phase(const double *win, long ld_win, long n_axes, long w, double *x,
+                     long ld_x, double *r)
+{
+    for (long a = 0; a < n_axes; a++) {
+        const double *y = win + a * ld_win;
+        double *out = x + a * ld_x;
+        double p[4] = {0, 0, 0, 0};
+        long j = 0;
+        for (; j + 4 <= w; j += 4)
+            for (int k = 0; k < 4; k++)
+                p[k] += y[j + k];
+        for (; j < w; j++)
+            p[0] += y[j];
+        double mean = w > 0 ? ((p[0] + p[1]) + (p[2] + p[3])) / (double)w : 0.0;
+        double run = 0.0;
+        out[0] = 0.0;
+        for (j = 0; j < w; j++) {
+            run += y[j] - mean;
+            out[j + 1] = run;
+        }
+        r[a] = mean;
+    }
 }
 
 /*

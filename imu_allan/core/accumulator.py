@@ -438,6 +438,8 @@ def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
         Shape (n_axes,), the mean that was removed [unit].
 
     """
+    if native.LIB is not None:
+        return native.phase(win, x)
     r = win.mean(axis=1)
     x[:, 0] = 0.0
     np.subtract(win, r[:, None], out=x[:, 1:])

@@ -39,6 +39,9 @@ def _load() -> ctypes.CDLL | None:
             lib.imu_allan_acc_sums.argtypes = [
                 ctypes.c_void_p, _LONG, _LONG, _LONG, _LONG, ctypes.c_void_p, _LONG,
                 ctypes.c_void_p]
+            lib.imu_allan_phase.restype = None
+            lib.imu_allan_phase.argtypes = [ctypes.c_void_p, _LONG, _LONG, _LONG,
+                                            ctypes.c_void_p, _LONG, ctypes.c_void_p]
             lib.imu_allan_diff_sumsq.restype = ctypes.c_double
             lib.imu_allan_diff_sumsq.argtypes = [ctypes.c_void_p, _LONG, _LONG, _LONG]
             lib.imu_allan_parse_csv.restype = _LONG
@@ -54,6 +57,32 @@ def _load() -> ctypes.CDLL | None:
 
 #: The loaded library, or None (then every caller uses its numpy twin).
 LIB = _load()
+
+
+def phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """
+    Compute the running sums of windows, from zero, after removing each one's mean.
+
+    Parameters
+    ----------
+    win : np.ndarray
+        Shape (n_axes, w), float64 samples [unit], rows contiguous (any row stride).
+    x : np.ndarray
+        Shape (n_axes, w + 1), float64 output, rows contiguous: x[:, 0] = 0 and
+        x[:, j] the sum of the first j centred samples [unit * samples].
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n_axes,), the means removed [unit].
+
+    """
+    assert LIB is not None and win.dtype == x.dtype == np.float64
+    assert win.strides[1] == x.strides[1] == 8 and x.shape[1] == win.shape[1] + 1
+    r = np.empty(win.shape[0])
+    LIB.imu_allan_phase(win.ctypes.data, win.strides[0] // 8, win.shape[0], win.shape[1],
+                        x.ctypes.data, x.strides[0] // 8, r.ctypes.data)
+    return r
 
 
 def acc_sums(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray) -> np.ndarray:
