@@ -115,3 +115,32 @@ def test_csv_reader_is_the_same_without_the_library(tmp_path, numpy_only):
     path.write_text('t,a\n0.0,1.25\n0.01,2.5e-3\n')
     data = read_csv(path)
     assert_array_equal(data.samples[:, 0], [1.25, 2.5e-3])
+
+
+def test_sqlite_varints_equal_the_numpy_twin(monkeypatch):
+    from imu_allan.io.bags.rosbag2_sqlite import _varint
+    rng = np.random.default_rng(5)
+    values = np.concatenate([rng.integers(0, 2**63 - 1, 300, dtype=np.int64),
+                             rng.integers(0, 300, 300), [0, 127, 128, 2**56 - 1, 2**56]])
+    chunks = []
+    for v in values.tolist():   # sqlite's encoding: 7 bits a byte, the 9th byte all 8
+        if v >= 1 << 56:
+            groups = [(v >> (8 + 7 * k)) & 0x7F for k in range(7, -1, -1)]
+            chunks.append(bytes([g | 0x80 for g in groups]) + bytes([v & 0xFF]))
+        else:
+            groups = [(v >> (7 * k)) & 0x7F for k in range(max(1, -(-v.bit_length() // 7)))]
+            groups = groups[::-1]
+            chunks.append(bytes([g | 0x80 for g in groups[:-1]] + [groups[-1]]))
+    u8 = np.frombuffer(b''.join(chunks), np.uint8)
+    pos = np.cumsum([0] + [len(c) for c in chunks[:-1]])
+    got = native.varints(u8, pos)
+    assert_array_equal(got[0], values)
+    monkeypatch.setattr(native, 'LIB', None)
+    want = _varint(u8, pos)
+    assert_array_equal(got[0], want[0])
+    assert_array_equal(got[1], want[1])
+    with pytest.raises(IndexError):
+        _varint(u8[:-1], pos)
+    monkeypatch.undo()
+    with pytest.raises(IndexError):
+        _varint(np.ascontiguousarray(u8[:-1]), pos)

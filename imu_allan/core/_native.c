@@ -432,6 +432,42 @@ long imu_allan_decode_imu(const uint8_t *buf, long size, const int64_t *starts,
     return misfits;
 }
 
+/* ------------------------------------------------------------ sqlite varints */
+
+/*
+ * Decode one sqlite varint at each offset pos[i] of buf (size bytes): big-endian groups
+ * of 7 bits with the high bit saying "more", the 9th byte taking all 8 bits (sqlite
+ * file format, section 2.1).  Sets value[i] and length[i] (bytes used).  Returns 0, or
+ * -1 when a varint runs past the buffer (imu_allan/io/bags/rosbag2_sqlite.py: _varint,
+ * whose numpy twin raises IndexError there).
+ */
+long imu_allan_varints(const uint8_t *buf, long size, const int64_t *pos, long n,
+                       int64_t *value, int64_t *length)
+{
+    for (long i = 0; i < n; i++) {
+        int64_t p = pos[i];
+        if (p < 0)
+            return -1;
+        uint64_t v = 0;
+        int k = 0;
+        for (;; k++) {
+            if (p + k >= size)
+                return -1;
+            uint8_t b = buf[p + k];
+            if (k == 8) {
+                v = (v << 8) | b;
+                break;
+            }
+            v = (v << 7) | (b & 0x7F);
+            if (b < 0x80)
+                break;
+        }
+        value[i] = (int64_t)v;
+        length[i] = k + 1;
+    }
+    return 0;
+}
+
 /* ------------------------------------------------------------- module init */
 
 static struct PyModuleDef native_module = {

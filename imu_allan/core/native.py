@@ -47,6 +47,9 @@ def _load() -> ctypes.CDLL | None:
             lib.imu_allan_parse_csv.restype = _LONG
             lib.imu_allan_parse_csv.argtypes = [ctypes.c_void_p, _LONG, _LONG,
                                                 ctypes.c_void_p, _LONG]
+            lib.imu_allan_varints.restype = _LONG
+            lib.imu_allan_varints.argtypes = [ctypes.c_void_p, _LONG, ctypes.c_void_p, _LONG,
+                                              ctypes.c_void_p, ctypes.c_void_p]
             lib.imu_allan_decode_imu.restype = _LONG
             lib.imu_allan_decode_imu.argtypes = [
                 ctypes.c_void_p, _LONG, ctypes.c_void_p, ctypes.c_void_p, _LONG, _LONG,
@@ -211,3 +214,36 @@ def decode_imu(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
                              n, int(ros1), stamp_ns.ctypes.data, samples.ctypes.data,
                              ok.ctypes.data)
     return stamp_ns, samples, ok.view(bool)
+
+
+def varints(u8: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Decode one sqlite varint at each offset of a byte buffer.
+
+    Parameters
+    ----------
+    u8 : np.ndarray
+        Shape (size,), contiguous uint8 buffer (e.g. a memory-mapped database file).
+    pos : np.ndarray
+        Shape (n,), int64 byte offsets.
+
+    Returns
+    -------
+    value, length : np.ndarray
+        Shape (n,) int64 each: the values and the bytes each one used.
+
+    Raises
+    ------
+    IndexError
+        When a varint runs past the end of the buffer (as its numpy twin,
+        ``imu_allan.io.bags.rosbag2_sqlite._varint``, does).
+
+    """
+    assert LIB is not None and u8.dtype == np.uint8 and u8.flags.c_contiguous
+    pos = np.ascontiguousarray(pos, dtype=np.int64)
+    value = np.empty(pos.size, np.int64)
+    length = np.empty(pos.size, np.int64)
+    if LIB.imu_allan_varints(u8.ctypes.data, u8.size, pos.ctypes.data, pos.size,
+                             value.ctypes.data, length.ctypes.data):
+        raise IndexError('a varint runs past the end of the file')
+    return value, length

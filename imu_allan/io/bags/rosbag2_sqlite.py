@@ -14,6 +14,7 @@ from urllib.parse import quote
 import numpy as np
 import yaml
 
+from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _Piece, _Topic
 from imu_allan.io.imu_cdr import _gather, _join
@@ -163,6 +164,8 @@ def _varint(u8: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         (n,) int64 bytes used.
 
     """
+    if native.LIB is not None and u8.flags.c_contiguous:
+        return native.varints(u8, pos)
     b = u8[pos]
     value = (b & 0x7F).astype(np.int64)
     length = np.ones(pos.size, np.int64)
