@@ -48,7 +48,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         'analyze', help='characterise the IMU noise of bags or CSV files',
         description='Analyse rosbag2 (sqlite3/MCAP), ROS 1 bags or CSV files of a static '
-                    'IMU: Allan deviation, fitted N, B, K, T_B with 95 %% intervals, '
+                    'IMU: Allan deviation, fitted N, B, K, T_B with 95 % intervals, '
                     'Kalibr imu.yaml, Kalman Q/R, robot_localization covariances, plots.')
     p.add_argument('inputs', nargs='+', metavar='INPUT', help='bag directory, .mcap, .db3, '
                    '.bag or .csv[.gz] (t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z)')
