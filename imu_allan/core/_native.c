@@ -1,7 +1,8 @@
 /*
  * Compiled kernels of imu_allan's core: the sums of squared phase differences behind
- * the overlapping Allan and Hadamard variances (NIST SP 1065 eqs. 14 and 20), and a
- * parser for the numeric fields of a CSV file.
+ * the overlapping Allan and Hadamard variances (NIST SP 1065 eqs. 14 and 20) and the
+ * accumulator's centred running sums; and for the readers, a parser for the numeric
+ * fields of a CSV file, a sensor_msgs/Imu payload decoder and sqlite varints.
  *
  * Plain C99: imu_allan/core/native.py loads this library with ctypes, which releases
  * the GIL for every call, so threads run these loops in parallel.  The only Python API
@@ -10,7 +11,7 @@
  * library is absent; test/test_native.py checks that both give the same results.
  *
  * Summation: eight independent partial sums (they keep the adders busy and let the
- * compiler vectorise without reassociating anything itself), closed every _BLOCK terms
+ * compiler vectorise without reassociating anything itself), closed every BLOCK terms
  * into a running total, so rounding grows with the block count, not the term count.
  */
 

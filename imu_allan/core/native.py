@@ -2,14 +2,15 @@
 The core's compiled kernels (``_native.c``), called through ctypes.
 
 setup.py compiles ``_native.c`` into ``_native<EXT_SUFFIX>`` beside this file whenever
-the package is built (``pip install``, ``colcon build``).  The library uses no Python
-API, so ctypes loads it like any shared object and releases the GIL for every call:
-threads that call these kernels run in parallel.
+the package is built (``pip install``, ``colcon build``).  Its only Python API is an
+empty module init; ctypes loads it like any shared object and releases the GIL for
+every call, so threads that call these kernels run in parallel.
 
 Each kernel has a numpy twin in the module that uses it (the accumulator, the batch
-curve, the CSV reader).  :data:`LIB` is None when the library was never built (a bare
-source tree) or when the environment sets ``IMU_ALLAN_NATIVE=0``; the twins then do the
-work, with the same results to rounding (test/test_native.py compares them).
+curve, the CSV reader, the Imu payload decoder, the sqlite page reader).  :data:`LIB`
+is None when the library was never built (a bare source tree) or when the environment
+sets ``IMU_ALLAN_NATIVE=0``; the twins then do the work, with the same results to
+rounding (test/test_native.py compares them).
 """
 
 import ctypes
@@ -19,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 _LONG = ctypes.c_long
 
 
@@ -176,10 +176,13 @@ def parse_csv(data: bytes | memoryview, n_cols: int) -> np.ndarray | None:
     return table[:rows]
 
 
-def decode_imu(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
-               ros1: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def decode_imu(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, ros1: bool,
+               stamp_ns: np.ndarray, samples: np.ndarray, ok: np.ndarray) -> None:
     """
-    Decode serialised sensor_msgs/Imu payloads that lie in one byte buffer.
+    Decode the serialised sensor_msgs/Imu payloads of one byte buffer that fit the plain layout.
+
+    The twin of :func:`imu_allan.io.imu_cdr._decode_plain` (same arguments, same
+    layout rules): rows that do not fit are left as they are.
 
     Parameters
     ----------
@@ -189,31 +192,23 @@ def decode_imu(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
         Shape (n,), int64 offset and length of each payload [bytes].
     ros1 : bool
         ROS 1 serialisation instead of ROS 2 CDR.
-
-    Returns
-    -------
     stamp_ns : np.ndarray
-        Shape (n,), int64 header.stamp [ns] (0 where not decoded).
+        Shape (n,), contiguous int64 output: header.stamp [ns].
     samples : np.ndarray
-        Shape (n, 6), float64 angular_velocity [rad/s] and linear_acceleration [m/s^2]
-        (NaN where not decoded).
+        Shape (n, 6), contiguous float64 output: angular_velocity [rad/s] and
+        linear_acceleration [m/s^2].
     ok : np.ndarray
-        Shape (n,), bool: the payload fits the plain layout (see
-        :func:`imu_allan.io.imu_cdr.decode_imu_payloads`, whose twin this is).
+        Shape (n,), contiguous bool output: True where the payload was decoded.
 
     """
-    assert LIB is not None
+    assert LIB is not None and stamp_ns.dtype == np.int64 and samples.dtype == np.float64
+    assert ok.dtype == bool and all(a.flags.c_contiguous for a in (stamp_ns, samples, ok))
     u8 = np.ascontiguousarray(u8, dtype=np.uint8)
     starts = np.ascontiguousarray(starts, dtype=np.int64)
     lengths = np.ascontiguousarray(lengths, dtype=np.int64)
-    n = starts.size
-    stamp_ns = np.zeros(n, np.int64)
-    samples = np.full((n, 6), np.nan)
-    ok = np.zeros(n, np.uint8)
     LIB.imu_allan_decode_imu(u8.ctypes.data, u8.size, starts.ctypes.data, lengths.ctypes.data,
-                             n, int(ros1), stamp_ns.ctypes.data, samples.ctypes.data,
+                             starts.size, int(ros1), stamp_ns.ctypes.data, samples.ctypes.data,
                              ok.ctypes.data)
-    return stamp_ns, samples, ok.view(bool)
 
 
 def varints(u8: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

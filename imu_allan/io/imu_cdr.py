@@ -197,13 +197,9 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     ok = np.zeros(n, bool)
     if n == 0:
         return stamp_ns, samples, ok
-    if native.LIB is not None:
-        stamp_ns, samples, fits = native.decode_imu(u8, starts, lengths, ros1)
-        ok = fits.copy()
-    else:
-        _decode_plain(u8, starts, lengths, ros1, stamp_ns, samples, ok)
-        fits = ok.copy()
-    for i in np.flatnonzero(~fits).tolist():
+    decode = native.decode_imu if native.LIB is not None else _decode_plain
+    decode(u8, starts, lengths, ros1, stamp_ns, samples, ok)
+    for i in np.flatnonzero(~ok).tolist():
         decoded = _fallback_decode(u8[starts[i]:starts[i] + lengths[i]].tobytes(), ros1)
         if decoded is not None:
             stamp_ns[i], samples[i] = decoded
