@@ -144,3 +144,61 @@ def test_sqlite_varints_equal_the_numpy_twin(monkeypatch):
     monkeypatch.undo()
     with pytest.raises(IndexError):
         _varint(np.ascontiguousarray(u8[:-1]), pos)
+
+
+@pytest.mark.parametrize('factor', [2, 8, 64])
+def test_block_means_are_bitwise_the_numpy_twin(monkeypatch, factor):
+    from imu_allan.core.raw import _means
+    rng = np.random.default_rng(factor)
+    y = rng.normal(size=(factor * 1_001, 6)) * 1e-2 + 9.81
+    fast = _means(y, factor)
+    monkeypatch.setattr(native, 'LIB', None)
+    assert_array_equal(fast, _means(y, factor))   # same additions in the same order
+
+
+def _motion_case(seed: int, moved_window: int | None) -> tuple:
+    """Still windows of 40 rows (a slow drift), one of them shaken when asked."""
+    rng = np.random.default_rng(seed)
+    win, n_windows = 40, 500
+    y = rng.normal(size=(win * n_windows, 6)) * 1e-3
+    y += np.linspace(0.0, 2e-3, y.shape[0])[:, None]      # bias drift, not motion
+    if moved_window is not None:
+        y[moved_window * win + 10:moved_window * win + 20, 1] += 0.5
+    thr = np.array([0.05] * 3 + [0.3] * 3)
+    return y, win, thr, np.zeros(6), np.full(6, 1e-3)
+
+
+@pytest.mark.parametrize('moved_window', [None, 0, 1, 377, 499])
+def test_motion_scan_equals_the_numpy_twin(monkeypatch, moved_window):
+    from imu_allan.pipeline.checks import _still_run
+    y, win, thr, ref0, ref_std = _motion_case(11, moved_window)
+    ref_fast, ref_slow = ref0.copy(), ref0.copy()
+    still, mean, std = native.motion_scan(y, win, thr, 3.0, ref_fast, ref_std)
+    still_np, mean_np, std_np = _still_run(y, win, thr, 3.0, ref_slow, ref_std)
+    assert still == still_np == (500 if moved_window is None else moved_window)
+    # The window statistics differ in summation order only.
+    assert_allclose(ref_fast, ref_slow, rtol=1e-12, atol=1e-18)
+    if moved_window is not None:
+        assert_allclose(mean, mean_np, rtol=1e-12, atol=1e-15)
+        assert_allclose(std, std_np, rtol=1e-9)
+        assert std[1] > 3.0 * 1e-3
+
+
+def test_repeat_runs_equal_the_numpy_twin(monkeypatch):
+    from imu_allan.pipeline.checks import _repeat_runs
+    rng = np.random.default_rng(5)
+    y = np.round(rng.normal(size=(5_000, 6)), 1)     # coarse values: short runs
+    y[:300, 0] = 0.7                                 # continues the run from before
+    y[1_000:1_900, 2] = -0.2
+    y[:, 5] = 1.5                                    # frozen all along
+    last = np.array([0.7, np.nan, 0.0, 0.0, 0.0, 1.5])
+    got = {}
+    for lib in (native.LIB, None):
+        monkeypatch.setattr(native, 'LIB', lib)
+        run = np.array([50, 0, 3, 0, 0, 10_000], dtype=np.int64)
+        longest = _repeat_runs(y, last, run)
+        got[lib is None] = (longest, run)
+    assert_array_equal(got[False][0], got[True][0])
+    assert_array_equal(got[False][1], got[True][1])
+    assert got[False][0][0] >= 350 and got[False][0][2] >= 899
+    assert got[False][0][5] == got[False][1][5] == 15_000

@@ -1,8 +1,10 @@
 /*
  * Compiled kernels of imu_allan's core: the sums of squared phase differences behind
  * the overlapping Allan and Hadamard variances (NIST SP 1065 eqs. 14 and 20) and the
- * accumulator's centred running sums; and for the readers, a parser for the numeric
- * fields of a CSV file, a sensor_msgs/Imu payload decoder and sqlite varints.
+ * accumulator's centred running sums; for the session's input checks, the raw copy's
+ * block means, the motion windows and the runs of repeated values; and for the readers,
+ * a parser for the numeric fields of a CSV file, a sensor_msgs/Imu payload decoder and
+ * sqlite varints.
  *
  * Plain C99: imu_allan/core/native.py loads this library with ctypes, which releases
  * the GIL for every call, so threads run these loops in parallel.  The only Python API
@@ -467,6 +469,100 @@ long imu_allan_varints(const uint8_t *buf, long size, const int64_t *pos, long n
         length[i] = k + 1;
     }
     return 0;
+}
+
+/* ------------------------------------------------------------- input checks */
+
+/*
+ * Block means of the raw copy (imu_allan/core/raw.py: _means): out row r (n_cols
+ * values, contiguous) = (((y[r f] + y[r f + 1]) + y[r f + 2]) + ...) * (1 / f) over f =
+ * factor >= 2 rows of y (row stride ld): the additions of the numpy twin, in its order,
+ * so both give the same bits.
+ */
+void imu_allan_block_means(const double *y, long ld, long n_out, long n_cols, long factor,
+                           double *out)
+{
+    double scale = 1.0 / (double)factor;
+    for (long r = 0; r < n_out; r++) {
+        const double *row = y + r * factor * ld;
+        double *o = out + r * n_cols;
+        for (long c = 0; c < n_cols; c++)
+            o[c] = row[c] + row[ld + c];
+        for (long k = 2; k < factor; k++)
+            for (long c = 0; c < n_cols; c++)
+                o[c] += row[k * ld + c];
+        for (long c = 0; c < n_cols; c++)
+            o[c] *= scale;
+    }
+}
+
+#define MAX_AXES 16
+
+/*
+ * Motion gate (imu_allan/pipeline/checks.py: _still_run): windows of win rows of y
+ * (row stride ld, n_axes <= MAX_AXES columns), one after another.  Each axis' mean and
+ * standard deviation (ddof 0) come from the deviations to the window's first row; a
+ * window moved when an axis' mean is more than thr[a] off ref_mean[a] or its std more
+ * than ratio_limit times ref_std[a].  Each still window pulls the reference towards its
+ * mean (ref_mean = 0.99 ref_mean + 0.01 mean, so slow bias drift is not motion).
+ * Returns the number of still windows before the first that moved (n_windows when none
+ * did); that window's mean and std are left in mean_out and std_out.
+ */
+long imu_allan_motion_scan(const double *y, long ld, long n_windows, long win, long n_axes,
+                           const double *thr, double ratio_limit, double *ref_mean,
+                           const double *ref_std, double *mean_out, double *std_out)
+{
+    if (n_axes > MAX_AXES)
+        return -1;
+    for (long w = 0; w < n_windows; w++) {
+        const double *b = y + w * win * ld;
+        double s[MAX_AXES] = {0}, s2[MAX_AXES] = {0};
+        for (long i = 1; i < win; i++) {
+            const double *row = b + i * ld;
+            for (long a = 0; a < n_axes; a++) {
+                double d = row[a] - b[a];
+                s[a] += d;
+                s2[a] += d * d;
+            }
+        }
+        int moving = 0;
+        for (long a = 0; a < n_axes; a++) {
+            double shift = s[a] / (double)win;
+            double var = s2[a] / (double)win - shift * shift;
+            mean_out[a] = b[a] + shift;
+            std_out[a] = sqrt(var > 0.0 ? var : 0.0);
+            if (fabs(mean_out[a] - ref_mean[a]) > thr[a] || std_out[a] / ref_std[a] > ratio_limit)
+                moving = 1;
+        }
+        if (moving)
+            return w;
+        for (long a = 0; a < n_axes; a++)
+            ref_mean[a] = 0.99 * ref_mean[a] + 0.01 * mean_out[a];
+    }
+    return n_windows;
+}
+
+/*
+ * Frozen-axis check (imu_allan/pipeline/checks.py: _repeat_runs): per axis a, the run
+ * of samples equal to the one before (last[a] before row 0) goes on from run[a]; on
+ * return run[a] is the run that ends the block and longest[a] the longest seen,
+ * run[a] on entry included.
+ */
+void imu_allan_repeats(const double *y, long ld, long n, long n_axes, const double *last,
+                       int64_t *run, int64_t *longest)
+{
+    for (long a = 0; a < n_axes; a++) {
+        int64_t r = run[a], top = run[a];
+        double prev = last[a];
+        for (long i = 0; i < n; i++) {
+            double v = y[i * ld + a];
+            r = v == prev ? r + 1 : 0;
+            top = r > top ? r : top;
+            prev = v;
+        }
+        run[a] = r;
+        longest[a] = top;
+    }
 }
 
 /* ------------------------------------------------------------- module init */

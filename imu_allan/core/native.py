@@ -7,7 +7,8 @@ empty module init; ctypes loads it like any shared object and releases the GIL f
 every call, so threads that call these kernels run in parallel.
 
 Each kernel has a numpy twin in the module that uses it (the accumulator, the batch
-curve, the CSV reader, the Imu payload decoder, the sqlite page reader).  :data:`LIB`
+curve, the raw copy, the session's sample checks, the CSV reader, the Imu payload
+decoder, the sqlite page reader).  :data:`LIB`
 is None when the library was never built (a bare source tree) or when the environment
 sets ``IMU_ALLAN_NATIVE=0``; the twins then do the work, with the same results to
 rounding (test/test_native.py compares them).
@@ -54,6 +55,16 @@ def _load() -> ctypes.CDLL | None:
             lib.imu_allan_decode_imu.argtypes = [
                 ctypes.c_void_p, _LONG, ctypes.c_void_p, ctypes.c_void_p, _LONG, _LONG,
                 ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+            lib.imu_allan_block_means.restype = None
+            lib.imu_allan_block_means.argtypes = [ctypes.c_void_p, _LONG, _LONG, _LONG, _LONG,
+                                                  ctypes.c_void_p]
+            lib.imu_allan_motion_scan.restype = _LONG
+            lib.imu_allan_motion_scan.argtypes = [
+                ctypes.c_void_p, _LONG, _LONG, _LONG, _LONG, ctypes.c_void_p, ctypes.c_double,
+                ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+            lib.imu_allan_repeats.restype = None
+            lib.imu_allan_repeats.argtypes = [ctypes.c_void_p, _LONG, _LONG, _LONG,
+                                              ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
             return lib
     return None
 
@@ -242,3 +253,111 @@ def varints(u8: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                              value.ctypes.data, length.ctypes.data):
         raise IndexError('a varint runs past the end of the file')
     return value, length
+
+
+def _rows(y: np.ndarray) -> np.ndarray:
+    """Return y (n, k) float64 with contiguous rows (a view when it has them)."""
+    y = np.asarray(y, dtype=np.float64)
+    return y if y.strides[1] == 8 else np.ascontiguousarray(y)
+
+
+def block_means(y: np.ndarray, factor: int) -> np.ndarray:
+    """
+    Average each ``factor`` consecutive rows (factor >= 2), bit for bit as the twin.
+
+    The twin is :func:`imu_allan.core.raw._means`.
+
+    Parameters
+    ----------
+    y : np.ndarray
+        Shape (n, n_cols), float64 samples [unit], n a multiple of ``factor``.
+    factor : int
+        Rows per mean.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n // factor, n_cols), the means [unit].
+
+    """
+    assert LIB is not None and factor >= 2
+    y = _rows(y)
+    out = np.empty((y.shape[0] // factor, y.shape[1]))
+    LIB.imu_allan_block_means(y.ctypes.data, y.strides[0] // 8, out.shape[0], y.shape[1],
+                              factor, out.ctypes.data)
+    return out
+
+
+def motion_scan(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
+                ref_mean: np.ndarray, ref_std: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+    """
+    Find the first window that moved; pull the reference along the still ones before it.
+
+    The twin is :func:`imu_allan.pipeline.checks._still_run` (same arguments, same rule).
+
+    Parameters
+    ----------
+    y : np.ndarray
+        Shape (n_windows * win, n_axes), float64 samples [unit].
+    win : int
+        Rows per window.
+    thr : np.ndarray
+        Shape (n_axes,), largest still offset of a window mean from the reference [unit].
+    ratio_limit : float
+        Largest still ratio of a window's std to the reference std.
+    ref_mean : np.ndarray
+        Shape (n_axes,), contiguous float64 reference means [unit], updated in place.
+    ref_std : np.ndarray
+        Shape (n_axes,), reference standard deviations [unit].
+
+    Returns
+    -------
+    still : int
+        Windows before the first that moved (n_windows when none did).
+    mean, std : np.ndarray
+        Shape (n_axes,) each: that window's mean and std [unit] (meaningless when
+        still == n_windows).
+
+    """
+    assert LIB is not None and ref_mean.dtype == np.float64 and ref_mean.flags.c_contiguous
+    y = _rows(y)
+    thr = np.ascontiguousarray(thr, dtype=np.float64)
+    ref_std = np.ascontiguousarray(ref_std, dtype=np.float64)
+    mean, std = np.empty(y.shape[1]), np.empty(y.shape[1])
+    still = LIB.imu_allan_motion_scan(y.ctypes.data, y.strides[0] // 8, y.shape[0] // win, win,
+                                      y.shape[1], thr.ctypes.data, float(ratio_limit),
+                                      ref_mean.ctypes.data, ref_std.ctypes.data, mean.ctypes.data,
+                                      std.ctypes.data)
+    assert still >= 0, 'more axes than the kernel holds'
+    return int(still), mean, std
+
+
+def repeats(y: np.ndarray, last: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """
+    Continue each axis' run of repeated values over a block; return the longest runs.
+
+    The twin is :func:`imu_allan.pipeline.checks._repeat_runs`.
+
+    Parameters
+    ----------
+    y : np.ndarray
+        Shape (n, n_axes), float64 samples [unit].
+    last : np.ndarray
+        Shape (n_axes,), the sample before row 0 [unit] (NaN: none).
+    run : np.ndarray
+        Shape (n_axes,), contiguous int64: the run going on before row 0 [samples];
+        updated in place to the run that ends the block.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n_axes,), int64 longest run per axis, ``run`` on entry included [samples].
+
+    """
+    assert LIB is not None and run.dtype == np.int64 and run.flags.c_contiguous
+    y = _rows(y)
+    last = np.ascontiguousarray(last, dtype=np.float64)
+    longest = np.empty(y.shape[1], np.int64)
+    LIB.imu_allan_repeats(y.ctypes.data, y.strides[0] // 8, y.shape[0], y.shape[1],
+                          last.ctypes.data, run.ctypes.data, longest.ctypes.data)
+    return longest

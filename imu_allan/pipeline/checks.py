@@ -8,11 +8,14 @@ samples that pass reach the Allan accumulator here.
 import numpy as np
 
 from imu_allan import AXES
+from imu_allan.core import native
 from imu_allan.pipeline.clock import _NS
 from imu_allan.pipeline.parts import _Parts
 
 
 N_AXES = len(AXES)
+#: Still runs at least this long reach the accumulator as they are, shorter ones joined.
+_DIRECT_ROWS = 4096
 
 
 class _SampleChecks(_Parts):
@@ -40,28 +43,14 @@ class _SampleChecks(_Parts):
             self._motion_stage(t_part, y_part)
 
     def _check_frozen(self, samples: np.ndarray) -> None:
-        # Length of the run of identical values that ends each axis' block.
-        same = np.empty(samples.shape, dtype=bool)
-        np.equal(samples[0], self._last_value, out=same[0])
-        np.equal(samples[1:], samples[:-1], out=same[1:])
-        repeats = same.any(axis=0)
-        for j in range(N_AXES):
-            col = same[:, j]
-            if not repeats[j]:      # noisy data: no value repeats (the usual case)
-                run, longest = 0, int(self._repeat[j])
-            elif col.all():
-                run = longest = self._repeat[j] + col.size
-            else:
-                breaks = np.flatnonzero(~col)
-                runs = np.diff(np.concatenate((breaks, [col.size]))) - 1
-                longest = max(self._repeat[j] + breaks[0], int(runs.max()))
-                run = col.size - 1 - breaks[-1]
-            self._repeat[j] = run
-            if longest >= self.config.frozen_samples and AXES[j] not in self.stats.frozen_axes:
+        """Warn once per axis whose value repeats for ``frozen_samples`` samples or more."""
+        longest = _repeat_runs(samples, self._last_value, self._repeat)
+        for j in np.flatnonzero(longest >= self.config.frozen_samples):
+            if AXES[j] not in self.stats.frozen_axes:
                 self.stats.frozen_axes.append(AXES[j])
                 self._warn(f'frozen-{AXES[j]}', f'{AXES[j]} is frozen: one value repeated for '
-                           f'{longest} samples (a dead or disconnected sensor, or a replayed '
-                           'constant)')
+                           f'{longest[j]} samples (a dead or disconnected sensor, or a '
+                           'replayed constant)')
         self._last_value = samples[-1].copy()
 
     def _motion_stage(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
@@ -69,21 +58,62 @@ class _SampleChecks(_Parts):
         Hold samples until their motion window is judged, then accumulate or drop them.
 
         Rows wait at most one window (``motion_window_s``), so no sample reaches the
-        accumulator before the check that could reject it.
+        accumulator before the check that could reject it.  Windows are cut from the
+        stream, not from the blocks: only the rows held from the last block are copied.
         """
-        self._win_t.append(stamp_ns)
-        self._win_y.append(samples)
-        t = np.concatenate(self._win_t)
-        y = np.concatenate(self._win_y)
         win = max(int(round(self.config.motion_window_s * self.rate_hz)), 2)
-        n_full = (y.shape[0] // win) * win
-        self._win_t, self._win_y = [t[n_full:]], [y[n_full:]]
+        t, y = stamp_ns, samples
+        held = sum(h.shape[0] for h in self._win_y)
+        if held >= win:     # the window shrank (a refined rate): start from the held rows
+            t, y = np.concatenate(self._win_t + [t]), np.concatenate(self._win_y + [y])
+        elif held:
+            take = min(win - held, t.size)
+            head_t = np.concatenate(self._win_t + [t[:take]])
+            head_y = np.concatenate(self._win_y + [y[:take]])
+            t, y = t[take:], y[take:]
+            if head_t.size < win:
+                self._win_t, self._win_y = [head_t], [head_y]
+                self._drain()
+                return
+            self._judge_windows(head_t, head_y, win)
+        n_full = (t.size // win) * win
         if n_full:
-            # The statistics of all whole windows at once; the decisions stay in order.
-            means, stds = _window_stats(y[:n_full].reshape(-1, win, N_AXES))
-            for i, k in enumerate(range(0, n_full, win)):
-                self._judge_window(t[k:k + win], y[k:k + win], means[i], stds[i])
+            self._judge_windows(t[:n_full], y[:n_full], win)
+        # Copies (at most one window): the caller may reuse its arrays after add().
+        self._win_t, self._win_y = (([t[n_full:].copy()], [y[n_full:].copy()])
+                                    if n_full < t.size else ([], []))
         self._drain()
+
+    def _judge_windows(self, t: np.ndarray, y: np.ndarray, win: int) -> None:
+        """
+        Judge whole windows in order; runs of still ones are found by one scan.
+
+        While the gate is open (a reference exists and the IMU was not moving), the
+        still windows up to the next that moved are passed on as one run; that window,
+        and every window while the IMU is held as moving, go through
+        :meth:`_judge_window` one by one.
+        """
+        n_windows = t.size // win
+        thr = self._motion_thresholds()
+        i = 0
+        while i < n_windows:
+            rows = slice(i * win, n_windows * win)
+            if self._ref_mean is not None and self._ref_std is not None and not self._moving:
+                still, mean, std = _scan_still(y[rows], win, thr, self.config.motion_std_ratio,
+                                               self._ref_mean, self._ref_std)
+                if still:
+                    self._in_motion = False
+                    end = (i + still) * win
+                    self._use(t[i * win:end], y[i * win:end])
+                    i += still
+                if i == n_windows:
+                    return
+            else:
+                means, stds = _window_stats(y[rows][:win][None])
+                mean, std = means[0], stds[0]
+            k = slice(i * win, (i + 1) * win)
+            self._judge_window(t[k], y[k], mean, std)
+            i += 1
 
     def _flush_motion(self, break_after: bool = False) -> None:
         """Accumulate the held partial window as still (end of data or a segment break)."""
@@ -136,19 +166,35 @@ class _SampleChecks(_Parts):
         self.stats.n_used += t.size
 
     def _drain(self) -> None:
-        """Pass the samples :meth:`_use` holds to the accumulator (one call)."""
-        if self._pending:
+        """Pass the samples :meth:`_use` holds to the accumulator, in order."""
+        # Long runs go as they are (the accumulator copies them anyway); short ones,
+        # window by window while the IMU moved now and then, are joined into one call.
+        short: list = []
+        for piece in self._pending + [None]:
+            if piece is not None and piece.shape[0] < _DIRECT_ROWS:
+                short.append(piece)
+                continue
             assert self.acc is not None
-            self.acc.add(self._pending[0] if len(self._pending) == 1
-                         else np.concatenate(self._pending))
-            self._pending = []
+            if short:
+                self.acc.add(short[0] if len(short) == 1 else np.concatenate(short))
+                short = []
+            if piece is not None:
+                self.acc.add(piece)
+        self._pending = []
+
+    def _motion_thresholds(self) -> np.ndarray:
+        """Shape (6,): largest still offset of a window mean, per axis [rad/s, m/s^2]."""
+        return np.array([self.config.motion_gyro_rad_s] * 3
+                        + [self.config.motion_accel_m_s2] * 3)
 
     def _window_moving(self, mean: np.ndarray, std: np.ndarray) -> bool:
         """Whether one motion window moved, from its per-axis mean and std (6,) each."""
-        thr = np.array([self.config.motion_gyro_rad_s] * 3 + [self.config.motion_accel_m_s2] * 3)
+        thr = self._motion_thresholds()
         if self._ref_mean is None:
-            # Quantised sensors can show zero spread: floor the reference noise.
-            self._ref_mean, self._ref_std = mean, np.maximum(std, thr / 20)
+            # Quantised sensors can show zero spread: floor the reference noise.  The
+            # reference is this session's own array: the scan updates it in place.
+            self._ref_mean = np.array(mean, dtype=np.float64)
+            self._ref_std = np.maximum(std, thr / 20)
             return False
         dev = np.abs(mean - self._ref_mean)
         ratio = std / self._ref_std
@@ -163,8 +209,84 @@ class _SampleChecks(_Parts):
                        f'stationary; {action}', once=False)
             return True
         # Follow slow bias drift so that temperature drift is not taken for motion.
-        self._ref_mean = 0.99 * self._ref_mean + 0.01 * mean
+        self._ref_mean[:] = 0.99 * self._ref_mean + 0.01 * mean
         return False
+
+
+def _scan_still(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
+                ref_mean: np.ndarray, ref_std: np.ndarray) -> tuple:
+    """Count the still windows before the first that moved (compiled or :func:`_still_run`)."""
+    scan = native.motion_scan if native.LIB is not None else _still_run
+    return scan(y, win, thr, ratio_limit, ref_mean, ref_std)
+
+
+def _still_run(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
+               ref_mean: np.ndarray, ref_std: np.ndarray) -> tuple:
+    """
+    Find the first window that moved; pull the reference along the still ones before it.
+
+    The numpy twin of :func:`imu_allan.core.native.motion_scan`: a window moved when an
+    axis' mean is more than ``thr`` off ``ref_mean`` or its std more than
+    ``ratio_limit`` times ``ref_std``; each still window before it moves ``ref_mean``
+    (in place) 1 % of the way to its mean, as :meth:`_SampleChecks._window_moving` does.
+
+    Parameters
+    ----------
+    y : np.ndarray
+        Shape (n_windows * win, n_axes), samples [unit].
+    win : int
+        Rows per window.
+    thr : np.ndarray
+        Shape (n_axes,), offset limits [unit].
+    ratio_limit : float
+        Std ratio limit.
+    ref_mean : np.ndarray
+        Shape (n_axes,), reference means [unit], updated in place.
+    ref_std : np.ndarray
+        Shape (n_axes,), reference standard deviations [unit].
+
+    Returns
+    -------
+    tuple
+        (still windows, mean (n_axes,) and std (n_axes,) of the window that moved);
+        mean and std are None when none moved.
+
+    """
+    means, stds = _window_stats(y.reshape(-1, win, y.shape[1]))
+    for w in range(means.shape[0]):
+        if ((np.abs(means[w] - ref_mean) > thr) | (stds[w] / ref_std > ratio_limit)).any():
+            return w, means[w], stds[w]
+        ref_mean[:] = 0.99 * ref_mean + 0.01 * means[w]
+    return means.shape[0], None, None
+
+
+def _repeat_runs(samples: np.ndarray, last: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """
+    Continue each axis' run of repeated values over a block; return the longest runs.
+
+    ``run`` (n_axes,) int64, the run going on before row 0 (``last`` is the sample
+    there, NaN for none), becomes in place the run that ends the block; the result
+    (n_axes,) is the longest run per axis, the one on entry included [samples].  The
+    compiled twin is :func:`imu_allan.core.native.repeats`.
+    """
+    if native.LIB is not None:
+        return native.repeats(samples, last, run)
+    same = np.empty(samples.shape, dtype=bool)
+    np.equal(samples[0], last, out=same[0])
+    np.equal(samples[1:], samples[:-1], out=same[1:])
+    longest = run.copy()
+    for j in range(samples.shape[1]):
+        col = same[:, j]
+        if not col.any():          # noisy data: no value repeats (the usual case)
+            run[j] = 0
+        elif col.all():
+            run[j] = longest[j] = run[j] + col.size
+        else:
+            breaks = np.flatnonzero(~col)
+            runs = np.diff(np.concatenate((breaks, [col.size]))) - 1
+            longest[j] = max(run[j] + breaks[0], int(runs.max()))
+            run[j] = col.size - 1 - breaks[-1]
+    return longest
 
 
 def _window_stats(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -72,7 +72,9 @@ class SessionConfig:
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
     background_accumulator : bool
         The accumulator sums on a thread of its own while the checks go on (one input
-        on two cores: ``imu-allan analyze``).  The sums are identical either way.
+        on two cores: ``imu-allan analyze``).  The sums are identical either way.  The
+        thread reads the blocks given to :meth:`Session.add` later, so the caller must
+        not change them afterwards (the offline readers make a new array per block).
 
     """
 
@@ -234,7 +236,10 @@ class Session(_StampClock, _SampleChecks, _StateFile):
                 self._flush_motion(break_after=True)
             self._nan_break = False
             ok = self._monotonic_mask(t_part)
-            self._ingest(t_part[ok], y_part[ok])
+            if ok.all():    # the usual case: the block's own arrays, not copies
+                self._ingest(t_part, y_part)
+            else:
+                self._ingest(t_part[ok], y_part[ok])
         # NaN rows that end a block break the segment before the next block's rows, just
         # as they would inside one block.
         self._nan_break = self._nan_break or not finite[-1]
