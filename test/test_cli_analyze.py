@@ -25,14 +25,13 @@ from rosbags.typesys import get_typestore, Stores
 import yaml
 
 from imu_allan import AXES
-from imu_allan.cli import analyze as cli_analyze
 from imu_allan.cli import main
 from imu_allan.core.noise_params import load_params
 from imu_allan.core.simulate import simulate_imu
 from imu_allan.io import inputs
 from imu_allan.io.bag_writer import serialize_imu, write_imu_bag
 from imu_allan.io.csv_io import write_csv
-from imu_allan.io.inputs import open_input, stream_input
+from imu_allan.io.inputs import open_input, Progress, stream_input
 from imu_allan.pipeline.session import SessionConfig
 
 REPO = Path(__file__).resolve().parents[1]
@@ -417,8 +416,8 @@ def test_truncated_mcap_recovers_warns_and_gives_a_result(tmp_path, rec, capsys)
 def test_progress_goes_to_stderr_and_never_to_stdout(tmp_path, rec, capsys, monkeypatch):
     stamps, samples = rec
     write_imu_bag(tmp_path / 'p.mcap', stamps, samples)
-    monkeypatch.setattr(cli_analyze.Progress, 'delay_s', 0.0)
-    monkeypatch.setattr(cli_analyze.Progress, 'log_interval_s', 0.05)
+    monkeypatch.setattr(Progress, 'delay_s', 0.0)
+    monkeypatch.setattr(Progress, 'log_interval_s', 0.05)
     monkeypatch.setattr(inputs, 'CSV_BLOCK', 500)
     code, out, err = _cli(['analyze', tmp_path / 'p.mcap', '--out', tmp_path / 'o',
                            '--format', 'json', '--no-plot'], capsys)
@@ -431,7 +430,7 @@ def test_progress_goes_to_stderr_and_never_to_stdout(tmp_path, rec, capsys, monk
 
 
 def test_progress_line_counts_messages():
-    bar = cli_analyze.Progress('x.mcap', 4_000)
+    bar = Progress('x.mcap', 4_000)
     bar.update(1_000)
     assert ' 25.0% 1,000 messages' in bar.line()
     bar.set_stage('fitting the noise model of')

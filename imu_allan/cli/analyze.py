@@ -19,14 +19,14 @@ import os
 from pathlib import Path
 import statistics
 import sys
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from imu_allan import AXES
 from imu_allan.errors import InputError
-from imu_allan.io.inputs import analyze_input, check_path, Progress
-from imu_allan.pipeline.session import SessionConfig
-from imu_allan.pipeline.workers import keep_large_blocks, worker_pool
+from imu_allan.pipeline.workers import keep_large_blocks, start_workers, worker_pool
+
+if TYPE_CHECKING:
+    from imu_allan.pipeline.session import SessionConfig
 
 
 def add_input_options(p: argparse.ArgumentParser) -> None:
@@ -38,8 +38,9 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
                    help='what to do with samples where the IMU moved')
 
 
-def session_config_from_args(args) -> SessionConfig:
+def session_config_from_args(args) -> 'SessionConfig':
     """Return the SessionConfig of the options added by :func:`add_input_options`."""
+    from imu_allan.pipeline.session import SessionConfig
     return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
 
 
@@ -67,6 +68,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
     path, topic, config, out, plot = args
+    from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True)
@@ -99,6 +101,7 @@ def spread_table(results: list, labels: list) -> tuple:
         in SI, None where a run gives no estimate (an upper bound or not identified).
 
     """
+    import numpy as np
     from imu_allan.core.fit import json_num   # scipy: not on the one-input path
 
     head = ['axis', 'param', 'unit'] + list(labels) + ['mean', 'std', 'CV %', 'min', 'max',
@@ -146,6 +149,7 @@ def _finite(obj):
 
 def _run_several(jobs: list, n_workers: int) -> list:
     """Analyse several inputs (in parallel when n_workers > 1), with a progress line."""
+    from imu_allan.io.inputs import Progress
     outcomes = [None] * len(jobs)
     if n_workers == 1:
         with Progress('inputs', len(jobs), unit='inputs') as bar:
@@ -169,26 +173,30 @@ def _run_several(jobs: list, n_workers: int) -> list:
 def run(args) -> int:
     """Analyse every input; write reports; print a summary or one JSON document."""
     paths = [Path(p) for p in args.inputs]
+    keep_large_blocks()         # a batch job: freed large blocks are reused, not re-faulted
+    plot = not args.no_plot
+    workers = args.jobs or min(2, os.cpu_count() or 1)
+    if len(paths) == 1 and workers > 1:
+        # The server of the workers that search the axes and draw the figures imports
+        # scipy and matplotlib on the other core while this process imports the readers
+        # below and reads the input.
+        start_workers(('imu_allan.io.plot_preload',) if plot else ())
+    from imu_allan.io.inputs import analyze_input, check_path, Progress
     for p in paths:
         check_path(p)
     config = session_config_from_args(args)
-    keep_large_blocks()         # a batch job: freed large blocks are reused, not re-faulted
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]
-    jobs = [(p, args.topic, config, o, not args.no_plot) for p, o in zip(paths, outs)]
+    jobs = [(p, args.topic, config, o, plot) for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
     else:
         # One input: its six axes are searched on the cores (several inputs: one each).
-        workers = args.jobs or min(2, os.cpu_count() or 1)
         if workers > 1:   # and the accumulator sums on a thread of its own
             config = replace(config, background_accumulator=True)
-        plot = not args.no_plot
-        # The figures are drawn by workers that loaded matplotlib while the input was read.
-        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
-                                        preload=('imu_allan.io.plot_preload',) if plot else ())
+        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, \
                 (worker_pool(min(workers, 2) if plot else 1) or nullcontext()) as pool:

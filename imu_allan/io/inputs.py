@@ -366,7 +366,7 @@ def raw_tap() -> tuple:
 
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
-                  prefetch: bool = True, preload: tuple = ()):
+                  prefetch: bool = True):
     """
     Stream one input through a Session and fit it.
 
@@ -387,9 +387,6 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         :func:`imu_allan.pipeline.analysis.analyze`).
     prefetch : bool
         See :func:`stream_input`.
-    preload : tuple of str
-        Further modules the worker processes import while the input is read (see
-        :func:`imu_allan.pipeline.workers.start_workers`), when workers > 1.
 
     Returns
     -------
@@ -402,7 +399,7 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
     start = time.monotonic()
     path = Path(path)
     if workers > 1:
-        start_workers(preload)      # its start-up overlaps the reading
+        start_workers()     # unless the caller did already: its start-up overlaps the reading
 
     def warn(text):
         if not quiet:
