@@ -41,24 +41,43 @@ class _LagQuadrature:
 
     def __init__(self, m: np.ndarray, n_terms: np.ndarray, reach: np.ndarray):
         k = m.size
-        hs: list = []
-        ws: list = []
-        pair_ids: list = []
-        pairs: list = []
-        for p in range(k):
-            for q in range(p, k):
-                h, w = self._nodes(int(m[p]), int(m[q]), int(n_terms[p]), int(n_terms[q]),
-                                   int(reach[p] + reach[q]))
-
-                pair_ids.append(np.full(h.size, len(pairs), dtype=np.int64))
-                pairs.append((p, q))
-                hs.append(h)
-                ws.append(w)
-        self.h = np.concatenate(hs)
-        self.weight = np.concatenate(ws)
-        self.pair = np.concatenate(pair_ids)
-        self.starts = np.concatenate([[0], np.cumsum([h.size for h in hs])[:-1]])
+        pairs = [(p, q) for p in range(k) for q in range(p, k)]
+        # Each pair's nodes, in order: its exact lag ranges, then its graded pieces.  The
+        # pieces are listed per pair in plain Python; the nodes are made in one go.
+        lo_a: list = []     # a range's first lag, or a piece's lower edge
+        hi_b: list = []     # a range's length, or a piece's upper edge
+        piece: list = []
+        per_pair: list = []
+        for p, q in pairs:
+            zones, gaps = _pair_layout(int(m[p]), int(m[q]), int(n_terms[p]), int(n_terms[q]),
+                                       int(reach[p] + reach[q]))
+            before = len(lo_a)
+            for s, e in zones:
+                lo_a.append(float(s))
+                hi_b.append(float(e + 1 - s))
+            for edges in gaps:
+                lo_a.extend(edges[:-1])
+                hi_b.extend(edges[1:])
+            piece += [False] * len(zones) + [True] * (len(lo_a) - before - len(zones))
+            per_pair.append(len(lo_a) - before)
+        a, b, is_piece = np.array(lo_a), np.array(hi_b), np.array(piece)
+        counts = np.where(is_piece, _GL_X.size, b).astype(np.int64)
+        item = np.repeat(np.arange(a.size), counts)
+        at = np.arange(item.size) - np.repeat(np.cumsum(counts) - counts, counts)
+        # A piece [a, b] gets Gauss-Legendre nodes mid + half x_i with weights half w_i.
+        half, mid = 0.5 * (b - a), 0.5 * (b + a)
+        gl = np.minimum(at, _GL_X.size - 1)
+        node_piece = is_piece[item]
+        self.h = np.where(node_piece, mid[item] + half[item] * _GL_X[gl], a[item] + at)
         self.pairs = np.array(pairs, dtype=np.int64)
+        nodes_per_pair = np.add.reduceat(counts, np.cumsum([0] + per_pair[:-1]))
+        self.pair = np.repeat(np.arange(len(pairs)), nodes_per_pair)
+        self.starts = np.cumsum(nodes_per_pair) - nodes_per_pair
+        n1 = n_terms[self.pairs[self.pair, 0]].astype(np.float64)
+        n2 = n_terms[self.pairs[self.pair, 1]].astype(np.float64)
+        # Lag h pairs terms k, k + h of the two taus: min(n1, n2 - h) - max(0, -h) of them.
+        w_pairs = np.clip(np.minimum(n1, n2 - self.h) - np.maximum(0.0, -self.h), 0.0, None)
+        self.weight = np.where(node_piece, half[item] * _GL_W[gl], 1.0) * w_pairs
         self.m1 = m[self.pairs[self.pair, 0]].astype(np.float64)
         self.m2 = m[self.pairs[self.pair, 1]].astype(np.float64)
         # Inner kink range of each node's pair: polynomial terms vanish outside it.
@@ -69,31 +88,6 @@ class _LagQuadrature:
         # Lags beyond the kink range of each node's pair (where tails apply).
         self.outside = (self.h < self.kmin) | (self.h > self.kmax)
         self.beyond = np.where(self.h > self.kmax, self.h - self.kmax, self.kmin - self.h)
-
-    @staticmethod
-    def _nodes(m1: int, m2: int, n1: int, n2: int, reach: int):
-        kinks = sorted({i * m1 - j * m2 for i in range(3) for j in range(3)})
-        lo = max(kinks[0] - reach, -(n1 - 1))
-        hi = min(kinks[-1] + reach, n2 - 1)
-        cuts = sorted({c for c in kinks + [0, n2 - n1, lo, hi] if lo <= c <= hi})
-        zones: list[list[int]] = []
-        for c in cuts:
-            s, e = max(lo, c - _EXACT), min(hi, c + _EXACT)
-            if zones and s <= zones[-1][1] + 1:
-                zones[-1][1] = max(zones[-1][1], e)
-            else:
-                zones.append([s, e])
-        hs = [np.arange(s, e + 1, dtype=np.float64) for s, e in zones]
-        ws = [np.ones(e + 1 - s) for s, e in zones]
-        for (_, e0), (s1, _) in zip(zones[:-1], zones[1:]):
-            edges = _graded(e0 + 0.5, s1 - 0.5, float(_EXACT))
-            half = 0.5 * np.diff(edges)
-            mid = 0.5 * (edges[1:] + edges[:-1])
-            hs.append((mid[:, None] + half[:, None] * _GL_X).ravel())
-            ws.append((half[:, None] * _GL_W).ravel())
-        h = np.concatenate(hs)
-        w_pairs = np.clip(np.minimum(n1, n2 - h) - np.maximum(0.0, -h), 0.0, None)
-        return h, np.concatenate(ws) * w_pairs
 
     def _stencil_lags(self, dt: float) -> tuple:
         """Inside nodes and the lags [s] of their nine stencil terms, (9, n_inside)."""
@@ -158,7 +152,35 @@ def _lru_get(cache: dict, key, size: int, make):
     return value
 
 
-def _graded(a: float, b: float, first: float) -> np.ndarray:
+def _pair_layout(m1: int, m2: int, n1: int, n2: int, reach: int) -> tuple[list, list]:
+    """
+    Lay out the lag axis of one pair of taus (m1, m2 samples; n1, n2 terms).
+
+    Returns
+    -------
+    zones : list of [int, int]
+        First and last lag of each run summed exactly (within ``_EXACT`` of a cut).
+    gaps : list of list of float
+        Between consecutive zones, the edges of the graded pieces [lags].
+
+    """
+    kinks = sorted({i * m1 - j * m2 for i in range(3) for j in range(3)})
+    lo = max(kinks[0] - reach, -(n1 - 1))
+    hi = min(kinks[-1] + reach, n2 - 1)
+    cuts = sorted({c for c in kinks + [0, n2 - n1, lo, hi] if lo <= c <= hi})
+    zones: list[list[int]] = []
+    for c in cuts:
+        s, e = max(lo, c - _EXACT), min(hi, c + _EXACT)
+        if zones and s <= zones[-1][1] + 1:
+            zones[-1][1] = max(zones[-1][1], e)
+        else:
+            zones.append([s, e])
+    gaps = [_graded(e0 + 0.5, s1 - 0.5, float(_EXACT))
+            for (_, e0), (s1, _) in zip(zones[:-1], zones[1:])]
+    return zones, gaps
+
+
+def _graded(a: float, b: float, first: float) -> list:
     """Edges of pieces covering [a, b], sizes first, _GROWTH first ... from both ends."""
     left, right = [a], [b]
     size = first
@@ -166,7 +188,7 @@ def _graded(a: float, b: float, first: float) -> np.ndarray:
         left.append(left[-1] + size)
         right.append(right[-1] - size)
         size *= _GROWTH
-    return np.array(left + right[::-1])
+    return left + right[::-1]
 
 
 class _CurveCovariance:
