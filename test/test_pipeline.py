@@ -134,6 +134,26 @@ def test_motion_policies(policy):
         assert s.stats.n_used == pytest.approx(40_000 - 16_500, abs=200)
 
 
+@pytest.mark.parametrize('policy', ['warn', 'pause', 'restart'])
+def test_motion_verdicts_do_not_depend_on_the_blocks(policy):
+    # Motion windows are cut from the stream: held rows join the next block's first.
+    t, y = _moving_record()
+    config = SessionConfig(on_motion=policy, settle_s=5.0)
+    whole = _feed(Session(config), t, y, block=t.size)
+    for seed, max_block in [(4, 7), (5, 250), (6, 9_000)]:
+        s = _feed_random_blocks(Session(config), t, y, seed, max_block)
+        assert s.stats == whole.stats
+        assert s.warnings == whole.warnings
+        assert_allclose(s.curve().avar, whole.curve().avar, rtol=1e-12)
+
+
+def test_a_session_flushed_before_its_rate_is_known_is_empty():
+    s = Session()
+    s.add(np.array([0, 10_000_000], dtype=np.int64), np.zeros((2, 6)))
+    s.flush()                                   # too few samples for a rate: nothing kept
+    assert s.acc is None and s.stats.n_used == 0 and s.curve() is None
+
+
 @pytest.mark.parametrize('cut', [20_000, 20_050])
 def test_checkpoint_round_trip_continues_identically(tmp_path, cut):
     # 20_050 stops inside a motion window (100 samples at 100 Hz): the 50 samples held

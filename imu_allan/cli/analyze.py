@@ -176,7 +176,7 @@ def run(args) -> int:
     keep_large_blocks()         # a batch job: freed large blocks are reused, not re-faulted
     plot = not args.no_plot
     workers = args.jobs or min(2, os.cpu_count() or 1)
-    if len(paths) == 1 and workers > 1:
+    if len(paths) == 1 and workers > 1 and paths[0].exists():
         # The server of the workers that search the axes and draw the figures imports
         # scipy and matplotlib on the other core while this process imports the readers
         # below and reads the input.

@@ -97,19 +97,18 @@ class _SampleChecks(_Parts):
         thr = self._motion_thresholds()
         i = 0
         while i < n_windows:
-            rows = slice(i * win, n_windows * win)
             if self._ref_mean is not None and self._ref_std is not None and not self._moving:
-                still, mean, std = _scan_still(y[rows], win, thr, self.config.motion_std_ratio,
-                                               self._ref_mean, self._ref_std)
+                still, mean, std = _scan_still(y[i * win:], win, thr,
+                                               self.config.motion_std_ratio, self._ref_mean,
+                                               self._ref_std)
                 if still:
                     self._in_motion = False
-                    end = (i + still) * win
-                    self._use(t[i * win:end], y[i * win:end])
+                    self._use(t[i * win:(i + still) * win], y[i * win:(i + still) * win])
                     i += still
                 if i == n_windows:
                     return
             else:
-                means, stds = _window_stats(y[rows][:win][None])
+                means, stds = _window_stats(y[i * win:(i + 1) * win][None])
                 mean, std = means[0], stds[0]
             k = slice(i * win, (i + 1) * win)
             self._judge_window(t[k], y[k], mean, std)
@@ -169,12 +168,14 @@ class _SampleChecks(_Parts):
         """Pass the samples :meth:`_use` holds to the accumulator, in order."""
         # Long runs go as they are (the accumulator copies them anyway); short ones,
         # window by window while the IMU moved now and then, are joined into one call.
+        if not self._pending:
+            return
+        assert self.acc is not None
         short: list = []
         for piece in self._pending + [None]:
             if piece is not None and piece.shape[0] < _DIRECT_ROWS:
                 short.append(piece)
                 continue
-            assert self.acc is not None
             if short:
                 self.acc.add(short[0] if len(short) == 1 else np.concatenate(short))
                 short = []
