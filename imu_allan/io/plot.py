@@ -127,8 +127,11 @@ def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
                 ax.loglog(tau_fine[inside], np.sqrt(avar), ':', color=colour, lw=0.9,
                           alpha=0.8)
                 k = int(np.argmax(avar))
+                # A term that peaks at the right end (random walk) is labelled leftwards,
+                # so that its name stays inside the figure.
                 ax.annotate(label, (tau_fine[inside][k], np.sqrt(avar[k])), fontsize=6,
-                            color=colour, alpha=0.8)
+                            color=colour, alpha=0.8,
+                            ha='right' if k > 0.8 * (avar.size - 1) else 'left')
         ax.set_xlabel('averaging time tau [s]')
         ax.set_ylabel(ylabel)
         ax.grid(True, which='major', alpha=0.3)
