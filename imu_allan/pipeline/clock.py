@@ -82,8 +82,15 @@ class _StampClock(_Parts):
         return _NS / verdict[1]
 
     def _note_jitter(self, jitter: float, n_steps: int) -> None:
-        self._jitter_sq += jitter ** 2 * n_steps
-        self._jitter_n += n_steps
+        self._note_jitters(np.array([jitter]), n_steps)
+
+    def _note_jitters(self, jitters: np.ndarray, n_steps: int) -> None:
+        """Add windows' relative jitters, each over ``n_steps`` steps, to the running RMS."""
+        # Added one window after the other (add.accumulate is sequential), so the sum
+        # has the same bits however the windows were grouped into calls.
+        terms = np.concatenate(([self._jitter_sq], jitters * jitters * n_steps))
+        self._jitter_sq = float(np.add.accumulate(terms)[-1])
+        self._jitter_n += n_steps * jitters.size
         self.stats.jitter_rel = math.sqrt(self._jitter_sq / self._jitter_n)
 
     def _flag_irregular(self, jitter: float) -> None:
@@ -160,10 +167,7 @@ class _StampClock(_Parts):
     def _note_ordinary(self, steps: np.ndarray) -> None:
         """Note the jitter of whole ordinary windows (see :meth:`_ordinary_windows`)."""
         w = steps.reshape(-1, _CLOCK_WINDOW).astype(np.float64)
-        # Summed window by window, in the order :meth:`_judge_clock` would: the same
-        # floating-point result whatever the block sizes.
-        for jitter in (w.std(axis=1) / w.mean(axis=1)).tolist():
-            self._note_jitter(jitter, _CLOCK_WINDOW)
+        self._note_jitters(w.std(axis=1) / w.mean(axis=1), _CLOCK_WINDOW)
         self._off_period_ns = None
 
     def _ingest_regular(self, stamp_ns: np.ndarray, samples: np.ndarray,
