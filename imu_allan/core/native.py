@@ -8,10 +8,10 @@ every call, so threads that call these kernels run in parallel.
 
 Each kernel has a numpy twin in the module that uses it (the accumulator, the batch
 curve, the raw copy, the session's sample checks, the CSV reader, the Imu payload
-decoder, the sqlite page reader).  :data:`LIB`
-is None when the library was never built (a bare source tree) or when the environment
-sets ``IMU_ALLAN_NATIVE=0``; the twins then do the work, with the same results to
-rounding (test/test_native.py compares them).
+decoder, the sqlite page reader).  :data:`LIB` is None when the library was never
+built (a bare source tree) or when the environment sets ``IMU_ALLAN_NATIVE=0``; the
+twins then do the work, with the same results to rounding (test/test_native.py
+compares them).
 """
 
 import ctypes
