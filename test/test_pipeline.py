@@ -184,7 +184,7 @@ def test_checkpoint_refuses_another_rate(tmp_path):
         Session.load_state(tmp_path / 'bad.npz')
 
 
-@pytest.mark.parametrize('damage', ['no_stats', 'held_rows', 'meta_list'])
+@pytest.mark.parametrize('damage', ['no_stats', 'held_rows', 'meta_list', 'short_reference'])
 def test_a_damaged_checkpoint_is_one_clear_error(tmp_path, damage):
     t, y = _record(5_050)
     _feed(Session(), t, y).save_state(tmp_path / 'state.npz')
@@ -196,6 +196,9 @@ def test_a_damaged_checkpoint_is_one_clear_error(tmp_path, damage):
     elif damage == 'held_rows':
         arrays['held_stamp_ns'] = np.arange(3, dtype=np.int64)
         arrays['held_samples'] = np.zeros((3, 2))
+    elif damage == 'short_reference':     # the motion scan would read past its end
+        assert meta['ref_mean'] is not None
+        meta['ref_mean'] = meta['ref_mean'][:3]
     arrays['session_meta'] = np.array(json.dumps([] if damage == 'meta_list' else meta))
     np.savez(tmp_path / 'damaged.npz', **arrays)
     with pytest.raises(InputError, match='is damaged'):

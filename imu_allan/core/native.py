@@ -323,6 +323,8 @@ def motion_scan(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
     y = _rows(y)
     thr = np.ascontiguousarray(thr, dtype=np.float64)
     ref_std = np.ascontiguousarray(ref_std, dtype=np.float64)
+    # The kernel reads n_axes values of each: a shorter array would be read past its end.
+    assert ref_mean.shape == ref_std.shape == thr.shape == (y.shape[1],)
     mean, std = np.empty(y.shape[1]), np.empty(y.shape[1])
     still = LIB.imu_allan_motion_scan(y.ctypes.data, y.strides[0] // 8, y.shape[0] // win, win,
                                       y.shape[1], thr.ctypes.data, float(ratio_limit),
@@ -357,6 +359,7 @@ def repeats(y: np.ndarray, last: np.ndarray, run: np.ndarray) -> np.ndarray:
     assert LIB is not None and run.dtype == np.int64 and run.flags.c_contiguous
     y = _rows(y)
     last = np.ascontiguousarray(last, dtype=np.float64)
+    assert last.shape == run.shape == (y.shape[1],)
     longest = np.empty(y.shape[1], np.int64)
     LIB.imu_allan_repeats(y.ctypes.data, y.strides[0] // 8, y.shape[0], y.shape[1],
                           last.ctypes.data, run.ctypes.data, longest.ctypes.data)

@@ -165,8 +165,11 @@ class _StateFile(_Parts):
         session.last_stamp_ns = meta['last_stamp_ns']
         session._restore_clock(meta, rate)
         if meta['ref_mean'] is not None:
-            session._ref_mean = np.array(meta['ref_mean'])
-            session._ref_std = np.array(meta['ref_std'])
+            # float64 arrays of their own: the motion scan updates the mean in place.
+            session._ref_mean = np.array(meta['ref_mean'], dtype=np.float64)
+            session._ref_std = np.array(meta['ref_std'], dtype=np.float64)
+            if session._ref_mean.shape != (N_AXES,) or session._ref_std.shape != (N_AXES,):
+                raise ValueError('the motion reference has the wrong shape')
         if 'held_samples' in held:  # version 3; older checkpoints lost these
             rows = held['held_stamp_ns'].shape
             if (held['held_samples'].shape != rows + (N_AXES,)
