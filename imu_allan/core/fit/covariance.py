@@ -70,7 +70,8 @@ class _LagQuadrature:
         node_piece = is_piece[item]
         self.h = np.where(node_piece, mid[item] + half[item] * _GL_X[gl], a[item] + at)
         self.pairs = np.array(pairs, dtype=np.int64)
-        nodes_per_pair = np.add.reduceat(counts, np.cumsum([0] + per_pair[:-1]))
+        nodes_per_pair = np.bincount(np.repeat(np.arange(len(pairs)), per_pair), weights=counts,
+                                     minlength=len(pairs)).astype(np.int64)
         self.pair = np.repeat(np.arange(len(pairs)), nodes_per_pair)
         self.starts = np.cumsum(nodes_per_pair) - nodes_per_pair
         n1 = n_terms[self.pairs[self.pair, 0]].astype(np.float64)
