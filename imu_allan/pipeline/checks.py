@@ -191,15 +191,14 @@ class _SampleChecks(_Parts):
     def _window_moving(self, mean: np.ndarray, std: np.ndarray) -> bool:
         """Whether one motion window moved, from its per-axis mean and std (6,) each."""
         thr = self._motion_thresholds()
-        if self._ref_mean is None:
+        if self._ref_mean is None or self._ref_std is None:
             # Quantised sensors can show zero spread: floor the reference noise.  The
             # reference is this session's own array: the scan updates it in place.
             self._ref_mean = np.array(mean, dtype=np.float64)
             self._ref_std = np.maximum(std, thr / 20)
             return False
-        dev = np.abs(mean - self._ref_mean)
-        ratio = std / self._ref_std
-        moving_axes = (dev > thr) | (ratio > self.config.motion_std_ratio)
+        moving_axes, dev, ratio = _moved_axes(mean, std, thr, self.config.motion_std_ratio,
+                                              self._ref_mean, self._ref_std)
         if moving_axes.any():
             names = ', '.join(AXES[j] for j in np.flatnonzero(moving_axes))
             action = {'warn': 'samples kept (on_motion=warn)',
@@ -209,9 +208,28 @@ class _SampleChecks(_Parts):
                        f'{dev.max():.3g}, noise x{ratio.max():.1f}): the IMU is not '
                        f'stationary; {action}', once=False)
             return True
-        # Follow slow bias drift so that temperature drift is not taken for motion.
-        self._ref_mean[:] = 0.99 * self._ref_mean + 0.01 * mean
+        _follow_drift(self._ref_mean, mean)
         return False
+
+
+def _moved_axes(mean: np.ndarray, std: np.ndarray, thr: np.ndarray, ratio_limit: float,
+                ref_mean: np.ndarray, ref_std: np.ndarray) -> tuple:
+    """
+    Judge one window against the still reference: the rule of the compiled scan too.
+
+    Returns (moved (n_axes,) bool, |mean - ref_mean| (n_axes,), std / ref_std (n_axes,)):
+    an axis moved when its mean is more than ``thr`` off or its std more than
+    ``ratio_limit`` times the reference's.
+    """
+    dev = np.abs(mean - ref_mean)
+    ratio = std / ref_std
+    return (dev > thr) | (ratio > ratio_limit), dev, ratio
+
+
+def _follow_drift(ref_mean: np.ndarray, mean: np.ndarray) -> None:
+    """Move the reference 1 % of the way to a still window's mean, in place (bias drift)."""
+    # Slow temperature drift of the bias is thus not taken for motion.
+    ref_mean[:] = 0.99 * ref_mean + 0.01 * mean
 
 
 def _scan_still(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
@@ -226,10 +244,9 @@ def _still_run(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
     """
     Find the first window that moved; pull the reference along the still ones before it.
 
-    The numpy twin of :func:`imu_allan.core.native.motion_scan`: a window moved when an
-    axis' mean is more than ``thr`` off ``ref_mean`` or its std more than
-    ``ratio_limit`` times ``ref_std``; each still window before it moves ``ref_mean``
-    (in place) 1 % of the way to its mean, as :meth:`_SampleChecks._window_moving` does.
+    The numpy twin of :func:`imu_allan.core.native.motion_scan`, window by window with
+    :func:`_moved_axes` and :func:`_follow_drift`, as :meth:`_SampleChecks._window_moving`
+    judges one window.
 
     Parameters
     ----------
@@ -255,9 +272,9 @@ def _still_run(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
     """
     means, stds = _window_stats(y.reshape(-1, win, y.shape[1]))
     for w in range(means.shape[0]):
-        if ((np.abs(means[w] - ref_mean) > thr) | (stds[w] / ref_std > ratio_limit)).any():
+        if _moved_axes(means[w], stds[w], thr, ratio_limit, ref_mean, ref_std)[0].any():
             return w, means[w], stds[w]
-        ref_mean[:] = 0.99 * ref_mean + 0.01 * means[w]
+        _follow_drift(ref_mean, means[w])
     return means.shape[0], None, None
 
 
