@@ -202,3 +202,47 @@ def test_repeat_runs_equal_the_numpy_twin(monkeypatch):
     assert_array_equal(got[False][1], got[True][1])
     assert got[False][0][0] >= 350 and got[False][0][2] >= 899
     assert got[False][0][5] == got[False][1][5] == 15_000
+
+
+def test_gauss_markov_stencil_sums_equal_the_numpy_twin():
+    # Lags across the three branches of e^-x - 1 + x (series, expm1, exp), both signs.
+    from imu_allan.core.fit.covariance import _STENCIL_WEIGHTS
+    from imu_allan.core.model import _gcov_gauss_markov
+    rng = np.random.default_rng(8)
+    t_s = 40.0
+    lags = t_s * np.geomspace(1e-6, 60.0, 9 * 3000) * rng.choice([-1.0, 1.0], 9 * 3000)
+    lags = rng.permutation(lags).reshape(9, -1)
+    got = native.gm_stencil(lags, _STENCIL_WEIGHTS, t_s)
+    want = _STENCIL_WEIGHTS @ _gcov_gauss_markov(lags, t_s)
+    # Same terms; summation order and exp against expm1 (x >= 0.5) round differently.
+    assert_allclose(got, want, rtol=0, atol=1e-15 * np.abs(want).max())
+
+
+def test_pair_sums_equal_the_numpy_twin():
+    rng = np.random.default_rng(9)
+    g = rng.normal(size=(3, 5000))
+    weight = rng.uniform(0.0, 2.0, 5000)
+    starts = np.array([0, 1, 9, 10, 777, 4000, 4999], dtype=np.int64)
+    a_idx, b_idx = np.triu_indices(3)
+    got = native.pair_sums(g, weight, starts, a_idx, b_idx)
+    want = np.add.reduceat((g * weight)[a_idx] * g[b_idx], starts, axis=1)
+    assert_allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+
+
+def test_fit_is_the_same_without_the_library(monkeypatch):
+    # The covariance quadrature's two kernels against their numpy twins, through a fit.
+    from imu_allan.core.fit import covariance, fit_axis
+    from imu_allan.core.model import avar_gauss_markov, avar_random_walk, avar_white
+    tau = np.unique(np.round(np.geomspace(1, 200_000, 30))) / 100.0
+    avar = (avar_white(tau, 1e-3) + avar_gauss_markov(tau, 2e-5, 50.0)
+            + avar_random_walk(tau, 1e-6))
+    n_samples = 3_600_000
+    edf = np.maximum(n_samples * 0.01 / tau, 2.0)
+    fits = {}
+    for lib in (native.LIB, None):
+        monkeypatch.setattr(native, 'LIB', lib)
+        monkeypatch.setattr(covariance, '_COV_CACHE', {})     # no nodes or sums shared
+        fits[lib is None] = fit_axis(tau, avar, edf, rate_hz=100.0, n_samples=n_samples)
+    for sym, p in fits[False].optimised.items():
+        q = fits[True].optimised[sym]
+        assert_allclose([p.value, *p.ci95], [q.value, *q.ci95], rtol=1e-6, err_msg=sym)

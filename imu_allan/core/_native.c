@@ -565,6 +565,62 @@ void imu_allan_repeats(const double *y, long ld, long n, long n_axes, const doub
     }
 }
 
+/* ------------------------------------------------ the fit's covariance quadrature */
+
+/*
+ * Stencil sums of the first-order Gauss-Markov generalised covariance at the quadrature
+ * nodes (imu_allan/core/fit/covariance.py, _LagQuadrature.gamma):
+ * out[k] = sum_s w[s] g(lags[s n + k]) with g(u) = -(T^3 / 2) (e^-x - 1 + x), x = |u| / T,
+ * and x^2 (1/2 - x (1/6 - x / 24)) for e^-x - 1 + x below x = 1e-3, term by term as
+ * the numpy twin (model.py, _gcov_gauss_markov) computes them; from x = 0.5 on, where
+ * nothing cancels, exp (faster than expm1) gives e^-x.  One pass over the lags instead
+ * of a handful of (n_s, n) temporaries.
+ */
+void imu_allan_gm_stencil(const double *lags, long n, long n_s, const double *w, double T,
+                          double *out)
+{
+    const double inv = 1.0 / T, scale = -0.5 * pow(T, 3.0);
+    for (long k = 0; k < n; k++)
+        out[k] = 0.0;
+    for (long s = 0; s < n_s; s++) {
+        const double *u = lags + s * n;
+        const double ws = w[s];
+        for (long k = 0; k < n; k++) {
+            double x = fabs(u[k]) * inv;
+            double h = x < 1e-3 ? x * x * (0.5 - x * (1.0 / 6.0 - x / 24.0))
+                       : x < 0.5 ? expm1(-x) + x : (exp(-x) - 1.0) + x;
+            out[k] += ws * (h * scale);
+        }
+    }
+}
+
+/*
+ * Per-segment sums of weight g_a g_b over the quadrature nodes (covariance.py,
+ * _LagQuadrature.blocks): out[p n_seg + i] = sum over nodes j of segment i
+ * ([starts[i], starts[i + 1]), the last one to n) of weight[j] g[a_p][j] g[b_p][j].
+ * Eight partial sums per segment, as everywhere in this file.
+ */
+void imu_allan_pair_sums(const double *g, long n, const double *weight, const long *starts,
+                         long n_seg, const long *a_idx, const long *b_idx, long n_ab,
+                         double *out)
+{
+    for (long i = 0; i < n_seg; i++) {
+        long j0 = starts[i], j1 = i + 1 < n_seg ? starts[i + 1] : n;
+        for (long p = 0; p < n_ab; p++) {
+            const double *ga = g + a_idx[p] * n, *gb = g + b_idx[p] * n;
+            double acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+            long j = j0;
+            for (; j + 8 <= j1; j += 8)
+                for (int k = 0; k < 8; k++)
+                    acc[k] += (weight[j + k] * ga[j + k]) * gb[j + k];
+            for (int k = 0; j < j1; j++, k++)
+                acc[k] += (weight[j] * ga[j]) * gb[j];
+            out[p * n_seg + i] = ((acc[0] + acc[1]) + (acc[2] + acc[3]))
+                + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+        }
+    }
+}
+
 /* ------------------------------------------------------------- module init */
 
 static struct PyModuleDef native_module = {

@@ -65,6 +65,13 @@ def _load() -> ctypes.CDLL | None:
             lib.imu_allan_repeats.restype = None
             lib.imu_allan_repeats.argtypes = [ctypes.c_void_p, _LONG, _LONG, _LONG,
                                               ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+            lib.imu_allan_gm_stencil.restype = None
+            lib.imu_allan_gm_stencil.argtypes = [ctypes.c_void_p, _LONG, _LONG, ctypes.c_void_p,
+                                                 ctypes.c_double, ctypes.c_void_p]
+            lib.imu_allan_pair_sums.restype = None
+            lib.imu_allan_pair_sums.argtypes = [
+                ctypes.c_void_p, _LONG, ctypes.c_void_p, ctypes.c_void_p, _LONG,
+                ctypes.c_void_p, ctypes.c_void_p, _LONG, ctypes.c_void_p]
             return lib
     return None
 
@@ -364,3 +371,72 @@ def repeats(y: np.ndarray, last: np.ndarray, run: np.ndarray) -> np.ndarray:
     LIB.imu_allan_repeats(y.ctypes.data, y.strides[0] // 8, y.shape[0], y.shape[1],
                           last.ctypes.data, run.ctypes.data, longest.ctypes.data)
     return longest
+
+
+def gm_stencil(lags: np.ndarray, weights: np.ndarray, T: float) -> np.ndarray:
+    """
+    Sum the weighted Gauss-Markov generalised covariances of stencil lags, per node.
+
+    The twin of ``weights @ _gcov_gauss_markov(lags, T)``
+    (:mod:`imu_allan.core.model`).
+
+    Parameters
+    ----------
+    lags : np.ndarray
+        Shape (n_s, n), C-contiguous float64 lags [s].
+    weights : np.ndarray
+        Shape (n_s,), float64 stencil weights.
+    T : float
+        Correlation time [s].
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n,), sum over s of weights[s] g(lags[s]) [s^3 per unit coefficient].
+
+    """
+    assert LIB is not None and lags.dtype == np.float64 and lags.flags.c_contiguous
+    w = np.ascontiguousarray(weights, dtype=np.float64)
+    assert lags.ndim == 2 and w.shape == (lags.shape[0],)
+    out = np.empty(lags.shape[1])
+    LIB.imu_allan_gm_stencil(lags.ctypes.data, lags.shape[1], lags.shape[0], w.ctypes.data,
+                             float(T), out.ctypes.data)
+    return out
+
+
+def pair_sums(g: np.ndarray, weight: np.ndarray, starts: np.ndarray, a_idx: np.ndarray,
+              b_idx: np.ndarray) -> np.ndarray:
+    """
+    Sum weight * g[a] * g[b] over each segment of nodes, for every pair (a, b).
+
+    The twin of ``np.add.reduceat(weight * g[a_idx] * g[b_idx], starts, axis=1)``.
+
+    Parameters
+    ----------
+    g : np.ndarray
+        Shape (n_g, n), C-contiguous float64 values at the nodes.
+    weight : np.ndarray
+        Shape (n,), contiguous float64 node weights.
+    starts : np.ndarray
+        Shape (n_seg,), int64 first node of each segment (increasing, each segment
+        non-empty, the last one running to n).
+    a_idx, b_idx : np.ndarray
+        Shape (n_ab,), int64 rows of g paired.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n_ab, n_seg), the sums.
+
+    """
+    assert LIB is not None and g.dtype == weight.dtype == np.float64
+    assert g.flags.c_contiguous and weight.flags.c_contiguous and weight.shape == g.shape[1:]
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    a_idx = np.ascontiguousarray(a_idx, dtype=np.int64)
+    b_idx = np.ascontiguousarray(b_idx, dtype=np.int64)
+    assert a_idx.shape == b_idx.shape
+    out = np.empty((a_idx.size, starts.size))
+    LIB.imu_allan_pair_sums(g.ctypes.data, g.shape[1], weight.ctypes.data, starts.ctypes.data,
+                            starts.size, a_idx.ctypes.data, b_idx.ctypes.data, a_idx.size,
+                            out.ctypes.data)
+    return out

@@ -9,7 +9,8 @@ from typing import Sequence
 
 import numpy as np
 
-from imu_allan.core.model import Term
+from imu_allan.core import native
+from imu_allan.core.model import _gcov_gauss_markov, Term
 
 # Lag-sum quadrature: lags within _EXACT of a kink are summed exactly, the rest is
 # integrated with Gauss-Legendre on pieces that grow _GROWTH-fold away from the kinks.
@@ -109,7 +110,10 @@ class _LagQuadrature:
             # Direct sums only between the kinks (beyond them the term has no
             # covariance, or its tail formula): one call over all nine stencil lags.
             inside, lags = self._stencil_lags(dt)
-            g[inside] = _STENCIL_WEIGHTS @ gcov(lags, *nonlinear)
+            if gcov is _gcov_gauss_markov and native.LIB is not None:
+                g[inside] = native.gm_stencil(lags, _STENCIL_WEIGHTS, *nonlinear)
+            else:
+                g[inside] = _STENCIL_WEIGHTS @ gcov(lags, *nonlinear)
         else:
             reach = term.reach(self.m1, self.m2, dt, *nonlinear)
             direct = (self.h >= self.kmin - reach) & (self.h <= self.kmax + reach)
@@ -132,9 +136,12 @@ class _LagQuadrature:
         p, q = self.pairs[:, 0], self.pairs[:, 1]
         a_idx, b_idx = np.triu_indices(n)
         g = np.stack(gammas)
-        wg = g * self.weight
-        # The nodes are stored pair by pair, so each pair's sum is one reduceat segment.
-        sums = np.add.reduceat(wg[a_idx] * g[b_idx], self.starts, axis=1) * scale[p, q]
+        # The nodes are stored pair by pair, so each pair's sum is one segment.
+        if native.LIB is not None:
+            sums = native.pair_sums(g, self.weight, self.starts, a_idx, b_idx)
+        else:
+            sums = np.add.reduceat((g * self.weight)[a_idx] * g[b_idx], self.starts, axis=1)
+        sums *= scale[p, q]
         for s, a, b in zip(sums, a_idx, b_idx):
             out[a, b, p, q] = s
             out[a, b, q, p] = s
