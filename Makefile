@@ -17,6 +17,9 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg imu_allan/cor
 	$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
 	$(PY) -m pip install -q --disable-pip-version-check -r requirements-dev.txt
 	$(PY) -m pip install -q --disable-pip-version-check --no-deps -e .
+	@# Byte-compiled as an installed package is (no .pyc is written where
+	@# PYTHONDONTWRITEBYTECODE is set, and every start would compile each module).
+	$(PY) -m compileall -q imu_allan >/dev/null
 	@touch $(STAMP)
 
 demo: venv
