@@ -15,9 +15,10 @@ from mcap.reader import make_reader
 import numpy as np
 import zstandard
 
+from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _MCAP_MAGIC, _Piece, _Topic
-from imu_allan.io.imu_cdr import _records
+from imu_allan.io.imu_cdr import _records, payload_frame_id
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
 _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_DATA_END = 0x05, 0x06, 0x07, 0x0F
@@ -209,19 +210,20 @@ class _McapBackend(_Backend):
         except (struct.error, UnicodeDecodeError):
             return None
         data_pos = body + 40 + name_len
-        data = mm[data_pos:min(data_pos + data_len, chunk.body_end)]
+        # A view of the map: zstd reads it in place (a slice of the map is a copy).
+        data = memoryview(self.u8[data_pos:min(data_pos + data_len, chunk.body_end)])
         try:
             if compression == '':
-                raw = data
+                raw = data.tobytes()
             elif compression == 'zstd' and chunk.complete:
                 raw = self.zstd.decompress(data, max_output_size=size)
             elif compression == 'zstd':
                 # A chunk cut short: keep what its complete zstd blocks hold.
                 raw = self.zstd.decompressobj().decompress(data)
             elif compression == 'lz4' and chunk.complete:
-                raw = lz4.frame.decompress(data)
+                raw = lz4.frame.decompress(data.tobytes())
             elif compression == 'lz4':
-                raw = lz4.frame.LZ4FrameDecompressor().decompress(data)
+                raw = lz4.frame.LZ4FrameDecompressor().decompress(data.tobytes())
             else:
                 self.warnings.append(f'{self.path}: chunk compression {compression!r} is not '
                                      'supported; chunk skipped')
@@ -324,6 +326,25 @@ class _McapBackend(_Backend):
             offsets, lengths, recv_ns = offsets[order], lengths[order], recv_ns[order]
         return _make_piece(buf, offsets + 31, lengths, recv_ns, encoding, self.decompress)
 
+    def _plain_piece(self, buf: np.ndarray, channel: int, offsets: np.ndarray,
+                     encoding: str) -> _Piece | None:
+        """
+        Read one channel's indexed messages of a chunk in one compiled call, or None.
+
+        The common case (every indexed record a Message of the channel, in log-time
+        order, with plain Imu payloads, no per-message compression); anything else
+        returns None and the chunk takes the general path, with the same result.
+        """
+        if native.LIB is None or self.decompress is not None or offsets.size == 0:
+            return None
+        got = native.mcap_imu(buf, offsets, channel, encoding == 'ros1')
+        if got is None:
+            return None
+        first = int(offsets[0])
+        size = int.from_bytes(buf[first + 1:first + 9].tobytes(), 'little') - 22
+        frame_id = payload_frame_id(buf[first + 31:first + 31 + size].tobytes(), encoding)
+        return _Piece(*got, 0, frame_id)
+
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield the topic's messages chunk by chunk (stop with a warning at damage)."""
         try:
@@ -342,15 +363,20 @@ class _McapBackend(_Backend):
                     continue
                 buf = np.frombuffer(raw, np.uint8)
                 offsets = None
+                piece = None
                 if item.indexes is not None:
-                    parts = [item.indexes[c][:, 1] for c in wanted if c in item.indexes]
-                    offsets = np.concatenate(parts).astype(np.int64)
-                    if not ((offsets + 31 <= buf.size).all()
-                            and (buf[offsets] == _OP_MESSAGE).all()):
-                        offsets = None   # an index that does not match the chunk: walk it
-                if offsets is None:
-                    offsets = self._walk(raw)
-                piece = self._message_piece(buf, offsets, wanted, topic.encoding)
+                    parts = [(c, item.indexes[c][:, 1]) for c in wanted if c in item.indexes]
+                    if len(parts) == 1:
+                        piece = self._plain_piece(buf, *parts[0], topic.encoding)
+                    if piece is None:
+                        offsets = np.concatenate([o for _, o in parts]).astype(np.int64)
+                        if not ((offsets + 31 <= buf.size).all()
+                                and (buf[offsets] == _OP_MESSAGE).all()):
+                            offsets = None   # an index that does not match the chunk: walk it
+                if piece is None:
+                    piece = self._message_piece(
+                        buf, self._walk(raw) if offsets is None else offsets, wanted,
+                        topic.encoding)
                 self._release(item.body_end)
             else:
                 piece = self._message_piece(self.u8, item, wanted, topic.encoding)
