@@ -9,7 +9,7 @@ from pathlib import Path
 
 from matplotlib import colormaps
 from matplotlib.figure import Figure
-from matplotlib.ticker import LogFormatter, LogLocator, NullFormatter
+from matplotlib.ticker import LogFormatter, NullLocator
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
@@ -35,15 +35,15 @@ def _plain_log_labels(fig) -> None:
     """
     Label log axes 1e-05 instead of 10^-5: the default needs the mathtext parser.
 
-    Minor ticks only at 2 and 5 x each decade, unlabelled: every tick is an object that
-    each saved format lays out anew (eight per decade cost a third of a figure's time).
+    No minor ticks: every tick is an object that each saved format lays out anew (eight
+    per decade cost a third of a figure's time, two per decade still 0.04 s of the
+    PNG's 0.31 s and 0.06 s of the SVG's 0.24 s); the decades carry labels and a grid.
     """
     for ax in fig.axes:
         for axis, scale in ((ax.xaxis, ax.get_xscale()), (ax.yaxis, ax.get_yscale())):
             if scale == 'log':
                 axis.set_major_formatter(LogFormatter(labelOnlyBase=True))
-                axis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))
-                axis.set_minor_formatter(NullFormatter())
+                axis.set_minor_locator(NullLocator())
 
 
 def warm_fonts() -> None:
