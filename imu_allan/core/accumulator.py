@@ -363,7 +363,8 @@ class AllanAccumulator(_Persistence):
         clone._flush()
         return clone._sums, clone._counts
 
-    def curve(self, confidence: float = 0.683, alpha=None, min_terms: int = 1) -> AllanCurve:
+    def curve(self, confidence: float = 0.683, alpha=None, min_terms: int = 1,
+              bounds: bool = True) -> AllanCurve:
         """
         Overlapping Allan curve of all axes from the data added so far.
 
@@ -379,6 +380,10 @@ class AllanAccumulator(_Persistence):
             keeps every tau with data, m <= M // 2 for one segment of M samples, as
             :func:`imu_allan.core.allan.tau_grid` does; the EDF says how little the last
             taus are worth.
+        bounds : bool
+            Compute adev_lo/adev_hi (chi-square quantiles per tau and axis); False leaves
+            them NaN, for a caller that adds them later
+            (:func:`imu_allan.core.allan.confidence_bounds` on avar and edf).
 
         Returns
         -------
@@ -414,7 +419,10 @@ class AllanAccumulator(_Persistence):
         edf = np.broadcast_to(np.asarray(edf_overlapping(alpha_arr, m_eff[:, None],
                                                          n_eff[:, None]), dtype=float),
                               (k, a)).copy()
-        adev_lo, adev_hi = confidence_bounds(avar, edf, confidence)
+        if bounds:
+            adev_lo, adev_hi = confidence_bounds(avar, edf, confidence)
+        else:
+            adev_lo = adev_hi = np.full(avar.shape, np.nan)
         return AllanCurve(tau_s, m, avar, n_terms, edf, alpha_arr, np.asarray(adev_lo),
                           np.asarray(adev_hi), float(confidence), 'overlapping',
                           self.rate_hz)

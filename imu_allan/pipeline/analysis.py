@@ -9,11 +9,12 @@ DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_param
 
 from dataclasses import asdict, dataclass
 import math
+from typing import Any, Callable
 
 import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
-from imu_allan.core.allan import AllanCurve
+from imu_allan.core.allan import AllanCurve, confidence_bounds
 from imu_allan.core.exports import driver_yaml, kalibr_yaml, robot_localization_yaml, vins_yaml
 from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.kalman import imu_covariance, kalman_model, KalmanModel
@@ -231,13 +232,21 @@ def _search_job(job: tuple) -> AxisFit | None:
         return None
 
 
-def _map_axes(jobs: list, workers: int) -> list:
-    """Run :func:`_search_job` over the axes, in worker processes when workers > 1."""
+def _map_axes(jobs: list, workers: int, meanwhile: Callable[[], Any]) -> tuple[list, Any]:
+    """
+    Run :func:`_search_job` over the axes, in worker processes when workers > 1.
+
+    Returns the fits and what ``meanwhile()`` returned: it runs in this process while
+    the workers search (first, without them).
+    """
     pool = worker_pool(min(workers, len(jobs)))
     if pool is None:
-        return [_search_job(job) for job in jobs]
+        done = meanwhile()
+        return [_search_job(job) for job in jobs], done
     with pool:
-        return list(pool.map(_search_job, jobs))
+        fits = pool.map(_search_job, jobs)      # submitted now, collected below
+        done = meanwhile()
+        return list(fits), done
 
 
 def analyze(session, source: str = '', raw=None, topic: str = '',
@@ -271,7 +280,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         None while no Allan deviation can be computed yet.
 
     """
-    curve = session.curve(confidence=CONFIDENCE)
+    # The bounds (chi-square quantiles) are computed while the workers search.
+    curve = session.curve(confidence=CONFIDENCE, bounds=False)
     if curve is None or curve.tau_s.size < 3:
         return None
     samples, raw_rate = raw_evidence(raw, session.rate_hz)
@@ -283,7 +293,10 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
             jobs[axis] = (curve.tau_s, avar, curve.edf[:, j], curve.rate_hz,
                           int(session.stats.n_used),
                           None if samples is None else samples[:, j], raw_rate, AXIS_UNITS[axis])
-    fits.update(zip(jobs, _map_axes(list(jobs.values()), workers)))
+    found, (lo, hi) = _map_axes(list(jobs.values()), workers, lambda: confidence_bounds(
+        curve.avar, curve.edf, CONFIDENCE))
+    fits.update(zip(jobs, found))
+    curve = curve._replace(adev_lo=lo, adev_hi=hi)
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
     return AnalysisResult(
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),

@@ -303,11 +303,16 @@ class Session(_StampClock, _SampleChecks, _StateFile):
         """Duration of the samples used so far [s]."""
         return self.stats.n_used / self.rate_hz if self.rate_hz > 0 else 0.0
 
-    def curve(self, confidence: float = 0.95) -> AllanCurve | None:
-        """Allan curve of the samples used so far, or None before any tau is computable."""
+    def curve(self, confidence: float = 0.95, bounds: bool = True) -> AllanCurve | None:
+        """
+        Allan curve of the samples used so far, or None before any tau is computable.
+
+        ``bounds=False`` leaves adev_lo/adev_hi NaN (see
+        :meth:`imu_allan.core.accumulator.AllanAccumulator.curve`).
+        """
         if self.acc is None or self.acc.n_samples < 4:
             return None
-        return self.acc.curve(confidence=confidence)
+        return self.acc.curve(confidence=confidence, bounds=bounds)
 
     @property
     def warnings(self) -> list[str]:
