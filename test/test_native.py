@@ -246,3 +246,17 @@ def test_fit_is_the_same_without_the_library(monkeypatch):
     for sym, p in fits[False].optimised.items():
         q = fits[True].optimised[sym]
         assert_allclose([p.value, *p.ci95], [q.value, *q.ci95], rtol=1e-6, err_msg=sym)
+
+
+def test_gauss_markov_shape_equals_the_numpy_twin(monkeypatch):
+    from imu_allan.core.model import _gm_shape
+    x = np.concatenate([np.geomspace(1e-9, 0.0499, 400), np.geomspace(0.05, 1e4, 400)])
+    got = _gm_shape(x.reshape(20, 40)).ravel()
+    assert _gm_shape(np.float64(0.3)).shape == () and _gm_shape(np.float64(3.0)).shape == ()
+    monkeypatch.setattr(native, 'LIB', None)
+    want = _gm_shape(x)
+    small = x < 0.05
+    assert_array_equal(got[small], want[small])     # the series: the same operations
+    # exp of libm against numpy's (an ulp apart) in a bracket that cancels to x^3 / 3
+    # near x = 0.05 (5e-12 relative there, whichever exp).
+    assert_allclose(got[~small], want[~small], rtol=1e-11, atol=0)

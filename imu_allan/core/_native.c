@@ -603,7 +603,34 @@ void imu_allan_repeats(const double *y, long ld, long n, long n_axes, const doub
     }
 }
 
-/* ------------------------------------------------ the fit's covariance quadrature */
+/* ------------------------------------------------ the fit's model and covariance */
+
+/*
+ * h(x) / x^2 of the Gauss-Markov Allan variance shape (imu_allan/core/model.py,
+ * _gm_shape): below x = 0.05 its Taylor series, the n_c coefficients c highest power
+ * first by Horner (h(x) / x^3) times x; else (x - 1.5 + 2 e - 0.5 e e) / (x x) with
+ * e = exp(-x).  The design matrix of every fit evaluates this thousands of times on a
+ * few tens of taus, where numpy's per-call overhead was most of the cost.
+ */
+void imu_allan_gm_shape(const double *x, long n, const double *c, long n_c, double *out)
+{
+    for (long i = 0; i < n; i++) {
+        double xi = x[i];
+        if (xi < 0.05) {
+            double acc = c[0];
+            for (long k = 1; k < n_c; k++) {
+                acc *= xi;
+                acc += c[k];
+            }
+            out[i] = acc * xi;
+        } else {
+            double e = exp(-xi);
+            out[i] = (xi - 1.5 + 2.0 * e - 0.5 * e * e) / (xi * xi);
+        }
+    }
+}
+
+
 
 /*
  * Stencil sums of the first-order Gauss-Markov generalised covariance at the quadrature

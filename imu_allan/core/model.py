@@ -38,6 +38,7 @@ from typing import Callable
 
 import numpy as np
 
+from imu_allan.core import native
 from imu_allan.core.noise_params import AxisNoise, GaussMarkov, GM_PEAK_FACTOR, Sinusoid
 
 #: 2 ln2 / pi: flicker AVAR floor per unit B^2 (IEEE Std 952 C.1).
@@ -128,6 +129,8 @@ def _gm_shape(x: np.ndarray) -> np.ndarray:
     h(x) = sum_{n>=3} (-1)^n (2 - 2^(n-1)) x^n / n!.
     """
     x = np.asarray(x, dtype=np.float64)
+    if native.LIB is not None:
+        return native.gm_shape(x, _GM_SERIES)
     small = x < 0.05
     if small.all():  # long T: the series alone (a fit calls this very often)
         return _gm_series(x)

@@ -69,6 +69,9 @@ def _load() -> ctypes.CDLL | None:
             lib.imu_allan_mcap_imu.argtypes = [
                 ctypes.c_void_p, _LONG, ctypes.c_void_p, _LONG, _LONG, _LONG, ctypes.c_void_p,
                 ctypes.c_void_p, ctypes.c_void_p]
+            lib.imu_allan_gm_shape.restype = None
+            lib.imu_allan_gm_shape.argtypes = [ctypes.c_void_p, _LONG, ctypes.c_void_p, _LONG,
+                                               ctypes.c_void_p]
             lib.imu_allan_gm_stencil.restype = None
             lib.imu_allan_gm_stencil.argtypes = [ctypes.c_void_p, _LONG, _LONG, ctypes.c_void_p,
                                                  ctypes.c_double, ctypes.c_void_p]
@@ -414,6 +417,34 @@ def mcap_imu(u8: np.ndarray, offsets: np.ndarray, channel: int,
                                   int(ros1), recv_ns.ctypes.data, stamp_ns.ctypes.data,
                                   samples.ctypes.data)
     return (recv_ns, stamp_ns, samples) if done == k else None
+
+
+def gm_shape(x: np.ndarray, series: np.ndarray) -> np.ndarray:
+    """
+    Evaluate the Gauss-Markov Allan variance shape h(x) / x^2 at x = tau / T.
+
+    The twin of :func:`imu_allan.core.model._gm_shape` (same branches and constants).
+
+    Parameters
+    ----------
+    x : np.ndarray
+        Any shape, float64 tau / T.
+    series : np.ndarray
+        Shape (n_c,), contiguous float64 Taylor coefficients of h(x) / x^3, highest
+        power first.
+
+    Returns
+    -------
+    np.ndarray
+        Same shape as x, h(x) / x^2.
+
+    """
+    assert LIB is not None and x.dtype == series.dtype == np.float64
+    out = np.empty(x.shape)      # 0-d for a 0-d x (ascontiguousarray would make it 1-d)
+    xc = x if x.flags.c_contiguous else np.ascontiguousarray(x)
+    LIB.imu_allan_gm_shape(xc.ctypes.data, x.size, series.ctypes.data, series.size,
+                           out.ctypes.data)
+    return out
 
 
 def gm_stencil(lags: np.ndarray, weights: np.ndarray, T: float) -> np.ndarray:
