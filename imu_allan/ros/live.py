@@ -23,6 +23,7 @@ from imu_allan import AXES
 from imu_allan.core.diagnose import RawKeeper
 from imu_allan.errors import InputError
 from imu_allan.io.imu_cdr import decode_imu_cdr, imu_frame_id
+from imu_allan.core.allan import confidence_bounds
 from imu_allan.pipeline.analysis import CONFIDENCE
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.params import session_config
@@ -40,20 +41,24 @@ class SessionView:
     """
     A frozen view of a session for :func:`~imu_allan.pipeline.analysis.analyze`.
 
-    Taken under the input lock in milliseconds (the Allan curve plus the counters), so
-    that the fit, which takes seconds, runs without holding up the input.
+    Taken under the input lock in milliseconds (the Allan curve without its confidence
+    bounds, plus the counters), so that the fit, which takes seconds, runs without
+    holding up the input.
     """
 
     def __init__(self, session: Session):
-        self._curve = session.curve(confidence=CONFIDENCE)
+        self._curve = session.curve(confidence=CONFIDENCE, bounds=False)
         self.stats = copy.deepcopy(session.stats)
         self.rate_hz = session.rate_hz
         self.duration_s = session.duration_s
         self.warnings = session.warnings
 
-    def curve(self, confidence: float = CONFIDENCE):
-        """Return the Allan curve taken with the snapshot."""
-        return self._curve
+    def curve(self, confidence: float = CONFIDENCE, bounds: bool = True):
+        """Return the Allan curve taken with the snapshot (bounds computed on request)."""
+        if self._curve is None or not bounds:
+            return self._curve
+        lo, hi = confidence_bounds(self._curve.avar, self._curve.edf, confidence)
+        return self._curve._replace(adev_lo=lo, adev_hi=hi, confidence=float(confidence))
 
 
 # Long by design: buffer, decode, resume and snapshots share one lock and one session;

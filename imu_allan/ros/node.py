@@ -258,7 +258,7 @@ class ImuAllanNode(_Reports, _Services, Node):
         return self._fit_and_publish(*self.live.snapshot())
 
     def _fit_and_publish(self, view: SessionView, raw: RawKeeper | None = None):
-        if view.curve() is None:
+        if view.curve(bounds=False) is None:
             return None
         # The raw copy feeds the effect search's periodogram and ramp evidence, so the
         # node publishes the model analyze and diagnose give for the same data.
@@ -307,7 +307,7 @@ class ImuAllanNode(_Reports, _Services, Node):
         # The same model as the periodic fit: raw copy and topic included.
         result = analyze(view, source=self.subscription.topic_name, raw=raw,
                          topic=self.subscription.topic_name) \
-            if view.curve() is not None else None
+            if view.curve(bounds=False) is not None else None
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
         self._last_result = result

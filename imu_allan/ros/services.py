@@ -48,7 +48,7 @@ class _Services:
             return response
         self.live.process()
         view, raw = self.live.snapshot()
-        if view.curve() is None:
+        if view.curve(bounds=False) is None:
             response.success = False
             response.message = 'not enough data for any Allan deviation yet'
             return response
