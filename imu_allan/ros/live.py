@@ -20,10 +20,10 @@ import time
 import numpy as np
 
 from imu_allan import AXES
+from imu_allan.core.allan import confidence_bounds
 from imu_allan.core.diagnose import RawKeeper
 from imu_allan.errors import InputError
 from imu_allan.io.imu_cdr import decode_imu_cdr, imu_frame_id
-from imu_allan.core.allan import confidence_bounds
 from imu_allan.pipeline.analysis import CONFIDENCE
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.params import session_config
