@@ -422,7 +422,7 @@ class AllanAccumulator(_Persistence):
         if bounds:
             adev_lo, adev_hi = confidence_bounds(avar, edf, confidence)
         else:
-            adev_lo = adev_hi = np.full(avar.shape, np.nan)
+            adev_lo, adev_hi = np.full(avar.shape, np.nan), np.full(avar.shape, np.nan)
         return AllanCurve(tau_s, m, avar, n_terms, edf, alpha_arr, np.asarray(adev_lo),
                           np.asarray(adev_hi), float(confidence), 'overlapping',
                           self.rate_hz)
