@@ -29,7 +29,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'imu-allan = imu_allan.cli:main',
+            'imu-allan = imu_allan.cli:entry',
             'imu_allan_node = imu_allan.ros.node:main',
         ],
     },

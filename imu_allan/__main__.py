@@ -1,7 +1,5 @@
 """Entry point for ``python -m imu_allan``."""
 
-import sys
+from imu_allan.cli import entry
 
-from imu_allan.cli import main
-
-sys.exit(main())
+entry()
