@@ -630,8 +630,6 @@ void imu_allan_gm_shape(const double *x, long n, const double *c, long n_c, doub
     }
 }
 
-
-
 /*
  * Stencil sums of the first-order Gauss-Markov generalised covariance at the quadrature
  * nodes (imu_allan/core/fit/covariance.py, _LagQuadrature.gamma):
@@ -665,16 +663,16 @@ void imu_allan_gm_stencil(const double *lags, long n, long n_s, const double *w,
  * ([starts[i], starts[i + 1]), the last one to n) of weight[j] g[a_p][j] g[b_p][j].
  * Eight partial sums per segment, as everywhere in this file.
  */
-void imu_allan_pair_sums(const double *g, long n, const double *weight, const long *starts,
-                         long n_seg, const long *a_idx, const long *b_idx, long n_ab,
-                         double *out)
+void imu_allan_pair_sums(const double *g, long n, const double *weight,
+                         const int64_t *starts, long n_seg, const int64_t *a_idx,
+                         const int64_t *b_idx, long n_ab, double *out)
 {
     for (long i = 0; i < n_seg; i++) {
-        long j0 = starts[i], j1 = i + 1 < n_seg ? starts[i + 1] : n;
+        int64_t j0 = starts[i], j1 = i + 1 < n_seg ? starts[i + 1] : n;
         for (long p = 0; p < n_ab; p++) {
             const double *ga = g + a_idx[p] * n, *gb = g + b_idx[p] * n;
             double acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-            long j = j0;
+            int64_t j = j0;
             for (; j + 8 <= j1; j += 8)
                 for (int k = 0; k < 8; k++)
                     acc[k] += (weight[j + k] * ga[j + k]) * gb[j + k];
