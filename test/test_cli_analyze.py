@@ -503,6 +503,14 @@ def test_read_ahead_keeps_order_and_passes_errors_on():
     assert not [t for t in threading.enumerate() if t.name == 'imu-allan-reader']
 
 
+def _python(code: str) -> subprocess.CompletedProcess:
+    """Run Python code in a fresh process; it must succeed."""
+    res = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    return res
+
+
 def test_main_process_of_a_two_worker_analysis_imports_no_scipy(tmp_path, rec):
     # The search runs in the workers (their fork server imports scipy while the input is
     # read); the main process only reads, checks, accumulates and reports.
@@ -514,9 +522,7 @@ def test_main_process_of_a_two_worker_analysis_imports_no_scipy(tmp_path, rec):
             '"--format", "json", "--jobs", "2"]) == 0\n'
             'print(sorted(m for m in sys.modules if m.split(".")[0] == "scipy"), '
             'file=sys.stderr)\n')
-    res = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                         timeout=300)
-    assert res.returncode == 0, res.stderr
+    res = _python(code)
     assert res.stderr.strip().splitlines()[-1] == '[]', res.stderr
     assert (tmp_path / 'o' / 'adev.png').exists() and (tmp_path / 'o' / 'adev.svg').exists()
 
@@ -534,9 +540,7 @@ def test_the_workers_server_ends_by_signal_with_the_command(tmp_path):
             'pid = forkserver._forkserver._forkserver_pid\n'
             'workers._end_server()\n'
             'print(pid, os.waitpid(pid, 0)[1])\n')
-    res = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                         timeout=120)
-    assert res.returncode == 0, res.stderr
+    res = _python(code)
     pid, status = map(int, res.stdout.split())
     assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == 15, status
     assert res.stderr == ''
