@@ -15,9 +15,10 @@ setup(
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
     ],
-    # The core's compiled kernels: plain C called through ctypes (imu_allan/core/native.py),
+    # The core's compiled kernels: plain C called through ctypes (imu_allan/core/native/),
     # so no numpy headers are needed.
-    ext_modules=[Extension(f'{package_name}.core._native', ['imu_allan/core/_native.c'],
+    ext_modules=[Extension(f'{package_name}.core.native._native',
+                           ['imu_allan/core/native/_native.c'],
                            extra_compile_args=['-O3', '-ffp-contract=off'])],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml'],
     # imu-allan fleet: Dask for the cluster, pyarrow for the Parquet store.

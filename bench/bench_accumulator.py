@@ -1,5 +1,5 @@
 """
-Benchmark of the streaming Allan accumulator (imu_allan.core.accumulator).
+Benchmark of the streaming Allan accumulator (imu_allan.core.allan.accumulator).
 
 Feeds ``--rows`` six-axis rows (default 10 million) in blocks of 1000 rows (as the
 ROS node does) and in blocks of 1 million rows (as a bag reader does), and prints
@@ -28,8 +28,8 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from imu_allan.core.accumulator import AllanAccumulator  # noqa: E402
 from imu_allan.core.allan import overlapping_avar  # noqa: E402
+from imu_allan.core.allan.accumulator import AllanAccumulator  # noqa: E402
 
 N_AXES = 6
 BASE_ROWS = 1_000_000

@@ -47,9 +47,9 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
-from imu_allan.core.accumulator import AllanAccumulator
-from imu_allan.core.noise_params import load_params
-from imu_allan.core.simulate import simulate_imu
+from imu_allan.core.allan.accumulator import AllanAccumulator
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.io.bag_reader import open_imu
 from imu_allan.io.bag_writer import write_imu_bag
 from imu_allan.io.report import write_outputs

@@ -18,11 +18,11 @@ import time
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.accumulator import AllanAccumulator
 from imu_allan.core.allan import allan_curve
+from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.core.fit import fit_curve
-from imu_allan.core.noise_params import load_params
-from imu_allan.core.simulate import simulate_imu
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.simulate import simulate_imu
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'xsens_mti7.yaml'
 

@@ -36,8 +36,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from imu_allan import AXES  # noqa: E402
-from imu_allan.core.noise_params import AxisNoise, NoiseSpec  # noqa: E402
-from imu_allan.core.simulate import simulate_imu  # noqa: E402
+from imu_allan.core.noise.params import AxisNoise, NoiseSpec  # noqa: E402
+from imu_allan.core.noise.simulate import simulate_imu  # noqa: E402
 from imu_allan.fleet.inputs import content_key, fleet_inputs  # noqa: E402
 from imu_allan.fleet.run import connect, run_fleet  # noqa: E402
 from imu_allan.fleet.store import FleetStore  # noqa: E402

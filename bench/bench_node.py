@@ -65,8 +65,8 @@ def role_publisher(args) -> int:
     """
     import rclpy
     from sensor_msgs.msg import Imu
-    from imu_allan.core.noise_params import load_params
-    from imu_allan.core.simulate import simulate_imu
+    from imu_allan.core.noise.params import load_params
+    from imu_allan.core.noise.simulate import simulate_imu
     from imu_allan.io.bag_writer import serialize_imu
     _, block = simulate_imu(load_params(PARAMS), 1000.0, 60.0, seed=1)
     rclpy.init(args=[])
@@ -181,8 +181,8 @@ def role_node(args) -> int:
 
 def role_pipeline(args) -> int:
     """Feed the Session the samples of ``--pipeline-hours`` at 1 kHz; RSS per hour."""
-    from imu_allan.core.noise_params import load_params
-    from imu_allan.core.simulate import simulate_imu
+    from imu_allan.core.noise.params import load_params
+    from imu_allan.core.noise.simulate import simulate_imu
     from imu_allan.pipeline.session import Session
     from imu_allan.ros.params import BY_NAME, session_config
     values = {name: p.default for name, p in BY_NAME.items()}

@@ -1,5 +1,5 @@
 """
-Benchmark of imu_allan.core.simulate: a 3-hour, 100 Hz, six-axis record.
+Benchmark of imu_allan.core.noise.simulate: a 3-hour, 100 Hz, six-axis record.
 
 Prints wall times measured in one run and their ratio to the record length, for the
 paper's model (Gauss-Markov B) and for a model with every term (flicker B, quantization,
@@ -15,8 +15,8 @@ import time
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.noise_params import AxisNoise, load_params, NoiseSpec, Sinusoid
-from imu_allan.core.simulate import simulate_imu, simulate_state_space
+from imu_allan.core.noise.params import AxisNoise, load_params, NoiseSpec, Sinusoid
+from imu_allan.core.noise.simulate import simulate_imu, simulate_state_space
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'xsens_mti7.yaml'
 

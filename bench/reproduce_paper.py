@@ -28,10 +28,10 @@ import numpy as np
 
 from imu_allan import AXIS_UNITS
 from imu_allan.core.allan import allan_curve
-from imu_allan.core.model import adev_model, FLICKER_AVAR
-from imu_allan.core.noise_params import AxisNoise, load_params
+from imu_allan.core.noise.model import adev_model, FLICKER_AVAR
+from imu_allan.core.noise.params import AxisNoise, load_params
+from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.search import search_axis
-from imu_allan.core.simulate import simulate_imu
 
 REPO = Path(__file__).resolve().parents[1]
 #: IMU -> (table 2 config, table 1 config, rate [Hz], paper's table 3 RMS (read-off,

@@ -27,10 +27,10 @@ import time
 import numpy as np
 
 from imu_allan.core.allan import allan_curve
-from imu_allan.core.model import avar_model, avar_white
-from imu_allan.core.noise_params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.noise.model import avar_model, avar_white
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.search import search_axis
-from imu_allan.core.simulate import simulate_imu
 
 RATE_HZ = 50.0
 EFFECTS = ('sinusoid', 'gauss_markov', 'rate_ramp', 'quantization', 'bias_instability')

@@ -18,9 +18,9 @@ import time
 import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
-from imu_allan.core.evidence import RawKeeper
-from imu_allan.core.judge import white_region, white_share
+from imu_allan.core.fit.judge import white_region, white_share
 from imu_allan.core.search import search_axis
+from imu_allan.core.search.evidence import RawKeeper
 from imu_allan.io.csv_io import read_csv
 from imu_allan.pipeline.session import Session, SessionConfig
 

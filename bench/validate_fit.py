@@ -2,7 +2,7 @@
 Validate the noise fit on simulated records of the two example IMUs.
 
 For each of config/xsens_mti7.yaml and config/ublox_c102_f9r.yaml, one gyro axis and one
-accelerometer axis are simulated (imu_allan.core.simulate.simulate_axis) for ``--hours`` at
+accelerometer axis are simulated (imu_allan.core.noise.simulate.simulate_axis) for ``--hours`` at
 ``--rate`` over ``--seeds`` seeds, their overlapping Allan curves computed at octave taus
 (imu_allan.core.allan.allan_curve) and fitted (imu_allan.core.fit.fit_axis).  Printed: a markdown
 table with the median relative error of N, B, K and T_B for the nominal IEEE Std 952
@@ -22,7 +22,7 @@ curve as the node and the offline reader build it, imu_allan.core.fit.fit_curve)
 and B against the datasheet: rate noise density 0.05 deg/s/sqrt(Hz) and in-run bias
 stability 0.007 deg/s.  Analog Devices quote the bias stability as the Allan deviation
 minimum itself, so the table gives the fitted ADEV floor 0.664 B (paper convention, see
-imu_allan.core.noise_params) beside B.
+imu_allan.core.noise.params) beside B.
 Exit code 1 when the optimised fit does not beat the nominal read-off on every median
 error, when an optimised coverage of one axis falls below 85 %, or when a parameter's
 coverage pooled over the four axes lies outside 85-99 %.  (One axis' 50/50 is not a
@@ -38,11 +38,11 @@ import time
 
 import numpy as np
 
-from imu_allan.core.accumulator import AllanAccumulator
 from imu_allan.core.allan import allan_curve
+from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.core.fit import fit_axis, fit_curve
-from imu_allan.core.noise_params import FLICKER_FLOOR, load_params
-from imu_allan.core.simulate import simulate_axis
+from imu_allan.core.noise.params import FLICKER_FLOOR, load_params
+from imu_allan.core.noise.simulate import simulate_axis
 from imu_allan.io.csv_io import read_csv
 
 REPO = Path(__file__).resolve().parents[1]

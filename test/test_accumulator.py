@@ -7,8 +7,8 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
-from imu_allan.core.accumulator import AllanAccumulator
 from imu_allan.core.allan import overlapping_avar, tau_grid
+from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
 
 

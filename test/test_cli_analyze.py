@@ -26,8 +26,8 @@ import yaml
 
 from imu_allan import AXES
 from imu_allan.cli import main
-from imu_allan.core.noise_params import load_params
-from imu_allan.core.simulate import simulate_imu
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.io import inputs
 from imu_allan.io.bag_writer import serialize_imu, write_imu_bag
 from imu_allan.io.csv_io import write_csv
@@ -451,7 +451,7 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
     """
     from rosbags.rosbag2 import Reader
 
-    from imu_allan.core.evidence import RawKeeper
+    from imu_allan.core.search.evidence import RawKeeper
     from imu_allan.io.imu_cdr import decode_imu_cdr
     from imu_allan.pipeline.analysis import analyze
     from imu_allan.pipeline.session import Session

@@ -10,7 +10,7 @@ from rosbags.highlevel import AnyReader
 
 from imu_allan import AXES
 from imu_allan.cli import main
-from imu_allan.core.noise_params import load_params
+from imu_allan.core.noise.params import load_params
 from imu_allan.io.csv_io import read_csv, write_csv
 from imu_allan.io.inputs import open_input
 

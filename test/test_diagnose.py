@@ -19,7 +19,7 @@ from conftest import REPO
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.diagnose import (diagnose_curve, diagnose_session, EFFECTS, find_bands, gap,
                                      ln_adev_stderr)
-from imu_allan.core.evidence import periodogram_peak, RawKeeper
+from imu_allan.core.search.evidence import periodogram_peak, RawKeeper
 from imu_allan.errors import InputError
 
 _SPEC = importlib.util.spec_from_file_location('diagnose_cases',

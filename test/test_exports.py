@@ -1,4 +1,4 @@
-"""Tests of imu_allan.core.exports: robot_localization, driver and VINS outputs."""
+"""Tests of imu_allan.core.outputs.exports: robot_localization, driver and VINS outputs."""
 
 import math
 
@@ -7,9 +7,9 @@ import pytest
 import yaml
 
 from imu_allan import AXES
-from imu_allan.core.exports import (driver_noise, driver_yaml, IMU0_CONFIG,
-                                    robot_localization_yaml, vins_yaml)
-from imu_allan.core.noise_params import AxisNoise
+from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.outputs.exports import (driver_noise, driver_yaml, IMU0_CONFIG,
+                                            robot_localization_yaml, vins_yaml)
 from imu_allan.errors import InputError
 
 RATE_HZ = 200.0

@@ -6,7 +6,7 @@ import numpy as np
 from numpy.testing import assert_array_equal
 import pytest
 
-from imu_allan.core.accumulator import AllanAccumulator
+from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
 from imu_allan.pipeline.feed import BackgroundAccumulator
 from imu_allan.pipeline.session import Session, SessionConfig

@@ -12,12 +12,12 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from imu_allan.core.accumulator import AllanAccumulator
 from imu_allan.core.allan import allan_curve, overlapping_avar
+from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.core.fit import _CurveCovariance, fit_axis, fit_curve, nominal_fit
-from imu_allan.core.model import avar_model, TERMS
-from imu_allan.core.noise_params import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
-from imu_allan.core.simulate import simulate_axis, simulate_imu
+from imu_allan.core.noise.model import avar_model, TERMS
+from imu_allan.core.noise.params import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
 from imu_allan.errors import InputError
 from imu_allan.io.csv_io import read_csv
 

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from imu_allan import AXES
-from imu_allan.core.noise_params import AxisNoise, NoiseSpec
-from imu_allan.core.simulate import simulate_imu
+from imu_allan.core.noise.params import AxisNoise, NoiseSpec
+from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.errors import InputError
 from imu_allan.fleet.inputs import content_key, fleet_inputs
 from imu_allan.fleet.report import fleet_summary, write_fleet_report

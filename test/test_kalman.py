@@ -1,8 +1,8 @@
 """
-Tests of imu_allan.core.kalman: densities, exact discretisation, Q/R, Kalibr and ROS exports.
+Tests of imu_allan.core.outputs.kalman: densities, discretisation, Q/R, Kalibr and ROS exports.
 
 Hand values follow the paper's eqs. 8 and 16-23 (exact forms); the six-axis matrices are
-also checked against the independent single-axis implementation in imu_allan.core.simulate.
+also checked against the independent single-axis implementation in imu_allan.core.noise.simulate.
 """
 
 import math
@@ -13,13 +13,13 @@ import pytest
 import yaml
 
 from imu_allan import AXES
-from imu_allan.core.exports import kalibr_yaml
 from imu_allan.core.fit import AxisFit, Param
-from imu_allan.core.kalman import (axis_densities, axis_noise_from, AxisDensities, discretise,
-                                   imu_covariance, kalman_model, NOTES)
-from imu_allan.core.model import avar_flicker, avar_gauss_markov, GM_PEAK_TAU
-from imu_allan.core.noise_params import AxisNoise, GaussMarkov
-from imu_allan.core.simulate import state_space_matrices
+from imu_allan.core.noise.model import avar_flicker, avar_gauss_markov, GM_PEAK_TAU
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov
+from imu_allan.core.noise.simulate import state_space_matrices
+from imu_allan.core.outputs.exports import kalibr_yaml
+from imu_allan.core.outputs.kalman import (axis_densities, axis_noise_from, AxisDensities,
+                                           discretise, imu_covariance, kalman_model, NOTES)
 from imu_allan.errors import InputError
 
 GYRO = AxisNoise(N=1.2e-4, B=5e-5, T_B=80.0, K=2e-6)

@@ -1,5 +1,5 @@
 """
-Tests of imu_allan.core.model: closed-form Allan variances against independent hand values.
+Tests of imu_allan.core.noise.model: closed-form Allan variances against independent hand values.
 
 The simulated-data check of every closed form lives in test_simulate.py (each generator
 against its own copy of the formula); here each formula is pinned to numbers worked
@@ -15,11 +15,11 @@ import pytest
 from scipy.integrate import quad
 from scipy.optimize import minimize_scalar
 
-from imu_allan.core.model import (adev_model, avar_flicker, avar_gauss_markov, avar_model,
-                                  avar_quantization, avar_random_walk, avar_rate_ramp,
-                                  avar_sinusoid, avar_terms, avar_white, base_name,
-                                  noise_from_terms, TERMS)
-from imu_allan.core.noise_params import AxisNoise, GaussMarkov, Sinusoid
+from imu_allan.core.noise.model import (adev_model, avar_flicker, avar_gauss_markov, avar_model,
+                                        avar_quantization, avar_random_walk, avar_rate_ramp,
+                                        avar_sinusoid, avar_terms, avar_white, base_name,
+                                        noise_from_terms, TERMS)
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov, Sinusoid
 
 E = math.e
 
@@ -209,7 +209,7 @@ def test_quantiles_from_scipy_special_equal_scipy_stats():
     # core.quantiles replaces scipy.stats (a second of start-up) with scipy.special.
     from scipy.stats import chi2, f
 
-    from imu_allan.core.quantiles import chi2_ppf, chi2_sf, f_ppf
+    from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
     edf = np.array([0.5, 1.0, 2.7, 10.0, 1e3, 1e6])
     for q in (0.025, 0.5, 0.95, 0.975):
         assert_allclose(chi2_ppf(q, edf), chi2.ppf(q, edf), rtol=1e-12)
@@ -223,7 +223,7 @@ def test_numpy_chi2_quantiles_equal_scipy():
     # the series, the continued fraction and the eta integral, both sides of a = 20.
     from scipy.special import chdtri, gammainc
 
-    from imu_allan.core.chi2 import chi2_ppf, gamma_p
+    from imu_allan.core.allan.chi2 import chi2_ppf, gamma_p
     df = np.concatenate([np.geomspace(0.3, 1e7, 120), [39.9, 40.0, 40.1]])
     for q in (1e-4, 0.025, 0.1585, 0.5, 0.8415, 0.975, 0.9999):
         assert_allclose(chi2_ppf(q, df), chdtri(df, 1.0 - q), rtol=1e-12)

@@ -1,5 +1,5 @@
 """
-The compiled kernels (imu_allan/core/_native.c) against their numpy twins.
+The compiled kernels (imu_allan/core/native/_native.c) against their numpy twins.
 
 ``make venv`` builds the library (pip install -e), so it must be there; every kernel
 must agree with the numpy code that runs when it is absent.
@@ -10,8 +10,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
 from imu_allan.core import native
-from imu_allan.core.accumulator import _accumulate, AllanAccumulator
 from imu_allan.core.allan import allan_curve, kernels
+from imu_allan.core.allan.accumulator import _accumulate, AllanAccumulator
 
 
 @pytest.fixture
@@ -21,7 +21,7 @@ def numpy_only(monkeypatch):
 
 
 def test_the_library_is_built():
-    assert native.LIB is not None, 'imu_allan/core/_native.c not built: run make venv'
+    assert native.LIB is not None, 'imu_allan/core/native/_native.c not built: run make venv'
 
 
 def test_accumulator_sums_equal_the_numpy_twin(monkeypatch):
@@ -148,7 +148,7 @@ def test_sqlite_varints_equal_the_numpy_twin(monkeypatch):
 
 @pytest.mark.parametrize('factor', [2, 8, 64])
 def test_block_means_are_bitwise_the_numpy_twin(monkeypatch, factor):
-    from imu_allan.core.raw import _means
+    from imu_allan.core.allan.raw import _means
     rng = np.random.default_rng(factor)
     y = rng.normal(size=(factor * 1_001, 6)) * 1e-2 + 9.81
     fast = _means(y, factor)
@@ -207,7 +207,7 @@ def test_repeat_runs_equal_the_numpy_twin(monkeypatch):
 def test_gauss_markov_stencil_sums_equal_the_numpy_twin():
     # Lags across the three branches of e^-x - 1 + x (series, expm1, exp), both signs.
     from imu_allan.core.fit.covariance import _STENCIL_WEIGHTS
-    from imu_allan.core.model import _gcov_gauss_markov
+    from imu_allan.core.noise.model import _gcov_gauss_markov
     rng = np.random.default_rng(8)
     t_s = 40.0
     lags = t_s * np.geomspace(1e-6, 60.0, 9 * 3000) * rng.choice([-1.0, 1.0], 9 * 3000)
@@ -232,7 +232,7 @@ def test_pair_sums_equal_the_numpy_twin():
 def test_fit_is_the_same_without_the_library(monkeypatch):
     # The covariance quadrature's two kernels against their numpy twins, through a fit.
     from imu_allan.core.fit import covariance, fit_axis
-    from imu_allan.core.model import avar_gauss_markov, avar_random_walk, avar_white
+    from imu_allan.core.noise.model import avar_gauss_markov, avar_random_walk, avar_white
     tau = np.unique(np.round(np.geomspace(1, 200_000, 30))) / 100.0
     avar = (avar_white(tau, 1e-3) + avar_gauss_markov(tau, 2e-5, 50.0)
             + avar_random_walk(tau, 1e-6))
@@ -249,7 +249,7 @@ def test_fit_is_the_same_without_the_library(monkeypatch):
 
 
 def test_gauss_markov_shape_equals_the_numpy_twin(monkeypatch):
-    from imu_allan.core.model import _gm_shape
+    from imu_allan.core.noise.model import _gm_shape
     x = np.concatenate([np.geomspace(1e-9, 0.0499, 400), np.geomspace(0.05, 1e4, 400)])
     got = _gm_shape(x.reshape(20, 40)).ravel()
     assert _gm_shape(np.float64(0.3)).shape == () and _gm_shape(np.float64(3.0)).shape == ()

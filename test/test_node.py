@@ -36,9 +36,9 @@ from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from imu_allan import AXES  # noqa: E402, I100
-from imu_allan.core.kalman import UNKNOWN_VARIANCE  # noqa: E402
-from imu_allan.core.noise_params import parse_params  # noqa: E402
-from imu_allan.core.simulate import simulate_imu  # noqa: E402
+from imu_allan.core.noise.params import parse_params  # noqa: E402
+from imu_allan.core.noise.simulate import simulate_imu  # noqa: E402
+from imu_allan.core.outputs.kalman import UNKNOWN_VARIANCE  # noqa: E402
 from imu_allan.errors import InputError  # noqa: E402
 from imu_allan.io.bag_writer import serialize_imu  # noqa: E402
 from imu_allan.pipeline.analysis import analyze  # noqa: E402

@@ -12,7 +12,7 @@ import pytest
 
 from conftest import REPO
 from imu_allan import ACCEL_AXES, GYRO_AXES
-from imu_allan.core.noise_params import load_params
+from imu_allan.core.noise.params import load_params
 
 TABLES = Path(__file__).resolve().parents[2] / 'shared' / 'paper' / 'TABLES.md'
 COLUMNS = ('N acc', 'N gyro', 'B acc', 'B gyro', 'K acc', 'K gyro', 'T_B acc', 'T_B gyro')

@@ -448,7 +448,7 @@ def test_axes_searched_in_worker_processes_give_the_same_result():
 def test_window_statistics_and_raw_means_equal_numpy():
     # The checks' three-pass window statistics against mean/std, at noise scale on a
     # 9.81 offset and at motion scale; the raw copy's strided means are bit-identical.
-    from imu_allan.core.raw import _means
+    from imu_allan.core.allan.raw import _means
     from imu_allan.pipeline.checks import _window_stats
     rng = np.random.default_rng(8)
     for scale, offset in ((1e-3, 9.81), (3.0, 0.0)):

@@ -1,8 +1,8 @@
 """
-Tests of imu_allan.core.simulate: every generator against its closed-form Allan variance.
+Tests of imu_allan.core.noise.simulate: every generator against its closed-form Allan variance.
 
 Closed forms (IEEE Std 952 annex C, DESIGN.md) are written out here so the test does not
-depend on imu_allan.core.model.  Statistical checks average the overlapping AVAR of R
+depend on imu_allan.core.noise.model.  Statistical checks average the overlapping AVAR of R
 independent replicas and accept |mean - theory| < 4.5 standard errors of that mean
 (the standard error comes from the replicas' own spread, so it holds for every noise
 type), plus 1 % for the point-sampling excess described in the simulate docstring,
@@ -17,11 +17,11 @@ import pytest
 
 from imu_allan import AXES, cli
 from imu_allan.core.allan import overlapping_avar
-from imu_allan.core.noise_params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
-from imu_allan.core.simulate import (flicker_noise, gauss_markov_noise, quantization_noise,
-                                     random_walk_noise, rate_ramp, simulate_axis, simulate_imu,
-                                     simulate_state_space, sinusoid, state_space_matrices,
-                                     white_noise)
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.noise.simulate import (flicker_noise, gauss_markov_noise, quantization_noise,
+                                           random_walk_noise, rate_ramp, simulate_axis,
+                                           simulate_imu, simulate_state_space, sinusoid,
+                                           state_space_matrices, white_noise)
 from imu_allan.errors import InputError
 
 RATE_HZ = 50.0
@@ -271,7 +271,7 @@ def test_cli_simulate_writes_csv_that_reads_back(tmp_path, capsys):
 def _spec_from_text(text: str) -> NoiseSpec:
     import yaml
 
-    from imu_allan.core.noise_params import parse_params
+    from imu_allan.core.noise.params import parse_params
     return parse_params(yaml.safe_load(text))
 
 

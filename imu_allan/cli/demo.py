@@ -103,9 +103,9 @@ def run(args) -> int:
     import rclpy
     from rclpy.parameter import Parameter
 
-    from imu_allan.core.noise_params import load_params
-    from imu_allan.core.simulate import simulate_imu
-    from imu_allan.core.units import format_quoted, sensor_of
+    from imu_allan.core.noise.params import load_params
+    from imu_allan.core.noise.simulate import simulate_imu
+    from imu_allan.core.noise.units import format_quoted, sensor_of
     from imu_allan.io.bag_writer import serialize_imu
     from imu_allan.ros.node import create_executor, ImuAllanNode
 

@@ -22,8 +22,8 @@ import time
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.noise_params import load_params
-from imu_allan.core.simulate import simulate_imu
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.errors import InputError
 
 BAG_SUFFIXES = ('.mcap', '.db3', '.bag')

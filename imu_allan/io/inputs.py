@@ -353,7 +353,7 @@ def raw_tap() -> tuple:
         needs it.
 
     """
-    from imu_allan.core.raw import RawKeeper
+    from imu_allan.core.allan.raw import RawKeeper
     # Every sample from the first on; the rate comes from the session at analysis time.
     keeper = RawKeeper(None, len(AXES))
 

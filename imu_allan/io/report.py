@@ -15,7 +15,7 @@ from pathlib import Path
 import yaml
 
 from imu_allan.atomic import write_atomic
-from imu_allan.core.noise_params import dump_params, NoiseSpec
+from imu_allan.core.noise.params import dump_params, NoiseSpec
 from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
 
 #: File names inside the output directory (stable: other tools read them).

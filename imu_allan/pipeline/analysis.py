@@ -15,12 +15,13 @@ import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve, confidence_bounds
-from imu_allan.core.exports import driver_yaml, kalibr_yaml, robot_localization_yaml, vins_yaml
+from imu_allan.core.allan.raw import raw_evidence
 from imu_allan.core.fit import AxisFit, json_floats
-from imu_allan.core.kalman import imu_covariance, kalman_model, KalmanModel
-from imu_allan.core.noise_params import AxisNoise
-from imu_allan.core.raw import raw_evidence
-from imu_allan.core.units import format_quoted, sensor_of
+from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.units import format_quoted, sensor_of
+from imu_allan.core.outputs.exports import (driver_yaml, kalibr_yaml, robot_localization_yaml,
+                                            vins_yaml)
+from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import worker_pool
 
@@ -264,7 +265,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         The session (node or offline) after its samples were added.
     source : str
         What was analysed, for the report.
-    raw : imu_allan.core.evidence.RawKeeper, optional
+    raw : imu_allan.core.search.evidence.RawKeeper, optional
         Block-averaged copy of the samples fed to the session: the periodogram and
         ramp evidence of the effect search.  Without it sinusoids and ramps are named
         from the Allan curve alone.

@@ -10,7 +10,7 @@ import queue
 import threading
 import weakref
 
-from imu_allan.core.accumulator import AllanAccumulator
+from imu_allan.core.allan.accumulator import AllanAccumulator
 
 #: Calls waiting for the accumulator at most (each holds one run of samples).
 _DEPTH = 8

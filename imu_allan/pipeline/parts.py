@@ -15,7 +15,7 @@ from typing import Callable, TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from imu_allan.core.accumulator import AllanAccumulator
+    from imu_allan.core.allan.accumulator import AllanAccumulator
     from imu_allan.pipeline.feed import BackgroundAccumulator
     from imu_allan.pipeline.session import HygieneStats, SessionConfig
 

@@ -4,7 +4,7 @@ The one analysis session that both the live node and the offline readers feed.
 A :class:`Session` takes blocks of ``(stamp_ns (n,), samples (n, 6))`` in AXES order,
 checks them (rate, gaps, duplicate or out-of-order stamps, NaN/Inf, saturation, frozen
 axes, motion), streams the clean samples through one
-:class:`~imu_allan.core.accumulator.AllanAccumulator`, and fits the noise model on demand.
+:class:`~imu_allan.core.allan.accumulator.AllanAccumulator`, and fits the noise model on demand.
 Because every mode goes through this object, the numbers cannot differ between them.
 """
 
@@ -15,8 +15,8 @@ from typing import Callable
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.accumulator import AllanAccumulator
 from imu_allan.core.allan import AllanCurve
+from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
 from imu_allan.pipeline.checks import _SampleChecks, _split_runs
 from imu_allan.pipeline.clock import _StampClock
@@ -308,7 +308,7 @@ class Session(_StampClock, _SampleChecks, _StateFile):
         Allan curve of the samples used so far, or None before any tau is computable.
 
         ``bounds=False`` leaves adev_lo/adev_hi NaN (see
-        :meth:`imu_allan.core.accumulator.AllanAccumulator.curve`).
+        :meth:`imu_allan.core.allan.accumulator.AllanAccumulator.curve`).
         """
         if self.acc is None or self.acc.n_samples < 4:
             return None

@@ -15,7 +15,7 @@ import numpy as np
 
 from imu_allan import AXES
 from imu_allan.atomic import write_atomic
-from imu_allan.core.accumulator import AllanAccumulator
+from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clock import _NS
 from imu_allan.pipeline.parts import _Parts

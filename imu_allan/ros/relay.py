@@ -4,7 +4,7 @@ The covariances ``~/imu_with_covariance`` writes into each republished Imu messa
 No rclpy here: the node calls :meth:`CovarianceRelay.patch` from its subscription
 callback, so every message goes out as it arrives, from the first one on.  Until the
 first fit the fields hold the covariances of an earlier result (the node's
-``initial_covariance_file``) or, without one, :data:`~imu_allan.core.kalman.
+``initial_covariance_file``) or, without one, :data:`~imu_allan.core.outputs.kalman.
 UNKNOWN_VARIANCE` on the diagonal: a large variance, so a filter leans on its other
 inputs, where zeros (sensor_msgs/Imu: "covariance unknown") make robot_localization
 fall back to its most confident floor.
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from imu_allan.core.kalman import UNKNOWN_VARIANCE
+from imu_allan.core.outputs.kalman import UNKNOWN_VARIANCE
 from imu_allan.errors import InputError
 from imu_allan.io.imu_cdr import CovariancePatch
 

@@ -52,8 +52,8 @@ variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 import numpy as np
 
 from imu_allan.core import native
-from imu_allan.core.accumulator_state import _Persistence
 from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
+from imu_allan.core.allan.accumulator_state import _Persistence
 from imu_allan.errors import InputError
 
 #: Format tag and version written into every state file.

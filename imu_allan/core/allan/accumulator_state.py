@@ -1,5 +1,5 @@
 """
-The state of an :class:`~imu_allan.core.accumulator.AllanAccumulator` in memory and on disk.
+The state of an :class:`~imu_allan.core.allan.accumulator.AllanAccumulator` in memory and on disk.
 
 :meth:`_Persistence.to_state` / :meth:`_Persistence.from_state` give the state as JSON-able
 metadata plus named arrays (what the pipeline's checkpoints embed); :meth:`~_Persistence.save`

@@ -5,7 +5,7 @@ The same values as scipy.stats' chi2.ppf, chi2.sf and f.ppf (checked in test_mod
 without importing scipy.stats, which costs about a second of start-up; scipy.special
 itself (0.25 s) is imported on first use by the fit, which calls these thousands of
 times.  The Allan curve's bounds take their two quantiles per tau from
-:mod:`imu_allan.core.chi2` (numpy alone), so ``imu-allan adev`` imports no scipy.
+:mod:`imu_allan.core.allan.chi2` (numpy alone), so ``imu-allan adev`` imports no scipy.
 """
 
 import numpy as np

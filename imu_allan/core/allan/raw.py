@@ -3,7 +3,7 @@ The bounded raw copy beside the Allan accumulator, for the effect search's evide
 
 :class:`RawKeeper` keeps block averages of the samples as they stream by (the node, the
 offline reader and the diagnosis keep one); :func:`raw_evidence` hands them to the
-time-domain tests of :mod:`imu_allan.core.evidence`.  numpy only: the offline reader
+time-domain tests of :mod:`imu_allan.core.search.evidence`.  numpy only: the offline reader
 imports it before the fit's scipy is loaded.
 """
 

@@ -9,7 +9,7 @@ for one axis at a time:
 1. fit the base model (default: white noise, the paper's Gauss-Markov bias
    instability, random walk) with :func:`imu_allan.core.fit.fit_axis`;
 2. simulate the fitted model (``n_replicas`` replicas: the state-space model of
-   :func:`imu_allan.core.simulate.simulate_state_space` plus the generators of the terms it
+   :func:`imu_allan.core.noise.simulate.simulate_state_space` plus the generators of the terms it
    has no state for) and take the replica-mean Allan variance as the model's curve;
 3. measure the **gap** (defined once, used everywhere)::
 
@@ -50,9 +50,8 @@ from imu_allan.core.diagnose.gap import (Band, find_bands, gap, GAP_OK, gap_z, l
                                          P_INCONSISTENT, Z_BAND)
 from imu_allan.core.diagnose.replicas import (filtered_white_noise, N_REPLICAS,
                                               simulate_model_avar)
-from imu_allan.core.diagnose.result import (AxisDiagnosis, DiagnoseResult, Finding,
-                                            summary_line)
-from imu_allan.core.evidence import RawKeeper
+from imu_allan.core.diagnose.result import AxisDiagnosis, DiagnoseResult, Finding, summary_line
+from imu_allan.core.search.evidence import RawKeeper
 
 __all__ = ['AxisDiagnosis', 'Band', 'DEFAULT_BASE', 'diagnose_axis', 'diagnose_curve',
            'diagnose_session', 'DiagnoseResult', 'EFFECTS', 'filtered_white_noise',

@@ -15,9 +15,9 @@ from imu_allan.core.diagnose.gap import find_bands, gap, gap_z, ln_adev_stderr
 from imu_allan.core.diagnose.replicas import (_Model, _model_from_fit, N_REPLICAS,
                                               simulate_model_avar)
 from imu_allan.core.diagnose.result import AxisDiagnosis, DiagnoseResult, Finding, summary_line
-from imu_allan.core.evidence import raw_evidence, RawKeeper
 from imu_allan.core.fit import AxisFit
 from imu_allan.core.search import EFFECT_TERM as _EFFECT_TERM, search_axis, SEARCH_EFFECTS
+from imu_allan.core.search.evidence import raw_evidence, RawKeeper
 from imu_allan.errors import InputError
 
 
@@ -90,7 +90,7 @@ def _visible_range(tau: np.ndarray, avar_term: np.ndarray, avar_rest: np.ndarray
 
 
 def _term_avar(tau: np.ndarray, fit: AxisFit, effect: str, params: dict) -> np.ndarray:
-    from imu_allan.core.model import TERMS
+    from imu_allan.core.noise.model import TERMS
     term = TERMS[_EFFECT_TERM[effect]]
     nonlinear = [params[s] for s in term.nonlinear]
     coef = term.to_coef(params[term.symbols[0]], *nonlinear)

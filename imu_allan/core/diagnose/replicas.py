@@ -12,9 +12,9 @@ from scipy.signal import lfilter
 
 from imu_allan.core.allan import overlapping_avar
 from imu_allan.core.fit import AxisFit
-from imu_allan.core.noise_params import AxisNoise
-from imu_allan.core.simulate import (flicker_noise, quantization_noise, rate_ramp,
-                                     simulate_state_space, sinusoid)
+from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.simulate import (flicker_noise, quantization_noise, rate_ramp,
+                                           simulate_state_space, sinusoid)
 
 
 #: Default number of simulated replicas.
@@ -48,7 +48,7 @@ def filtered_white_noise(n_density: float, filter_s: float, rate_hz: float, n_sa
 
     The filtered rate x is an Ornstein-Uhlenbeck process of time constant T and driving
     noise q^2 = N^2 / T^2 (DC gain 1); each output sample is its mean over the sample
-    period h, as the ``filtered_white`` term of :data:`imu_allan.core.model.TERMS`
+    period h, as the ``filtered_white`` term of :data:`imu_allan.core.noise.model.TERMS`
     assumes.  Exact discretisation: with a = exp(-h/T), x' = a x + w1 and the integral
     I = T (1 - a) x + w2, where Var w1 = q^2 T (1 - a^2) / 2, Var w2 = q^2 T^2 (h -
     2 T (1 - a) + T (1 - a^2) / 2) and Cov(w1, w2) = q^2 T^2 (1 - a)^2 / 2.
@@ -92,7 +92,7 @@ def simulate_model_avar(model: _Model, rate_hz: float, n_samples: int, m: np.nda
     Simulate a model and return its replica-mean overlapping AVAR at cluster sizes ``m``.
 
     The white, Gauss-Markov and random-walk part runs through the paper's state-space
-    model (:func:`imu_allan.core.simulate.simulate_state_space`, eqs. 14-23); flicker,
+    model (:func:`imu_allan.core.noise.simulate.simulate_state_space`, eqs. 14-23); flicker,
     quantization, ramp and sinusoids are added with their generators.  Replicas are
     simulated two at a time to bound memory.
 

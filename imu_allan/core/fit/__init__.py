@@ -14,7 +14,7 @@ they are shown for comparison, not trusted.
 Optimised (generalised least squares on the Allan variance, GMWM-style):
 
 * Model: AVAR(tau) = sum_j c_j s_j(tau; phi_j), one term per entry of
-  :data:`imu_allan.core.model.TERMS`; linear in the coefficients c_j (S_N = N^2, S_B,
+  :data:`imu_allan.core.noise.model.TERMS`; linear in the coefficients c_j (S_N = N^2, S_B,
   S_K = K^2, ...) for fixed nonlinear parameters phi (T_B, sinusoid frequency), as in
   the paper's section 3.2 (Maia, Silva, De Lima, Meneses).  The c_j are solved by
   non-negative least squares, phi by a grid and then a bounded 1-D search or a
@@ -26,7 +26,7 @@ Optimised (generalised least squares on the Allan variance, GMWM-style):
   quadratic form in the phase, so Cov(avar_p, avar_q) = 2 sum_{k,l} gamma_pq(l-k)^2 /
   (4 tau_p^2 tau_q^2 n_p n_q), with gamma the covariance between second differences at
   cluster sizes m_p and m_q, built from each term's generalised covariance
-  (:class:`imu_allan.core.model.Term`).  The lag sum is exact near the kinks and
+  (:class:`imu_allan.core.noise.model.Term`).  The lag sum is exact near the kinks and
   Gauss-Legendre far from them; test_fit.py checks Sigma against Monte Carlo.  It
   carries the chi-square spread of each point (its EDF, for the noise mix at that tau)
   and the correlation of neighbouring tau (about 0.5 at octave spacing).  A sinusoid

@@ -13,12 +13,12 @@ import numpy as np
 
 from imu_allan.core.allan import AllanCurve
 from imu_allan.core.allan.blas import _single_thread_blas
+from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.fit.nominal import nominal_fit
 from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter, _Slot, _Solution
-from imu_allan.core.model import base_name, noise_from_terms, TERMS
-from imu_allan.core.quantiles import chi2_ppf, chi2_sf, f_ppf
+from imu_allan.core.noise.model import base_name, noise_from_terms, TERMS
 from imu_allan.errors import InputError
 
 #: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
@@ -138,7 +138,7 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     n_samples : int
         Number of samples the curve was computed from.
     terms : sequence of str, optional
-        Candidate terms (names of :data:`imu_allan.core.model.TERMS`, numbered for repeats:
+        Candidate terms (names of :data:`imu_allan.core.noise.model.TERMS`, numbered for repeats:
         'gauss_markov', 'gauss_markov_2', 'sinusoid' ...).  Default
         :data:`DEFAULT_TERMS`.  The fit keeps the subset the data support.
     unit : str

@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 
 from imu_allan.core import native
-from imu_allan.core.model import _gcov_gauss_markov, Term
+from imu_allan.core.noise.model import _gcov_gauss_markov, Term
 
 # Lag-sum quadrature: lags within _EXACT of a kink are summed exactly, the rest is
 # integrated with Gauss-Legendre on pieces that grow _GROWTH-fold away from the kinks.

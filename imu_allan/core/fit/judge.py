@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 
+from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf
 from imu_allan.core.fit.axis import _slot
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design
-from imu_allan.core.quantiles import chi2_ppf, chi2_sf
 
 #: A model whose chi-square p-value is at least this explains the curve: no search.
 P_CONSISTENT = 1e-3

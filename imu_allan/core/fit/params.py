@@ -12,11 +12,11 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtr
 
+from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.result import _unit, Param
 from imu_allan.core.fit.solver import _design, _Fitter, _Slot, _Solution
-from imu_allan.core.model import base_name, GM_PEAK_TAU, TERMS
-from imu_allan.core.quantiles import chi2_ppf
+from imu_allan.core.noise.model import base_name, GM_PEAK_TAU, TERMS
 
 #: Parameters always reported, with the term they belong to.
 CORE_PARAMS = {'N': 'white', 'B': 'bias_instability', 'T_B': 'bias_instability',

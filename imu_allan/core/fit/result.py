@@ -10,9 +10,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from imu_allan.core.model import base_name, TERMS
-from imu_allan.core.noise_params import AxisNoise
-from imu_allan.core.quantiles import chi2_sf
+from imu_allan.core.allan.quantiles import chi2_sf
+from imu_allan.core.noise.model import base_name, TERMS
+from imu_allan.core.noise.params import AxisNoise
 
 #: Kinds of a reported parameter.
 KINDS = ('estimate', 'upper_bound', 'lower_bound', 'not_identified')

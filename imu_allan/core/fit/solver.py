@@ -13,7 +13,7 @@ from scipy.optimize import nnls
 
 from imu_allan.core.fit.covariance import _shared_covariance
 from imu_allan.core.fit.polish import _polish_1d, _polish_lm
-from imu_allan.core.model import Term
+from imu_allan.core.noise.model import Term
 
 
 @dataclass(frozen=True)

@@ -279,7 +279,7 @@ def block_means(y: np.ndarray, factor: int) -> np.ndarray:
     """
     Average each ``factor`` consecutive rows (factor >= 2), bit for bit as the twin.
 
-    The twin is :func:`imu_allan.core.raw._means`.
+    The twin is :func:`imu_allan.core.allan.raw._means`.
 
     Parameters
     ----------
@@ -423,7 +423,7 @@ def gm_shape(x: np.ndarray, series: np.ndarray) -> np.ndarray:
     """
     Evaluate the Gauss-Markov Allan variance shape h(x) / x^2 at x = tau / T.
 
-    The twin of :func:`imu_allan.core.model._gm_shape` (same branches and constants).
+    The twin of :func:`imu_allan.core.noise.model._gm_shape` (same branches and constants).
 
     Parameters
     ----------
@@ -452,7 +452,7 @@ def gm_stencil(lags: np.ndarray, weights: np.ndarray, T: float) -> np.ndarray:
     Sum the weighted Gauss-Markov generalised covariances of stencil lags, per node.
 
     The twin of ``weights @ _gcov_gauss_markov(lags, T)``
-    (:mod:`imu_allan.core.model`).
+    (:mod:`imu_allan.core.noise.model`).
 
     Parameters
     ----------

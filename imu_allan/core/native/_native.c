@@ -6,9 +6,9 @@
  * a parser for the numeric fields of a CSV file, a sensor_msgs/Imu payload decoder and
  * sqlite varints.
  *
- * Plain C99: imu_allan/core/native.py loads this library with ctypes, which releases
+ * Plain C99: imu_allan/core/native/__init__.py loads this library with ctypes, which releases
  * the GIL for every call, so threads run these loops in parallel.  The only Python API
- * is an empty module init, so that importing imu_allan.core._native (as tools that
+ * is an empty module init, so that importing imu_allan.core.native._native (as tools that
  * walk the package do) works.  Every kernel has a numpy twin that is used when the
  * library is absent; test/test_native.py checks that both give the same results.
  *
@@ -80,7 +80,7 @@ static double sumsq(const double *x, long m, int order, long j0, long j1)
 }
 
 /*
- * Running sums of centred windows (imu_allan/core/accumulator.py: _phase): for every
+ * Running sums of centred windows (imu_allan/core/allan/accumulator.py: _phase): for every
  * axis a, r[a] = mean of win row a (w samples, row stride ld_win), x row a (row stride
  * ld_x) gets x[0] = 0 and x[j + 1] = x[j] + (win[j] - r[a]).
  */
@@ -109,7 +109,7 @@ void imu_allan_phase(const double *win, long ld_win, long n_axes, long w, double
 }
 
 /*
- * Streaming accumulator (imu_allan/core/accumulator.py): for every axis a < n_axes
+ * Streaming accumulator (imu_allan/core/allan/accumulator.py): for every axis a < n_axes
  * (row a of x, row stride ld) and cluster size ms[i], add the squared second
  * differences ending at j_first .. j_last (those with j >= 2 ms[i]) to
  * sums[i * n_axes + a].
@@ -512,7 +512,7 @@ long imu_allan_varints(const uint8_t *buf, long size, const int64_t *pos, long n
 /* ------------------------------------------------------------- input checks */
 
 /*
- * Block means of the raw copy (imu_allan/core/raw.py: _means): out row r (n_cols
+ * Block means of the raw copy (imu_allan/core/allan/raw.py: _means): out row r (n_cols
  * values, contiguous) = (((y[r f] + y[r f + 1]) + y[r f + 2]) + ...) * (1 / f) over f =
  * factor >= 2 rows of y (row stride ld): the additions of the numpy twin, in its order,
  * so both give the same bits.
@@ -606,7 +606,7 @@ void imu_allan_repeats(const double *y, long ld, long n, long n_axes, const doub
 /* ------------------------------------------------ the fit's model and covariance */
 
 /*
- * h(x) / x^2 of the Gauss-Markov Allan variance shape (imu_allan/core/model.py,
+ * h(x) / x^2 of the Gauss-Markov Allan variance shape (imu_allan/core/noise/model.py,
  * _gm_shape): below x = 0.05 its Taylor series, the n_c coefficients c highest power
  * first by Horner (h(x) / x^3) times x; else (x - 1.5 + 2 e - 0.5 e e) / (x x) with
  * e = exp(-x).  The design matrix of every fit evaluates this thousands of times on a

@@ -23,7 +23,7 @@ sinusoid             A^2  [unit^2]      A^2 (sin^2(pi f0 tau) / (pi f0 tau))^2
 
 B convention (paper eq. 8, the one used everywhere in imu_allan): the Gauss-Markov
 term with level B and correlation time T has driving PSD S_B = 2 B^2 ln2 /
-(pi 0.4365^2 T) (:attr:`imu_allan.core.noise_params.GaussMarkov.psd`), so its ADEV peak
+(pi 0.4365^2 T) (:attr:`imu_allan.core.noise.params.GaussMarkov.psd`), so its ADEV peak
 is 0.664 B, the same floor as flicker noise of level B.
 
 The registry :data:`TERMS` also carries each term's generalised covariance of the
@@ -39,7 +39,7 @@ from typing import Callable
 import numpy as np
 
 from imu_allan.core import native
-from imu_allan.core.noise_params import AxisNoise, GaussMarkov, GM_PEAK_FACTOR, Sinusoid
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov, GM_PEAK_FACTOR, Sinusoid
 
 #: 2 ln2 / pi: flicker AVAR floor per unit B^2 (IEEE Std 952 C.1).
 FLICKER_AVAR = 2.0 * math.log(2.0) / math.pi

@@ -21,7 +21,7 @@ written by :func:`dump_params` / :func:`save_params`::
 ``gyro`` and ``accel`` set all three axes of that sensor; an entry for one axis
 overrides the group's keys one by one (a per-axis ``gauss_markov`` or ``sinusoid``
 list replaces the group's list).  Values are SI numbers or strings with a unit
-(``imu_allan.core.units``).  N, B, K, Q, T_B, A, T and f0_hz must be finite and >= 0
+(``imu_allan.core.noise.units``).  N, B, K, Q, T_B, A, T and f0_hz must be finite and >= 0
 (T_B, T and f0_hz > 0); R and bias may be negative.  T_B absent or null makes B
 flicker noise.
 """
@@ -31,7 +31,7 @@ import math
 from pathlib import Path
 
 from imu_allan import AXES
-from imu_allan.core.units import quoted, sensor_of, to_si
+from imu_allan.core.noise.units import quoted, sensor_of, to_si
 from imu_allan.errors import InputError
 
 #: 0.4365: peak of the Gauss-Markov ADEV in units of q sqrt(T) (IEEE Std 952 C.1).
@@ -379,7 +379,7 @@ def dump_params(spec: NoiseSpec, with_units: bool = False) -> dict:
         The model.
     with_units : bool
         False: plain SI floats (exact round trip).  True: strings in the customary
-        units of ``imu_allan.core.units.quoted`` with 6 significant digits
+        units of ``imu_allan.core.noise.units.quoted`` with 6 significant digits
         (e.g. '0.41253 deg/sqrt(h)'), for people; they round-trip to 5e-6 relative.
 
     Returns

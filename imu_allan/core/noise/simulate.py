@@ -4,7 +4,7 @@ Simulate IMU rate samples from a stochastic error model.
 Two generators are provided:
 
 * :func:`simulate_axis` sums independent generators, one per term of an
-  :class:`~imu_allan.core.noise_params.AxisNoise` (white, Gauss-Markov, flicker, random
+  :class:`~imu_allan.core.noise.params.AxisNoise` (white, Gauss-Markov, flicker, random
   walk, quantization, rate ramp, sinusoids, constant bias).  Each generator's Allan
   variance matches the closed form of its term (IEEE Std 952 annex C); the tests check
   every one against ``imu_allan.core.allan.overlapping_avar``.
@@ -14,7 +14,7 @@ Two generators are provided:
   model a Kalman filter sees, and it is vectorised over Monte-Carlo replicas.
 
 :func:`simulate_imu` draws a six-axis record from a
-:class:`~imu_allan.core.noise_params.NoiseSpec`.  Everything is reproducible from a seed:
+:class:`~imu_allan.core.noise.params.NoiseSpec`.  Everything is reproducible from a seed:
 each axis gets its own child generator (``numpy.random.SeedSequence.spawn``), so
 changing one axis' model leaves the other axes' samples unchanged.
 
@@ -63,7 +63,7 @@ import scipy.fft
 from scipy.signal import lfilter
 
 from imu_allan import AXES
-from imu_allan.core.noise_params import AxisNoise, GaussMarkov, NoiseSpec
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov, NoiseSpec
 from imu_allan.errors import InputError
 
 

@@ -1,7 +1,7 @@
 """
 Outputs in the shapes their consumers read: robot_localization, IMU drivers, VIO configs.
 
-Each function takes the six per-axis sources of :func:`imu_allan.core.kalman.kalman_model`
+Each function takes the six per-axis sources of :func:`imu_allan.core.outputs.kalman.kalman_model`
 (AxisNoise or AxisFit) and returns YAML text whose keys are the consumer's own:
 
 * :func:`kalibr_yaml`: Kalibr's imu.yaml (one noise density and random walk per sensor,
@@ -27,8 +27,8 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.kalman import _param, _six, imu_covariance
-from imu_allan.core.noise_params import AxisNoise
+from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.outputs.kalman import _param, _six, imu_covariance
 from imu_allan.errors import InputError
 
 #: robot_localization's imu0_config order (15 booleans): x y z, roll pitch yaw, vx vy vz,
@@ -269,7 +269,7 @@ def driver_noise(sources, rate_hz: float) -> DriverNoise:
     Parameters
     ----------
     sources : mapping or sequence
-        Six AxisNoise / AxisFit, see :func:`imu_allan.core.kalman.kalman_model`.
+        Six AxisNoise / AxisFit, see :func:`imu_allan.core.outputs.kalman.kalman_model`.
     rate_hz : float
         Sample rate [Hz].
 
@@ -425,7 +425,7 @@ def vins_yaml(sources, rate_hz: float, reduce: str = 'max') -> str:
     The values are the continuous-time densities Kalibr uses (N and K, one per sensor,
     :func:`sensor_value`), which is how they are usually filled
     in.  VINS' pre-integration uses them as per-sample values (see
-    :data:`imu_allan.core.kalman.NOTES`), and its shipped examples are larger than the
+    :data:`imu_allan.core.outputs.kalman.NOTES`), and its shipped examples are larger than the
     Allan densities by factors of 10-50: start from these and inflate.  A value no axis
     gives is left out with a comment.
 

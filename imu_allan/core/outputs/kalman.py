@@ -34,8 +34,8 @@ from typing import Mapping
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.model import GM_PEAK_TAU
-from imu_allan.core.noise_params import AxisNoise, GaussMarkov
+from imu_allan.core.noise.model import GM_PEAK_TAU
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov
 from imu_allan.errors import InputError
 
 #: robot_localization ignores (clamps) variances below this [unit^2].

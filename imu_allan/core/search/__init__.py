@@ -19,7 +19,7 @@ Kalibr file and the Imu covariances all come from it.
    is added and the model re-weighted (IRLS), up to :data:`MAX_STEPS` effects.  Rival
    explanations compete on the same statistic: a second Gauss-Markov process (two
    parameters) against flicker noise (one), a sinusoid against both.
-3. **Time-domain evidence**, where the curve blurs it (:mod:`imu_allan.core.evidence`):
+3. **Time-domain evidence**, where the curve blurs it (:mod:`imu_allan.core.search.evidence`):
    a sinusoid must show as a periodogram line of the raw samples near the fitted
    frequency (the line's frequency replaces the curve's); a rate ramp is tested on
    the record itself by a likelihood ratio against more random walk, so a ramp that
@@ -37,9 +37,8 @@ random_walk, rate_ramp, sinusoid; the model's own low-pass is ``filtered_white``
 from typing import Sequence
 
 from imu_allan.core.allan.blas import _single_thread_blas
-from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN,
-                                         EFFECT_TERM, MAX_REPEATS, MAX_STEPS, Search,
-                                         SEARCH_EFFECTS, Step)
+from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN, EFFECT_TERM,
+                                         MAX_REPEATS, MAX_STEPS, Search, SEARCH_EFFECTS, Step)
 from imu_allan.core.search.run import _finish, _Run
 from imu_allan.errors import InputError
 

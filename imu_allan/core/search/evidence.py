@@ -1,14 +1,14 @@
 """
 Time-domain evidence for the effect search, where the Allan curve blurs it.
 
-- :class:`RawKeeper` (from :mod:`imu_allan.core.raw`): a bounded, block-averaged copy
+- :class:`RawKeeper` (from :mod:`imu_allan.core.allan.raw`): a bounded, block-averaged copy
   of the samples (the node, the offline reader and the diagnosis keep one beside the
   Allan accumulator);
 - :func:`periodogram_peak`: a spectral line (a sinusoid) and its significance;
 - :func:`ramp_test`: a likelihood-ratio test of a rate ramp against the correlated
   noise model (white, Gauss-Markov, flicker, random walk), on the differences of block
   means, whose covariance the model fixes exactly (the generalised covariances of
-  :data:`imu_allan.core.model.TERMS`).  A random walk alone also drifts; the test asks
+  :data:`imu_allan.core.noise.model.TERMS`).  A random walk alone also drifts; the test asks
   whether a straight line in the rate explains the record better than more random walk.
 """
 
@@ -19,8 +19,8 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import minimize_scalar
 
-from imu_allan.core.model import TERMS
-from imu_allan.core.raw import raw_evidence, RawKeeper  # noqa: F401 (re-exported)
+from imu_allan.core.allan.raw import raw_evidence, RawKeeper  # noqa: F401 (re-exported)
+from imu_allan.core.noise.model import TERMS
 
 
 class PeakCheck(NamedTuple):

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from imu_allan.core.fit.axis import _n_params
-from imu_allan.core.judge import shows_quantization
+from imu_allan.core.fit.judge import shows_quantization
 from imu_allan.core.search.rules import _label_for, DELTA_MIN
 
 #: Rival effects re-fitted (IRLS) and compared by their full likelihood at each step.

@@ -7,8 +7,8 @@ rules an effect must pass: a label it can still take, periodogram evidence of a 
 
 from typing import NamedTuple, Sequence
 
-from imu_allan.core.evidence import periodogram_peak
 from imu_allan.core.fit.result import AxisFit
+from imu_allan.core.search.evidence import periodogram_peak
 
 #: Effects the search may add, in the order they are tried (ties keep the first).
 SEARCH_EFFECTS = ('sinusoid', 'gauss_markov', 'bias_instability', 'quantization',

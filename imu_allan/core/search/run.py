@@ -10,14 +10,14 @@ import math
 
 import numpy as np
 
-from imu_allan.core.evidence import ramp_test
+from imu_allan.core.allan.quantiles import chi2_sf
 from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
+from imu_allan.core.fit.judge import (follows_curve, P_CONSISTENT, shows_quantization,
+                                      white_region, white_share)
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
-from imu_allan.core.judge import (follows_curve, P_CONSISTENT, shows_quantization,
-                                  white_region, white_share)
-from imu_allan.core.model import base_name, TERMS
-from imu_allan.core.quantiles import chi2_sf
+from imu_allan.core.noise.model import base_name, TERMS
+from imu_allan.core.search.evidence import ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
 from imu_allan.core.search.rules import (_label_for, _sinusoid_evidence, DELTA_MIN, MAX_STEPS,
                                          Step)
