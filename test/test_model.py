@@ -104,8 +104,8 @@ def test_avar_terms_names_and_sum():
     assert_allclose(avar_model(tau, noise), sum(terms.values()), rtol=1e-14)
     # One further Gauss-Markov term keeps the plain name; no T_B means flicker.
     one = avar_terms(tau, AxisNoise(B=2e-4, gauss_markov=(GaussMarkov(1e-4, 2.0),)))
-    assert set(one) == {'bias_instability', 'gauss_markov'}
-    assert_allclose(one['bias_instability'], avar_flicker(tau, 2e-4), rtol=1e-14)
+    assert set(one) == {'flicker', 'gauss_markov'}
+    assert_allclose(one['flicker'], avar_flicker(tau, 2e-4), rtol=1e-14)
     assert_allclose(avar_model(tau, AxisNoise()), np.zeros(tau.size))
 
 

@@ -1,12 +1,5 @@
 """
-Noise parameters of one IMU axis, shared by the model, the fit and the simulator.
-
-Every value is in SI units of the axis' samples (``unit`` = rad/s for a gyro,
-m/s^2 for an accelerometer).  B follows the paper's convention (Maia et al. eq. 8):
-B is the bias instability read off the Allan deviation floor, ADEV_min = 0.664 B
-for flicker noise, and for a first-order Gauss-Markov term with correlation time T
-the driving PSD is S_B = 2 B^2 ln2 / (pi 0.4365^2 T), which puts the Gauss-Markov
-ADEV peak (0.4365 sqrt(S_B T) at tau = 1.89 T) on the same floor 0.664 B.
+Parameter files of a noise model (the values themselves: :mod:`.values`, re-exported).
 
 Parameter files (YAML) are read by :func:`load_params` / :func:`parse_params` and
 written by :func:`dump_params` / :func:`save_params`::
@@ -24,154 +17,53 @@ list replaces the group's list).  Values are SI numbers or strings with a unit
 (``imu_allan.core.noise.units``).  N, B, K, Q, T_B, A, T and f0_hz must be finite and >= 0
 (T_B, T and f0_hz > 0); R and bias may be negative.  T_B absent or null makes B
 flicker noise.
+
+The keys come from the term registry (each term's ``keys``, ``list_key`` and
+``signed``, :mod:`imu_allan.core.noise.terms`): a term held in its own AxisNoise fields
+has scalar keys, a term that may repeat (and every term added later) a list entry
+named by its ``list_key`` (its name by default) whose items carry its keys.
 """
 
-from dataclasses import dataclass, field
 import math
 from pathlib import Path
 
 from imu_allan import AXES
+from imu_allan.core.noise.terms import Term, TERMS
 from imu_allan.core.noise.units import quoted, sensor_of, to_si
+from imu_allan.core.noise.values import (AxisNoise, FLICKER_FLOOR,  # noqa: F401
+                                         GaussMarkov, GM_PEAK_FACTOR, NoiseSpec, Sinusoid,
+                                         TermValue)
 from imu_allan.errors import InputError
 
-#: 0.4365: peak of the Gauss-Markov ADEV in units of q sqrt(T) (IEEE Std 952 C.1).
-GM_PEAK_FACTOR = 0.4365
-#: 0.664 = sqrt(2 ln2 / pi): flicker ADEV floor per unit of B (IEEE Std 952 C.1).
-FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
-
-
-@dataclass(frozen=True)
-class GaussMarkov:
-    """
-    A first-order Gauss-Markov term.
-
-    Attributes
-    ----------
-    B : float
-        Bias-instability level [unit] (paper convention, see module docstring).
-    T : float
-        Correlation time [s].
-
-    """
-
-    B: float
-    T: float
-
-    @property
-    def psd(self) -> float:
-        """Driving white-noise PSD S_B [unit^2/s] (paper eq. 8)."""
-        return 2.0 * self.B ** 2 * math.log(2.0) / (math.pi * GM_PEAK_FACTOR ** 2 * self.T)
-
-    @property
-    def q(self) -> float:
-        """Driving noise density q = sqrt(S_B) [unit/s^0.5]."""
-        return math.sqrt(self.psd)
-
-    @property
-    def sigma(self) -> float:
-        """Stationary standard deviation sqrt(S_B T / 2) [unit]."""
-        return math.sqrt(self.psd * self.T / 2.0)
-
-    @classmethod
-    def from_psd(cls, psd: float, T: float) -> 'GaussMarkov':
-        """Build from the driving PSD q^2 [unit^2/s] and correlation time T [s]."""
-        return cls(B=math.sqrt(psd * math.pi * GM_PEAK_FACTOR ** 2 * T / (2.0 * math.log(2.0))),
-                   T=T)
-
-
-@dataclass(frozen=True)
-class Sinusoid:
-    """
-    A sinusoidal error A sin(2 pi f0 t + phase).
-
-    Attributes
-    ----------
-    A : float
-        Amplitude [unit].
-    f0_hz : float
-        Frequency [Hz].
-
-    """
-
-    A: float
-    f0_hz: float
-
-
-@dataclass(frozen=True)
-class AxisNoise:
-    """
-    Stochastic error model of one axis; a term set to 0 (or None) is absent.
-
-    Attributes
-    ----------
-    N : float
-        White noise density (angle / velocity random walk) [unit*s^0.5].
-    B : float
-        Bias instability [unit]: a Gauss-Markov term with ``T_B`` when T_B is set
-        (the paper's model), otherwise flicker (1/f) noise.
-    T_B : float or None
-        Correlation time of the bias-instability Gauss-Markov term [s].
-    K : float
-        Rate random walk [unit/s^0.5].
-    Q : float
-        Quantization noise [unit*s] (AVAR 3 Q^2 / tau^2).
-    R : float
-        Rate ramp [unit/s] (AVAR R^2 tau^2 / 2).
-    gauss_markov : tuple of GaussMarkov
-        Further Gauss-Markov terms.
-    sinusoids : tuple of Sinusoid
-        Sinusoidal errors.
-    bias : float
-        Constant offset [unit], e.g. 9.80665 on an upward accelerometer axis.
-
-    """
-
-    N: float = 0.0
-    B: float = 0.0
-    T_B: float | None = None
-    K: float = 0.0
-    Q: float = 0.0
-    R: float = 0.0
-    gauss_markov: tuple[GaussMarkov, ...] = field(default_factory=tuple)
-    sinusoids: tuple[Sinusoid, ...] = field(default_factory=tuple)
-    bias: float = 0.0
-
-    def all_gauss_markov(self) -> tuple[GaussMarkov, ...]:
-        """Every Gauss-Markov term: the bias-instability one (if T_B is set) first."""
-        head = (GaussMarkov(self.B, self.T_B),) if self.B > 0 and self.T_B else ()
-        return head + tuple(self.gauss_markov)
-
-    @property
-    def has_flicker(self) -> bool:
-        """Return True when B is modelled as flicker (1/f) noise, i.e. T_B is not set."""
-        return self.B > 0 and not self.T_B
-
-
-@dataclass(frozen=True)
-class NoiseSpec:
-    """
-    Noise model of a whole six-axis IMU.
-
-    Attributes
-    ----------
-    name : str
-        Free-text name of the IMU ('' when not given).
-    axes : dict of str to AxisNoise
-        One entry per name in ``imu_allan.AXES`` (absent axes are ``AxisNoise()``).
-
-    """
-
-    name: str
-    axes: dict[str, AxisNoise]
-
-
-#: Scalar keys of an axis entry, in file order.
-SCALAR_KEYS = ('N', 'B', 'T_B', 'K', 'Q', 'R', 'bias')
-#: List keys of an axis entry and the keys of their items.
-LIST_KEYS = {'gauss_markov': ('B', 'T'), 'sinusoid': ('A', 'f0_hz')}
 _GROUPS = {'gyro': AXES[:3], 'accel': AXES[3:]}
-_MAY_BE_NEGATIVE = ('R', 'bias')
-_MUST_BE_POSITIVE = ('T_B', 'T', 'f0_hz')
+
+
+def list_key(term: Term) -> str:
+    """Return the list entry of a term in files ('' for a term with scalar keys)."""
+    return term.list_key or (term.name if term.read is None else '')
+
+
+def scalar_keys() -> tuple:
+    """Return the scalar keys of an axis entry (AxisNoise fields), in file order."""
+    keys = [k.name for t in TERMS.values() if not list_key(t) for k in t.keys if k.name]
+    return tuple(dict.fromkeys(keys)) + ('bias',)
+
+
+def list_keys() -> dict:
+    """Return each list entry of an axis entry with its term: {key: Term}."""
+    return {list_key(t): t for t in TERMS.values() if list_key(t)}
+
+
+def _sign_rules() -> tuple:
+    """Return the keys that may be negative and the keys that must be positive."""
+    signed, positive = {'bias'}, set()
+    for t in TERMS.values():
+        for sym, key in zip(t.symbols, t.keys):
+            if sym in t.signed:
+                signed.add(key.name)
+            if sym in t.nonlinear:
+                positive.add(key.name)
+    return signed, positive - {''}
 
 
 def _value(raw, key: str, sensor: str, where: str) -> float:
@@ -182,9 +74,10 @@ def _value(raw, key: str, sensor: str, where: str) -> float:
         raise InputError(f'{where}: {exc}') from None
     if not math.isfinite(value):
         raise InputError(f'{where}: must be finite, got {raw!r}')
-    if key in _MUST_BE_POSITIVE and value <= 0:
+    signed, positive = _sign_rules()
+    if key in positive and value <= 0:
         raise InputError(f'{where}: must be > 0, got {raw!r}')
-    if key not in _MAY_BE_NEGATIVE and value < 0:
+    if key not in signed and value < 0:
         raise InputError(f'{where}: must be >= 0, got {raw!r}')
     return value
 
@@ -197,32 +90,33 @@ def _entry(raw, entry: str, sensor: str, prefix: str) -> dict:
     if not isinstance(raw, dict):
         raise InputError(f'{here}: expected a mapping of terms, got {type(raw).__name__}')
     out: dict[str, object] = {}
+    scalars, lists = scalar_keys(), list_keys()
     for key, val in raw.items():
         where = f'{here}.{key}'
         if key in ('sinusoids',):  # the AxisNoise field name, accepted as an alias
             key = 'sinusoid'
-        if key in SCALAR_KEYS:
+        if key in scalars:
             if key == 'T_B' and val is None:
                 out[key] = None
             else:
                 out[key] = _value(val, key, sensor, where)
-        elif key in LIST_KEYS:
-            out[key] = _items(val, key, sensor, where)
+        elif key in lists:
+            out[key] = _items(val, lists[key], sensor, where)
         else:
             raise InputError(f'{where}: unknown key (expected one of '
-                             f'{", ".join(SCALAR_KEYS + tuple(LIST_KEYS))})')
+                             f'{", ".join(scalars + tuple(lists))})')
     return out
 
 
-def _items(raw, key: str, sensor: str, where: str) -> tuple:
-    """Parse a ``gauss_markov`` or ``sinusoid`` list."""
+def _items(raw, term: Term, sensor: str, where: str) -> tuple:
+    """Parse a list entry (``gauss_markov``, ``sinusoid`` ...) into value tuples."""
     if raw is None:
         return ()
     if isinstance(raw, dict):
         raw = [raw]
     if not isinstance(raw, list):
         raise InputError(f'{where}: expected a list of mappings, got {type(raw).__name__}')
-    names = LIST_KEYS[key]
+    names = tuple(k.name for k in term.keys)
     items = []
     for i, item in enumerate(raw):
         at = f'{where}[{i}]'
@@ -234,17 +128,18 @@ def _items(raw, key: str, sensor: str, where: str) -> tuple:
         missing = [k for k in names if k not in item]
         if missing:
             raise InputError(f'{at}: missing key {missing[0]}')
-        a, b = (_value(item[k], k, sensor, f'{at}.{k}') for k in names)
-        items.append(GaussMarkov(B=a, T=b) if key == 'gauss_markov' else Sinusoid(A=a, f0_hz=b))
+        items.append(tuple(_value(item[k], k, sensor, f'{at}.{k}') for k in names))
     return tuple(items)
 
 
 def _axis_noise(terms: dict) -> AxisNoise:
-    kwargs = {k: terms[k] for k in SCALAR_KEYS if k in terms}
-    if 'gauss_markov' in terms:
-        kwargs['gauss_markov'] = terms['gauss_markov']
-    if 'sinusoid' in terms:
-        kwargs['sinusoids'] = terms['sinusoid']
+    kwargs = {k: terms[k] for k in scalar_keys() if k in terms}
+    kwargs.update(gauss_markov=[], sinusoids=[], extra=[])
+    for key, term in list_keys().items():
+        for values in terms.get(key, ()):
+            term.put(kwargs, values)
+    for key in ('gauss_markov', 'sinusoids', 'extra'):
+        kwargs[key] = tuple(kwargs[key])
     return AxisNoise(**kwargs)
 
 
@@ -353,16 +248,15 @@ def _terms(noise: AxisNoise, sensor: str, with_units: bool) -> dict:
         return f'{v:.6g} {unit}'
 
     out = {}
-    for key in SCALAR_KEYS:
+    for key in scalar_keys():
         value = getattr(noise, key)
         if value is not None and value != 0.0:
             out[key] = fmt(key, value)
-    if noise.gauss_markov:
-        out['gauss_markov'] = [{'B': fmt('B', g.B), 'T': fmt('T', g.T)}
-                               for g in noise.gauss_markov]
-    if noise.sinusoids:
-        out['sinusoid'] = [{'A': fmt('A', s.A), 'f0_hz': fmt('f0_hz', s.f0_hz)}
-                           for s in noise.sinusoids]
+    for key, term in list_keys().items():
+        items = [{k.name: fmt(k.name, v) for k, v in zip(term.keys, values)}
+                 for values in term.instances(noise)]
+        if items:
+            out[key] = items
     return out
 
 

@@ -23,7 +23,10 @@ T_B, T     s                 s, min, h                    s, min, h
 f0_hz      Hz                Hz                           Hz
 =========  ================  ==========================  ===========================
 
-Customary units used by :func:`quoted` (summaries; the files and JSON stay SI):
+Each key's dimension and customary unit come from the term registry (the unit template
+and ``keys`` of each entry of :data:`imu_allan.core.noise.terms.TERMS`); the tables
+here show them.  Customary units used by :func:`quoted` (summaries; the files and JSON
+stay SI):
 
 * gyro: N deg/sqrt(h), B deg/h, K deg/h/sqrt(h), Q arcsec, R deg/h^2, A deg/h,
   bias deg/s.
@@ -45,6 +48,7 @@ from fractions import Fraction
 import math
 import re
 
+from imu_allan.core.noise.terms import TERMS
 from imu_allan.errors import InputError
 
 #: Standard gravity [m/s^2] (CGPM 1901), used for g, mg and ug.
@@ -87,33 +91,55 @@ _NAMES = {
 _PREFIXES = {'m': 1e-3, 'u': 1e-6, 'µ': 1e-6, 'μ': 1e-6, 'n': 1e-9}
 _PREFIXABLE = ('rad', 'deg', 'm', 'g', 's', 'hz')
 
-# SI unit of the samples, per sensor.
-_SAMPLE_DIM = {'gyro': _dim(1, 0, -1), 'accel': _dim(0, 1, -2)}
-# Dimension of each key relative to the sample unit: time exponent added, or absolute.
-_KEY_TIME = {'N': Fraction(1, 2), 'B': Fraction(0), 'A': Fraction(0), 'bias': Fraction(0),
-             'K': Fraction(-1, 2), 'Q': Fraction(1), 'R': Fraction(-1)}
-_KEY_ABSOLUTE = {'T_B': _dim(0, 0, 1), 'T': _dim(0, 0, 1), 'f0_hz': _dim(0, 0, -1)}
+#: SI unit of the samples, per sensor.
+SAMPLE_UNITS = {'gyro': 'rad/s', 'accel': 'm/s^2'}
+# SI text of the unit templates of the registry ('u' = the sample unit) where plain
+# substitution reads badly.
+_SI_TEXT = {('u*s^0.5', 'gyro'): 'rad/s/sqrt(Hz)', ('u*s^0.5', 'accel'): 'm/s^2/sqrt(Hz)',
+            ('u/s^0.5', 'gyro'): 'rad/s/sqrt(s)', ('u/s^0.5', 'accel'): 'm/s^2/sqrt(s)',
+            ('u*s', 'gyro'): 'rad', ('u*s', 'accel'): 'm/s',
+            ('u/s', 'gyro'): 'rad/s^2', ('u/s', 'accel'): 'm/s^3'}
+# Keys that are no term's parameter: the constant offset.
+_OTHER_KEYS = {'bias': ('u', ('deg/s', 'm/s^2'))}
 
-#: Unit of each key in SI, per sensor (for messages and YAML comments).
-SI_UNITS = {
-    'gyro': {'N': 'rad/s/sqrt(Hz)', 'B': 'rad/s', 'A': 'rad/s', 'bias': 'rad/s',
-             'K': 'rad/s/sqrt(s)', 'Q': 'rad', 'R': 'rad/s^2',
-             'T_B': 's', 'T': 's', 'f0_hz': 'Hz'},
-    'accel': {'N': 'm/s^2/sqrt(Hz)', 'B': 'm/s^2', 'A': 'm/s^2', 'bias': 'm/s^2',
-              'K': 'm/s^2/sqrt(s)', 'Q': 'm/s', 'R': 'm/s^3',
-              'T_B': 's', 'T': 's', 'f0_hz': 'Hz'},
-}
-#: Customary unit of each key, per sensor, used by :func:`quoted`.
-CUSTOMARY_UNITS = {
-    'gyro': {'N': 'deg/sqrt(h)', 'B': 'deg/h', 'A': 'deg/h', 'bias': 'deg/s',
-             'K': 'deg/h/sqrt(h)', 'Q': 'arcsec', 'R': 'deg/h^2',
-             'T_B': 's', 'T': 's', 'f0_hz': 'Hz'},
-    'accel': {'N': 'ug/sqrt(Hz)', 'B': 'ug', 'A': 'ug', 'bias': 'm/s^2',
-              'K': 'ug/sqrt(s)', 'Q': 'mm/s', 'R': 'ug/h',
-              'T_B': 's', 'T': 's', 'f0_hz': 'Hz'},
-}
-#: Keys that carry a unit.
-KEYS = tuple(SI_UNITS['gyro'])
+
+def _key_table() -> dict:
+    """Return {file key: (unit template, (customary gyro, customary accel))}."""
+    table = dict(_OTHER_KEYS)
+    for term in TERMS.values():
+        for template, key in zip(term.units, term.keys):
+            if key.name:
+                table.setdefault(key.name, (template, key.customary))
+    return table
+
+
+def keys() -> tuple:
+    """Return every key that carries a unit (the registry's file keys and bias)."""
+    return tuple(_key_table())
+
+
+def _entry(key: str):
+    entry = _key_table().get(key)
+    if entry is None:
+        raise ValueError(f'unknown parameter key {key!r}')
+    return entry
+
+
+def si_unit(key: str, sensor: str) -> str:
+    """Return the SI unit of a key for a sensor, e.g. 'rad/s/sqrt(Hz)' for N of a gyro."""
+    sensor = sensor_of(sensor)
+    template = _entry(key)[0]
+    if not template.startswith('u'):
+        return template
+    return _SI_TEXT.get((template, sensor), SAMPLE_UNITS[sensor] + template[1:])
+
+
+def customary_unit(key: str, sensor: str) -> str:
+    """Return the customary unit of a key for a sensor (:func:`quoted`), e.g. 'deg/h'."""
+    sensor = sensor_of(sensor)
+    custom = _entry(key)[1][0 if sensor == 'gyro' else 1]
+    return custom or si_unit(key, sensor)
+
 
 _NUMBER = re.compile(r'\s*([+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?)\s*(.*)\s*$', re.S)
 _TOKEN = re.compile(r'\s*(\*\*|√|[A-Za-zµμ°]+|\d+(?:\.\d*)?|\.\d+|[/*·^()\-+²³])')
@@ -142,12 +168,7 @@ def sensor_of(axis_or_sensor: str) -> str:
 
 def expected_dim(key: str, sensor: str) -> _Dim:
     """Dimension (angle, length, time exponents) that ``key`` must have for ``sensor``."""
-    if key in _KEY_ABSOLUTE:
-        return _KEY_ABSOLUTE[key]
-    if key not in _KEY_TIME:
-        raise ValueError(f'unknown parameter key {key!r}')
-    a, ln, t = _SAMPLE_DIM[sensor_of(sensor)]
-    return (a, ln, t + _KEY_TIME[key])
+    return parse_unit(si_unit(key, sensor))[1]
 
 
 class _Parser:
@@ -342,7 +363,7 @@ def to_si(value, key: str, sensor: str) -> float:
         return number
     factor, dim = parse_unit(unit)
     if dim != want:
-        examples = dict.fromkeys((SI_UNITS[sensor][key], CUSTOMARY_UNITS[sensor][key]))
+        examples = dict.fromkeys((si_unit(key, sensor), customary_unit(key, sensor)))
         article = 'an' if sensor == 'accel' else 'a'
         raise InputError(
             f'unit {unit!r} is {_dim_text(dim)}, but {key} of {article} {sensor} needs '
@@ -371,8 +392,7 @@ def quoted(key: str, sensor: str, value_si: float) -> tuple[float, str]:
         The customary unit, e.g. 'deg/sqrt(h)'.
 
     """
-    sensor = sensor_of(sensor)
-    unit = CUSTOMARY_UNITS[sensor][key]
+    unit = customary_unit(key, sensor)
     factor, _ = parse_unit(unit)
     return value_si / factor, unit
 
