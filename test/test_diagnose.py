@@ -163,7 +163,7 @@ def test_diagnose_session_duck_typed():
 def test_unknown_base_term_is_an_input_error():
     y, _, _ = cases.make_case(None, 5)
     curve = allan_curve(y, cases.RATE_HZ, 'octave', confidence=0.95)
-    with pytest.raises(InputError, match='unknown effect'):
+    with pytest.raises(InputError, match="unknown term 'pink' in the base model"):
         diagnose_curve(curve, y.shape[0], base_model=('white', 'pink'))
 
 

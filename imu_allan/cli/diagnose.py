@@ -15,7 +15,8 @@ from pathlib import Path
 import sys
 
 from imu_allan.cli.analyze import add_input_options, session_config_from_args
-from imu_allan.core.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS
+from imu_allan.core.diagnose import (base_terms, DEFAULT_BASE, diagnose_session, EFFECTS,
+                                     N_REPLICAS)
 from imu_allan.errors import InputError
 from imu_allan.io.inputs import open_input, Progress, raw_tap, stream_input
 from imu_allan.pipeline.session import SessionConfig
@@ -33,7 +34,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     add_input_options(p)
     p.add_argument('--base-model', default=','.join(DEFAULT_BASE),
                    help='comma-separated base-model terms (default %(default)s: the '
-                        "paper's white noise, Gauss-Markov bias instability, random walk)")
+                        "paper's white noise, Gauss-Markov bias instability, random walk; "
+                        'the old name gauss_markov is read as bias_instability)')
     p.add_argument('--out', type=Path, default=Path('imu_allan_diagnose'),
                    help='output directory')
     p.add_argument('--format', choices=('text', 'json'), default='text')
@@ -49,10 +51,10 @@ def _base_model(text: str) -> tuple:
     names = tuple(n.strip() for n in text.split(',') if n.strip())
     if not names:
         raise InputError('--base-model needs at least one term')
-    for n in names:
-        if n not in EFFECTS:
-            raise InputError(f'--base-model: unknown term {n!r}; known: {", ".join(EFFECTS)}')
-    return names
+    try:
+        return base_terms(names)
+    except InputError as exc:
+        raise InputError(f'--base-model: {exc}') from None
 
 
 def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_model,

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from imu_allan.core.allan.chi2 import chi2_ppf
+from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.allan.taus import _check_method, _DIFF_ORDER
 from imu_allan.errors import InputError
 

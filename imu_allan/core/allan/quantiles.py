@@ -1,11 +1,10 @@
 """
-Chi-square and F distribution functions from scipy.special.
+Chi-square and F distribution functions: the one place the package takes them from.
 
 The same values as scipy.stats' chi2.ppf, chi2.sf and f.ppf (checked in test_model.py),
-without importing scipy.stats, which costs about a second of start-up; scipy.special
-itself (0.25 s) is imported on first use by the fit, which calls these thousands of
-times.  The Allan curve's bounds take their two quantiles per tau from
-:mod:`imu_allan.core.allan.chi2` (numpy alone), so ``imu-allan adev`` imports no scipy.
+from scipy.special, imported on first use: the Allan curve's bounds, the fit and the
+search all call these, and scipy.stats' own import is a large share of a short
+command's start-up.
 """
 
 import numpy as np

@@ -8,9 +8,10 @@ for one axis at a time:
 
 1. fit the base model (default: white noise, the paper's Gauss-Markov bias
    instability, random walk) with :func:`imu_allan.core.fit.fit_axis`;
-2. simulate the fitted model (``n_replicas`` replicas: the state-space model of
-   :func:`imu_allan.core.noise.simulate.simulate_state_space` plus the generators of the terms it
-   has no state for) and take the replica-mean Allan variance as the model's curve;
+2. simulate the fitted model (``n_replicas`` replicas, each term by its registry
+   entry's generator: the Gauss-Markov and random-walk states by the exact
+   discretisation of the paper's state-space form, eqs. 18-23) and take the
+   replica-mean Allan variance as the model's curve;
 3. measure the **gap** (defined once, used everywhere)::
 
        z(tau) = (ln ADEV_meas(tau) - ln ADEV_model(tau)) / s(tau),
@@ -35,25 +36,28 @@ for one axis at a time:
    is consistent (gap <= :data:`GAP_OK` and the fit's chi-square acceptable) or
    nothing more is supported.
 
-Effect names (DESIGN.md diagnose contract) and the fit terms behind them:
-quantization (Q), white (N), bias_instability (flicker noise, B), gauss_markov (a
-further first-order Gauss-Markov process, B and T), random_walk (K), rate_ramp (R),
-sinusoid (A, f0_hz).  B follows the paper's convention (eq. 8, see noise_params).
+Effect names are the names of the terms they add (docs/contracts.md): quantization
+(Q), white (N), flicker (B; called bias_instability before, still accepted), gauss_markov
+(a further first-order Gauss-Markov process, B and T), random_walk (K), rate_ramp (R),
+sinusoid (A, f0_hz).  The base model is given by term names (default white,
+bias_instability, random_walk; the old base name gauss_markov is still accepted for
+bias_instability).  B follows the paper's convention (eq. 8, see noise.values).
 
 Modules: :mod:`.gap` (the gap and its bands), :mod:`.replicas` (the model's simulated
 curve), :mod:`.engine` (the steps above), :mod:`.result` (what is reported).
 """
 
-from imu_allan.core.diagnose.engine import (DEFAULT_BASE, diagnose_axis, diagnose_curve,
-                                            diagnose_session, EFFECTS)
+from imu_allan.core.diagnose.engine import (base_terms, DEFAULT_BASE, diagnose_axis,
+                                            diagnose_curve, diagnose_session, EFFECTS)
 from imu_allan.core.diagnose.gap import (Band, find_bands, gap, GAP_OK, gap_z, ln_adev_stderr,
                                          P_INCONSISTENT, Z_BAND)
 from imu_allan.core.diagnose.replicas import (filtered_white_noise, N_REPLICAS,
-                                              simulate_model_avar)
+                                              simulate_fit_avar)
 from imu_allan.core.diagnose.result import AxisDiagnosis, DiagnoseResult, Finding, summary_line
 from imu_allan.core.search.evidence import RawKeeper
 
-__all__ = ['AxisDiagnosis', 'Band', 'DEFAULT_BASE', 'diagnose_axis', 'diagnose_curve',
-           'diagnose_session', 'DiagnoseResult', 'EFFECTS', 'filtered_white_noise',
+__all__ = ['AxisDiagnosis', 'Band', 'base_terms', 'DEFAULT_BASE', 'diagnose_axis',
+           'diagnose_curve', 'diagnose_session', 'DiagnoseResult', 'EFFECTS',
+           'filtered_white_noise',
            'find_bands', 'Finding', 'gap', 'GAP_OK', 'gap_z', 'ln_adev_stderr', 'N_REPLICAS',
-           'P_INCONSISTENT', 'RawKeeper', 'simulate_model_avar', 'summary_line', 'Z_BAND']
+           'P_INCONSISTENT', 'RawKeeper', 'simulate_fit_avar', 'summary_line', 'Z_BAND']

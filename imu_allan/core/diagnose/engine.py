@@ -12,45 +12,60 @@ import numpy as np
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve, edf_overlapping
 from imu_allan.core.diagnose.gap import find_bands, gap, gap_z, ln_adev_stderr
-from imu_allan.core.diagnose.replicas import (_Model, _model_from_fit, N_REPLICAS,
-                                              simulate_model_avar)
+from imu_allan.core.diagnose.replicas import N_REPLICAS, simulate_fit_avar
 from imu_allan.core.diagnose.result import AxisDiagnosis, DiagnoseResult, Finding, summary_line
 from imu_allan.core.fit import AxisFit
-from imu_allan.core.search import EFFECT_TERM as _EFFECT_TERM, search_axis, SEARCH_EFFECTS
+from imu_allan.core.noise.terms import (BASE_ALIASES, EFFECT_ALIASES, effect_name, effect_names,
+                                        TERMS)
+from imu_allan.core.search import search_axis, SEARCH_EFFECTS
 from imu_allan.core.search.evidence import raw_evidence, RawKeeper
 from imu_allan.errors import InputError
 
 
-#: Effect names the diagnosis can report (DESIGN.md), in the order they are tried.
-EFFECTS = ('quantization', 'white', 'bias_instability', 'gauss_markov', 'random_walk',
-           'rate_ramp', 'sinusoid')
+#: Effect names the diagnosis can report: the registry's effects (term names).
+EFFECTS = effect_names()
 
-
-#: The paper's model: white noise, Gauss-Markov bias instability, random walk.
-DEFAULT_BASE = ('white', 'gauss_markov', 'random_walk')
-
-#: Fit term behind each name of the base model: 'gauss_markov' is the paper's
-#: bias-instability Gauss-Markov term (B, T_B).
-_BASE_TERM = dict(_EFFECT_TERM, gauss_markov='bias_instability')
-
-#: Reported symbols of each effect (DESIGN.md) and the fit's symbols behind them.
-_EFFECT_SYMBOLS = {'quantization': (('Q', 'Q'),), 'white': (('N', 'N'),),
-                   'bias_instability': (('B', 'B'),),
-                   'gauss_markov': (('B', 'B'), ('T', 'T')), 'random_walk': (('K', 'K'),),
-                   'rate_ramp': (('R', 'R'),), 'sinusoid': (('A', 'A'), ('f0_hz', 'f0_hz'))}
-
-
-#: Unit templates of the reported symbols ('u' = the sample unit).
-_UNITS = {'Q': 'u*s', 'N': 'u*s^0.5', 'B': 'u', 'T': 's', 'K': 'u/s^0.5', 'R': 'u/s',
-          'A': 'u', 'f0_hz': 'Hz'}
+#: The paper's model (term names): white noise, the Gauss-Markov bias instability
+#: (B, T_B), random walk.
+DEFAULT_BASE = ('white', 'bias_instability', 'random_walk')
 
 
 class _State(NamedTuple):
     labels: tuple
     fit: AxisFit
-    model: _Model
     adev_sim: np.ndarray
     gap: float
+
+
+def base_terms(base_model: Sequence[str]) -> tuple:
+    """
+    Return the term names of a base model, old names mapped (:data:`BASE_ALIASES`).
+
+    Parameters
+    ----------
+    base_model : sequence of str
+        Term names; 'gauss_markov' (the old name of the paper's floor) is read as
+        'bias_instability' for one release.
+
+    Returns
+    -------
+    tuple of str
+        Registry names, each once.
+
+    Raises
+    ------
+    InputError
+        An unknown name, or an empty model.
+
+    """
+    names = tuple(BASE_ALIASES.get(b, b) for b in base_model)
+    for name in names:
+        if name not in TERMS:
+            raise InputError(f'unknown term {name!r} in the base model; known: '
+                             f'{", ".join(TERMS)}')
+    if not names:
+        raise InputError('the base model needs at least one term')
+    return tuple(dict.fromkeys(names))
 
 
 def _default_effects(base_model: Sequence[str]) -> tuple:
@@ -67,14 +82,14 @@ def _fit_symbol(fit: AxisFit, label: str, sym: str):
 
 def _effect_params(fit: AxisFit, effect: str, label: str, unit: str):
     params, ci, units = {}, {}, {}
-    for out_sym, fit_sym in _EFFECT_SYMBOLS[effect]:
-        p = _fit_symbol(fit, label, fit_sym)
+    term = TERMS[effect]
+    for sym, template in zip(term.symbols, term.units):
+        p = _fit_symbol(fit, label, sym)
         if p is None:
             return None
-        params[out_sym] = float(p.value)
-        ci[out_sym] = (float(p.ci95[0]), float(p.ci95[1]))
-        template = _UNITS[out_sym]
-        units[out_sym] = template if template in ('s', 'Hz') else unit + template[1:]
+        params[sym] = float(p.value)
+        ci[sym] = (float(p.ci95[0]), float(p.ci95[1]))
+        units[sym] = unit + template[1:] if template.startswith('u') else template
     return params, ci, units
 
 
@@ -90,8 +105,7 @@ def _visible_range(tau: np.ndarray, avar_term: np.ndarray, avar_rest: np.ndarray
 
 
 def _term_avar(tau: np.ndarray, fit: AxisFit, effect: str, params: dict) -> np.ndarray:
-    from imu_allan.core.noise.model import TERMS
-    term = TERMS[_EFFECT_TERM[effect]]
+    term = TERMS[effect]
     nonlinear = [params[s] for s in term.nonlinear]
     coef = term.to_coef(params[term.symbols[0]], *nonlinear)
     return coef * term.shape(tau, *nonlinear)
@@ -121,8 +135,8 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     raw_rate_hz : float, optional
         Rate of ``raw`` [Hz]; default ``rate_hz``.
     base_model : sequence of str
-        Effect names of the base model (default white, gauss_markov, random_walk:
-        the paper's model; 'gauss_markov' there is the bias-instability term B, T_B).
+        Term names of the base model (default white, bias_instability, random_walk:
+        the paper's model; see :func:`base_terms` for the old names).
     axis : str
         Axis name for the summary.
     unit : str
@@ -132,7 +146,8 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     n_replicas : int
         Simulated replicas per model.
     effects : sequence of str
-        Effects that may be added (default the search's own list,
+        Effects that may be added, term names (the old bias_instability is read as
+        flicker; default the search's own list,
         :data:`imu_allan.core.search.SEARCH_EFFECTS`, plus white noise or random walk
         where the base lacks them: with the default base the diagnosis ends at the model
         every analysis reports).
@@ -149,21 +164,22 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
 
     """
     rng = np.random.default_rng(0) if rng is None else rng
-    for name in tuple(base_model) + tuple(effects or ()):
-        if name not in _BASE_TERM:
-            raise InputError(f'unknown effect {name!r}; known: {", ".join(EFFECTS)}')
-    if not base_model:
-        raise InputError('the base model needs at least one term')
-    base_labels = tuple(dict.fromkeys(_BASE_TERM[b] for b in base_model))
+    base_labels = base_terms(base_model)
+    if effects is not None:
+        effects = tuple(effect_name(e) for e in effects)
+        for name in effects:
+            if name not in EFFECTS:
+                raise InputError(f'unknown effect {name!r}; known: {", ".join(EFFECTS)} '
+                                 f'(old names: {", ".join(EFFECT_ALIASES)})')
     tau_all = np.asarray(tau_s, dtype=np.float64)
     avar_all = np.asarray(avar, dtype=np.float64)
     edf_all = np.asarray(edf, dtype=np.float64)
     # The same search as every analysis (one model); here each step is also simulated.
     search = search_axis(tau_all, avar_all, edf_all, rate_hz, n_samples, raw=raw,
                          raw_rate_hz=raw_rate_hz, unit=unit, base_labels=base_labels,
-                         effects=tuple(e for e in (_default_effects(base_model) if effects
+                         effects=tuple(e for e in (_default_effects(base_labels) if effects
                                                    is None else effects)
-                                       if e not in base_model),
+                                       if e not in base_labels),
                          keep_steps=True)
     fit0 = search.base
     # The comparison grid: the fit's taus (thinned to two per octave).
@@ -180,9 +196,8 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     s_ln = ln_adev_stderr(e_meas)
 
     def state_of(labels, fit) -> _State:
-        model = _model_from_fit(fit)
-        sim = np.sqrt(simulate_model_avar(model, rate_hz, int(n_samples), m, rng, n_replicas))
-        return _State(tuple(labels), fit, model, sim, gap(adev, sim, s_ln))
+        sim = np.sqrt(simulate_fit_avar(fit, rate_hz, int(n_samples), m, rng, n_replicas))
+        return _State(tuple(labels), fit, sim, gap(adev, sim, s_ln))
 
     first = state_of(fit0.terms, fit0)
     state = first
@@ -288,13 +303,13 @@ def diagnose_curve(curve: AllanCurve, n_samples: int, *, raw=None,
                 base_model=base_model, axis=axis, unit=AXIS_UNITS.get(axis, 'unit'),
                 rng=np.random.default_rng(children[j]), n_replicas=n_replicas)
         except InputError as exc:
-            if 'unknown effect' in str(exc) or 'base model' in str(exc):
+            if 'unknown' in str(exc) or 'base model' in str(exc):
                 raise
             out[axis] = None
     return DiagnoseResult(
         axes=out, rate_hz=float(curve.rate_hz), n_samples=int(n_samples),
         duration_s=float(duration_s if duration_s is not None else n_samples / curve.rate_hz),
-        base_model=tuple(base_model), n_replicas=int(n_replicas),
+        base_model=base_terms(base_model), n_replicas=int(n_replicas),
         raw_checked=raw is not None, source=source, warnings=tuple(warnings))
 
 

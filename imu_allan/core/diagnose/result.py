@@ -11,6 +11,7 @@ import numpy as np
 
 from imu_allan.core.diagnose.gap import GAP_OK
 from imu_allan.core.fit import AxisFit, json_floats, json_num
+from imu_allan.core.noise.terms import TERMS
 
 
 class Finding(NamedTuple):
@@ -20,7 +21,7 @@ class Finding(NamedTuple):
     Attributes
     ----------
     effect : str
-        One of :data:`EFFECTS`.
+        One of :data:`EFFECTS` (a term name).
     params : dict of str to float
         The effect's parameters in SI (DESIGN.md symbols), e.g. {'A': .., 'f0_hz': ..}.
     ci95 : dict of str to tuple
@@ -225,22 +226,7 @@ class DiagnoseResult:
 
 
 def _finding_text(f: Finding) -> str:
-    p, u = f.params, f.units
-    if f.effect == 'sinusoid':
-        return (f'sinusoid at {p["f0_hz"]:.2g} Hz (period {1.0 / p["f0_hz"]:.3g} s, '
-                f'amplitude {p["A"]:.2g} {u["A"]})')
-    if f.effect == 'gauss_markov':
-        return (f'a further Gauss-Markov process (B {p["B"]:.2g} {u["B"]}, '
-                f'T {p["T"]:.3g} s)')
-    if f.effect == 'bias_instability':
-        return f'flicker bias instability (B {p["B"]:.2g} {u["B"]})'
-    if f.effect == 'quantization':
-        return f'quantization (Q {p["Q"]:.2g} {u["Q"]})'
-    if f.effect == 'white':
-        return f'white noise (N {p["N"]:.2g} {u["N"]})'
-    if f.effect == 'random_walk':
-        return f'rate random walk (K {p["K"]:.2g} {u["K"]})'
-    return f'rate ramp (R {p["R"]:.2g} {u["R"]})'
+    return TERMS[f.effect].summary(f.params, f.units)
 
 
 def summary_line(d: AxisDiagnosis) -> str:

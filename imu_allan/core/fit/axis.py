@@ -23,32 +23,19 @@ from imu_allan.errors import InputError
 
 #: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
 DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
-#: Symbols reported without a term prefix (others become '<term>.<symbol>').
-_PLAIN = {'quantization': ('Q',), 'white': ('N',), 'filtered_white': ('N', 'T_f'),
-          'flicker': ('B',),
-          'bias_instability': ('B', 'T_B'), 'random_walk': ('K',), 'rate_ramp': ('R',)}
 #: Penalty per parameter of the information criterion (AIC).
 IC_PENALTY = 2.0
 Z95 = 1.959963984540054
 
 
 def _slot(label: str, tau: np.ndarray, rate_hz: float) -> _Slot:
-    base = base_name(label)
-    term = TERMS[base]
-    bounds = []
-    for name in term.nonlinear:
-        if name in ('T', 'T_B'):
-            # The bump (at 1.89 T) must fall inside the record: a shorter T is white
-            # noise to the curve, a longer one random walk.
-            bounds.append((2.0 * tau.min(), tau.max()))
-        elif name == 'T_f':
-            # The sensor's filter: from a tiny fraction of a sample period to a few.
-            bounds.append((0.01 / rate_hz, 4.0 / rate_hz))
-        elif name == 'f0_hz':
-            bounds.append((0.371 / (2.0 * tau.max()), min(0.742 / tau.min(), 0.5 * rate_hz)))
-        else:  # pragma: no cover - a registry entry without search bounds
-            raise InputError(f'no search range for parameter {name} of term {label}')
-    return _Slot(label, term, tuple(bounds))
+    term = TERMS[base_name(label)]
+    if not term.nonlinear:
+        return _Slot(label, term, ())
+    if term.bounds is None:
+        raise InputError(f'no search range for the nonlinear parameters of term {label}')
+    # The registry entry's search range (e.g. a Gauss-Markov bump inside the record).
+    return _Slot(label, term, tuple(term.bounds(tau, rate_hz)))
 
 
 def _n_params(slots: Sequence[_Slot]) -> int:
@@ -61,7 +48,7 @@ def _symbols(slots: Sequence[_Slot]) -> dict:
     for s in slots:
         base = base_name(s.label)
         for sym in s.term.symbols:
-            plain = sym in _PLAIN.get(base, ()) and s.label == base
+            plain = TERMS[base].plain and s.label == base
             name = sym if plain and sym not in used else f'{s.label}.{sym}'
             used.add(name)
             out[(s.label, sym)] = name

@@ -27,8 +27,8 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.noise.params import AxisNoise
-from imu_allan.core.outputs.kalman import _param, _six, imu_covariance
+from imu_allan.core.noise.values import AxisNoise
+from imu_allan.core.outputs.kalman import _param, _six, axis_densities, imu_covariance
 from imu_allan.errors import InputError
 
 #: robot_localization's imu0_config order (15 booleans): x y z, roll pitch yaw, vx vy vz,
@@ -55,15 +55,23 @@ def _kinded(source, symbol: str, use_upper_bounds: bool) -> tuple[float, str]:
     """
     Value of N or K for one axis with its kind ('estimate', 'upper_bound', 'absent').
 
-    An AxisNoise carries estimates (0 means absent); an AxisFit its optimised parameter,
-    an upper bound only when ``use_upper_bounds`` (otherwise it counts as absent).
+    An AxisNoise carries estimates (0 means absent): N and K are the square roots of
+    the white and random-walk densities its terms add up to by their registry roles
+    (:func:`imu_allan.core.outputs.kalman.axis_densities`).  An AxisFit gives its
+    optimised parameter, an upper bound only when ``use_upper_bounds`` (otherwise it
+    counts as absent), plus what terms without a field of their own add by their roles.
     """
     if isinstance(source, AxisNoise):
-        value = float(getattr(source, symbol))
+        d = axis_densities(source)
+        value = math.sqrt(d.S_N if symbol == 'N' else d.S_K)
         return value, ('estimate' if value > 0 else 'absent')
     value, kind = _param(source, symbol, use_upper_bounds)
     if value is None or kind not in ('estimate', 'upper_bound') or value <= 0:
         return 0.0, 'absent'
+    model = getattr(source, 'model', None)
+    if model is not None and model.extra:
+        d = axis_densities(AxisNoise(extra=model.extra))
+        value = math.sqrt(value ** 2 + (d.S_N if symbol == 'N' else d.S_K))
     return value, kind
 
 
@@ -425,7 +433,7 @@ def vins_yaml(sources, rate_hz: float, reduce: str = 'max') -> str:
     The values are the continuous-time densities Kalibr uses (N and K, one per sensor,
     :func:`sensor_value`), which is how they are usually filled
     in.  VINS' pre-integration uses them as per-sample values (see
-    :data:`imu_allan.core.outputs.kalman.NOTES`), and its shipped examples are larger than the
+    :data:`imu_allan.core.outputs.consumers.NOTES`), and its shipped examples are larger than the
     Allan densities by factors of 10-50: start from these and inflate.  A value no axis
     gives is left out with a comment.
 

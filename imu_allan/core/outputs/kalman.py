@@ -1,5 +1,10 @@
 """
-Kalman-filter inputs from a noise fit: densities, Q and R, Kalibr and ROS exports.
+Kalman-filter inputs from a noise fit: densities, Q and R, the Imu covariances.
+
+The consumer files (Kalibr, robot_localization, VINS, driver scalars) are in
+:mod:`imu_allan.core.outputs.exports`; how the VIO and SLAM packages read the numbers is
+:data:`imu_allan.core.outputs.consumers.NOTES`.  Which terms enter Q and R is each
+term's registry role (``Term.kalman``, :mod:`imu_allan.core.noise.terms`).
 
 Model per axis (the paper's eqs. 14-23, after Farrell; Maia, Silva, De Lima, Meneses):
 two bias states, a first-order Gauss-Markov b_GM (correlation time T_B, driving PSD
@@ -35,7 +40,9 @@ import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
 from imu_allan.core.noise.model import GM_PEAK_TAU
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov
+from imu_allan.core.noise.terms import TERMS, terms_of
+from imu_allan.core.noise.values import AxisNoise
+from imu_allan.core.outputs.consumers import NOTES  # noqa: F401
 from imu_allan.errors import InputError
 
 #: robot_localization ignores (clamps) variances below this [unit^2].
@@ -44,50 +51,6 @@ ROBOT_LOCALIZATION_MIN_VARIANCE = 1e-9
 #: filter leans on its other inputs, where 0 or 1e-9 would be the most trust it allows
 #: (sensor_msgs/Imu: all zeros mean "unknown", and a consumer must assume something).
 UNKNOWN_VARIANCE = 1e4
-
-NOTES = """\
-How VIO / SLAM packages read IMU noise numbers (check your version; all of them expect
-the same physical quantities in different forms).
-
-Common ground: N is the white-noise density sigma (rad/s/sqrt(Hz) = rad/sqrt(s) for a
-gyro, m/s^2/sqrt(Hz) for an accelerometer) and K the bias random-walk density
-(rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)), both continuous-time.  Discrete per-sample values at
-rate f: sigma_d = N sqrt(f) (white), sigma_bd = K / sqrt(f) (bias step).  The
-Gauss-Markov bias instability B has no slot in any of these packages: they model the
-bias as a pure random walk, so B and T_B only enter through how you inflate K.
-
-* Kalibr (imu.yaml): accelerometer_noise_density, accelerometer_random_walk,
-  gyroscope_noise_density, gyroscope_random_walk, update_rate: continuous densities,
-  one value for all three axes; Kalibr itself forms sigma / sqrt(dt) and sigma sqrt(dt)
-  with dt = 1 / update_rate, which assumes the sensor low-pass filters at the Nyquist
-  frequency (a subsampled, unfiltered output must not be scaled that way).
-* OpenVINS (kalibr_imu_chain.yaml, same four keys): continuous densities; the
-  propagator builds Qc = sigma_w^2 / dt for the white terms and sigma_wb^2 dt for the
-  bias walks at each IMU interval (the exact forms above).  Its zero-velocity update
-  multiplies the IMU noise by a separate zupt_noise_multiplier.
-* ORB-SLAM3 (IMU.NoiseGyro, IMU.NoiseAcc, IMU.GyroWalk, IMU.AccWalk, IMU.Frequency):
-  continuous densities; Tracking converts them with sf = sqrt(IMU.Frequency) to
-  Ng sf, Na sf (white) and Ngw / sf, Naw / sf (walk), so a wrong IMU.Frequency scales
-  the white and walk terms in opposite directions.
-* VINS-Mono / VINS-Fusion (acc_n, gyr_n, acc_w, gyr_w): the config calls them noise
-  standard deviations; the pre-integration (integration_base.h) puts acc_n^2 ... gyr_w^2
-  straight into its noise matrix and maps them with dt-scaled (not sqrt(dt)) Jacobians
-  in a mid-point scheme: per step the attitude gains gyr_n^2 dt^2 / 2 and the gyro
-  bias gyr_w^2 dt^2, against N^2 dt and K^2 dt for the continuous model.  The same
-  covariance growth therefore needs gyr_n ~ N sqrt(2 f) and gyr_w ~ K sqrt(f), i.e.
-  the numbers act as per-sample values, not densities.  The shipped EuRoC example
-  (acc_n 0.08, gyr_n 0.004, acc_w 4e-5, gyr_w 2e-6) differs from Kalibr's EuRoC
-  densities (2.0e-3, 1.6968e-4, 3.0e-3, 1.9393e-5) by factors of 0.01 to 40.
-* Inflation: Allan values come from a still, temperature-stable sensor; in motion,
-  vibration, temperature changes, scale-factor and misalignment errors add error the
-  model does not contain.  People therefore inflate the Allan numbers before use
-  (factors of a few up to 10 or more on N, more on K), tune them on recorded runs, and
-  use upper bounds where a term was not identified.  imu_allan reports the measured
-  values; any inflation is the integrator's decision.
-* robot_localization has no bias states and takes no noise parameters: it reads each
-  sensor_msgs/Imu message's covariance fields (variance N^2 f for white noise per
-  axis) and clamps variances below 1e-9.
-"""
 
 
 @dataclass(frozen=True)
@@ -252,7 +215,11 @@ def axis_noise_from(source, use_upper_bounds: bool = True) -> tuple[AxisNoise, t
         notes.append(f'B is flicker (no T_B): modelled as a Gauss-Markov state of the same '
                      f'peak ADEV with T_B = {t_b:.3g} s (peak at the middle of the fitted '
                      'taus)')
-    noise = AxisNoise(N=values['N'] or 0.0, B=values['B'] or 0.0, T_B=t_b, K=values['K'] or 0.0)
+    # Terms without a field of their own (a newly registered term) enter through their
+    # registry role at the fit's values (see :func:`axis_densities`).
+    extra = getattr(source, 'model', AxisNoise()).extra
+    noise = AxisNoise(N=values['N'] or 0.0, B=values['B'] or 0.0, T_B=t_b, K=values['K'] or 0.0,
+                      extra=extra)
     return noise, tuple(notes)
 
 
@@ -286,10 +253,15 @@ def axis_densities(noise: AxisNoise, axis: str = '') -> AxisDensities:
     """
     Continuous densities of one axis: S_N = N^2, S_B (paper eq. 8), S_K = K^2.
 
+    Each term of the model enters by its registry role (``Term.kalman``): 'white'
+    terms add their coefficient (N^2) to S_N, 'b_rw' terms theirs (K^2) to S_K, the
+    first 'b_gm' term is the Gauss-Markov state (S_B and T_B); further Gauss-Markov
+    processes, flicker, quantization, ramp and sinusoids are not in Q or R.
+
     Parameters
     ----------
     noise : AxisNoise
-        The axis model, SI units; only N, B, T_B and K enter.
+        The axis model, SI units.
     axis : str
         Axis name for labels.
 
@@ -299,11 +271,19 @@ def axis_densities(noise: AxisNoise, axis: str = '') -> AxisDensities:
         S_B = 0 and T_B None when B is 0 or has no T_B.
 
     """
-    if noise.B > 0 and noise.T_B:
-        s_b, t_b = GaussMarkov(noise.B, noise.T_B).psd, float(noise.T_B)
-    else:
-        s_b, t_b = 0.0, None
-    return AxisDensities(axis=axis, S_N=noise.N ** 2, S_B=s_b, T_B=t_b, S_K=noise.K ** 2)
+    s_n = s_k = s_b = 0.0
+    t_b = None
+    for _, name, params in terms_of(noise):
+        term = TERMS[name]
+        nonlinear = [params[s] for s in term.nonlinear]
+        coef = term.to_coef(params[term.symbols[0]], *nonlinear)
+        if term.kalman == 'white':
+            s_n += coef
+        elif term.kalman == 'b_rw':
+            s_k += coef
+        elif term.kalman == 'b_gm' and t_b is None:
+            s_b, t_b = coef, float(nonlinear[0])
+    return AxisDensities(axis=axis, S_N=s_n, S_B=s_b, T_B=t_b, S_K=s_k)
 
 
 def discretise(d: AxisDensities, dt: float) -> AxisDiscrete:
@@ -460,8 +440,9 @@ def imu_covariance(sources, rate_hz: float) -> ImuCovariance:
     noises = {a: axis_noise_from(s)[0] for a, s in zip(AXES, _six(sources))}
     var, clamped, unknown = {}, [], []
     for a in AXES:
-        v = noises[a].N ** 2 * float(rate_hz)
-        if not noises[a].N > 0:
+        s_n = axis_densities(noises[a]).S_N
+        v = s_n * float(rate_hz)
+        if not s_n > 0:
             unknown.append(a)
             v = UNKNOWN_VARIANCE
         elif v < ROBOT_LOCALIZATION_MIN_VARIANCE:

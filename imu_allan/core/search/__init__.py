@@ -29,21 +29,23 @@ Kalibr file and the Imu covariances all come from it.
    axis says so (``model_consistent`` false) and N is read from the white region of
    the curve, not from the distorted fit.
 
-Effect names (DESIGN.md diagnose contract): quantization, white, bias_instability
-(flicker noise, B), gauss_markov (a further Gauss-Markov process, B and T),
-random_walk, rate_ramp, sinusoid; the model's own low-pass is ``filtered_white``.
+Effect names are term names (:mod:`imu_allan.core.noise.terms`): quantization, white,
+flicker (B), gauss_markov (a further Gauss-Markov process, B and T), random_walk,
+rate_ramp, sinusoid; the old effect name bias_instability is read as flicker for one
+release.  The model's own low-pass is the term ``filtered_white``.
 """
 
 from typing import Sequence
 
 from imu_allan.core.allan.blas import _single_thread_blas
-from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN, EFFECT_TERM,
-                                         MAX_REPEATS, MAX_STEPS, Search, SEARCH_EFFECTS, Step)
+from imu_allan.core.noise.terms import effect_name, effect_names, TERMS
+from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN, MAX_STEPS,
+                                         Search, SEARCH_EFFECTS, Step)
 from imu_allan.core.search.run import _finish, _Run
 from imu_allan.errors import InputError
 
-__all__ = ['AMPLITUDE_FACTOR', 'BASE_LABELS', 'DELTA_MIN', 'EFFECT_TERM', 'MAX_REPEATS',
-           'MAX_STEPS', 'Search', 'search_axis', 'SEARCH_EFFECTS', 'Step']
+__all__ = ['AMPLITUDE_FACTOR', 'BASE_LABELS', 'DELTA_MIN', 'MAX_STEPS', 'Search', 'search_axis',
+           'SEARCH_EFFECTS', 'Step']
 
 
 def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
@@ -71,7 +73,8 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
     unit : str
         Unit of the samples.
     effects : sequence of str
-        Effects the search may add (names of :data:`SEARCH_EFFECTS`).
+        Effects the search may add (term names with ``effect`` in the registry; the old
+        name bias_instability is read as flicker).
     base_labels : sequence of str
         Fit labels of the base model.
     keep_steps : bool
@@ -88,9 +91,10 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
         Unknown effects, or a curve the fit cannot use.
 
     """
+    effects = tuple(effect_name(e) for e in effects)
     for e in effects:
-        if e not in EFFECT_TERM:
-            raise InputError(f'unknown effect {e!r}; known: {", ".join(EFFECT_TERM)}')
+        if e not in TERMS or not TERMS[e].effect:
+            raise InputError(f'unknown effect {e!r}; known: {", ".join(effect_names())}')
     # Tiny matrices: OpenBLAS threads only add overhead (see fit_axis).
     with _single_thread_blas():
         return _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit,

@@ -8,20 +8,14 @@ rules an effect must pass: a label it can still take, periodogram evidence of a 
 from typing import NamedTuple, Sequence
 
 from imu_allan.core.fit.result import AxisFit
+from imu_allan.core.noise.terms import base_name, search_effects, TERMS
 from imu_allan.core.search.evidence import periodogram_peak
 
-#: Effects the search may add, in the order they are tried (ties keep the first).
-SEARCH_EFFECTS = ('sinusoid', 'gauss_markov', 'bias_instability', 'quantization',
-                  'rate_ramp')
-#: The paper's base model (fit labels).
+#: Effects the search may add, in the order they are tried (ties keep the first): the
+#: registry's terms with a ``search_rank``.  An effect's name is its term's name.
+SEARCH_EFFECTS = search_effects()
+#: The paper's base model (term names).
 BASE_LABELS = ('white', 'bias_instability', 'random_walk')
-#: Fit term behind each effect when it is added ('bias_instability' is flicker noise).
-EFFECT_TERM = {'quantization': 'quantization', 'white': 'white',
-               'bias_instability': 'flicker', 'gauss_markov': 'gauss_markov',
-               'random_walk': 'random_walk', 'rate_ramp': 'rate_ramp',
-               'sinusoid': 'sinusoid'}
-#: At most this many of a repeatable effect (gauss_markov, sinusoid) are added.
-MAX_REPEATS = 2
 #: Most effects added per axis.
 MAX_STEPS = 4
 #: Drop of the GLS chi-square, beyond BIC's ln(k) per parameter, that an effect must buy
@@ -83,15 +77,14 @@ class Search(NamedTuple):
 
 def _label_for(effect: str, labels: Sequence[str]) -> str | None:
     """Fit label of an effect to add, or None when it cannot be added again."""
-    term = EFFECT_TERM[effect]
-    if effect == 'white' and 'filtered_white' in labels:
+    term = TERMS[effect]
+    bases = [base_name(lb) for lb in labels]
+    if any(b in term.exclusive for b in bases):
         return None
-    if effect in ('gauss_markov', 'sinusoid'):
-        used = [lb for lb in labels if lb == term or lb.startswith(term + '_')]
-        if len(used) >= MAX_REPEATS:
-            return None
-        return term if term not in labels else f'{term}_{len(used) + 1}'
-    return None if term in labels else term
+    used = bases.count(effect)
+    if used >= term.repeats:     # the registry says how many of it a model may hold
+        return None
+    return effect if effect not in labels else f'{effect}_{used + 1}'
 
 
 def _sinusoid_evidence(raw, raw_rate_hz: float, f0: float, amp: float,
