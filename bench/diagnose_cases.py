@@ -45,7 +45,7 @@ def hidden(effect: str, noise: AxisNoise, rng: np.random.Generator) -> tuple:
     if effect == 'white':
         n = 3e-3 * u
         return AxisNoise(**{**noise.__dict__, 'N': n}), {'N': n}
-    if effect == 'bias_instability':
+    if effect == 'flicker':
         b = 2e-3 * u
         return AxisNoise(**{**noise.__dict__, 'B': b, 'T_B': None}), {'B': b}
     if effect == 'gauss_markov':
@@ -69,8 +69,8 @@ def hidden(effect: str, noise: AxisNoise, rng: np.random.Generator) -> tuple:
 #: Gauss-Markov term with a free T absorbs a random walk (T beyond the record) or most
 #: of a flicker floor, so those cases use a smaller base, and their clean axes carry
 #: exactly that base model.
-BASE = {'white': ('gauss_markov', 'random_walk'), 'random_walk': ('white',),
-        'gauss_markov': ('white', 'random_walk'), 'bias_instability': ('white', 'random_walk')}
+BASE = {'white': ('bias_instability', 'random_walk'), 'random_walk': ('white',),
+        'gauss_markov': ('white', 'random_walk'), 'flicker': ('white', 'random_walk')}
 
 
 def make_case(effect: str | None, seed: int, axis_index: int | None = None):
@@ -78,9 +78,9 @@ def make_case(effect: str | None, seed: int, axis_index: int | None = None):
     rng = np.random.default_rng(seed)
     j = int(rng.integers(len(AXES))) if axis_index is None else axis_index
     axes = {a: clean_noise(a, rng, white=effect != 'white') for a in AXES}
-    base = BASE.get(effect, ('white', 'gauss_markov', 'random_walk'))
+    base = BASE.get(effect, ('white', 'bias_instability', 'random_walk'))
     strip = {}
-    if 'gauss_markov' not in base:
+    if 'bias_instability' not in base:
         strip.update(B=0.0, T_B=None)
     if 'random_walk' not in base:
         strip.update(K=0.0)
@@ -97,7 +97,7 @@ def run_case(effect, seed, n_replicas=4, axis_index=None):
     """Diagnose one case; return (result, effect axis, truth)."""
     y, axis, truth = make_case(effect, seed, axis_index)
     curve = allan_curve(y, RATE_HZ, TAUS, confidence=0.95)
-    base = BASE.get(effect, ('white', 'gauss_markov', 'random_walk'))
+    base = BASE.get(effect, ('white', 'bias_instability', 'random_walk'))
     res = diagnose_curve(curve, y.shape[0], raw=y, base_model=base, seed=seed,
                          n_replicas=n_replicas)
     return res, axis, truth
@@ -108,8 +108,8 @@ def main():
     ap.add_argument('--seeds', type=int, default=5)
     ap.add_argument('--clean', type=int, default=20)
     ap.add_argument('--effects', default=','.join(
-        ('quantization', 'white', 'bias_instability', 'gauss_markov', 'random_walk',
-         'rate_ramp', 'sinusoid')))
+        ('quantization', 'white', 'flicker', 'gauss_markov', 'random_walk', 'rate_ramp',
+         'sinusoid')))
     args = ap.parse_args()
     for effect in [e for e in args.effects.split(',') if e]:
         hit = inv = n_clean = shrink = 0

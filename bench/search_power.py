@@ -13,7 +13,7 @@ hidden effect at a fixed size (or none, for the false-alarm rate):
 - rate_ramp: three times the base deviation at a tenth of the record (the blind case a
   random walk absorbed);
 - quantization: Q such that it equals white noise at tau = 2 samples;
-- bias_instability: flicker noise at 0.8 of the base B.
+- flicker: flicker noise at 0.8 of the base B.
 
 Printed: a markdown table of the share of seeds in which the hidden effect is named
 first (its 'power') per record length, the clean axes that got an effect, and the CPU
@@ -33,7 +33,7 @@ from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.search import search_axis
 
 RATE_HZ = 50.0
-EFFECTS = ('sinusoid', 'gauss_markov', 'rate_ramp', 'quantization', 'bias_instability')
+EFFECTS = ('sinusoid', 'gauss_markov', 'rate_ramp', 'quantization', 'flicker')
 
 
 def base_noise(rng: np.random.Generator) -> AxisNoise:
@@ -57,7 +57,7 @@ def with_effect(effect: str, noise: AxisNoise, hours: float) -> AxisNoise:
     elif effect == 'quantization':
         tau = 2.0 / RATE_HZ
         kw['Q'] = math.sqrt(float(avar_white(tau, noise.N)) * tau ** 2 / 3.0)
-    elif effect == 'bias_instability':
+    elif effect == 'flicker':
         kw['gauss_markov'] = (GaussMarkov(noise.B, noise.T_B),)
         kw['B'], kw['T_B'] = 0.8 * noise.B, None
     return AxisNoise(**kw)

@@ -94,3 +94,32 @@ def adev_model(tau_s, noise: AxisNoise) -> np.ndarray:
 
     """
     return np.sqrt(avar_model(tau_s, noise))
+
+
+_ROLE_TEXT = {'white': 'R (adds to S_N)', 'b_gm': 'state b_gm (S_B, T_B)',
+              'b_rw': 'state b_rw (adds to S_K)', '': 'not in Q or R'}
+
+
+def term_table() -> str:
+    """
+    Return the registry as a markdown table (docs/architecture.md shows it; tested).
+
+    Returns
+    -------
+    str
+        One row per entry of :data:`TERMS`: name, what it is, parameters with their
+        unit templates, parameter-file keys, effect (and search order), Kalman role.
+
+    """
+    rows = ['| term | what | parameters | in parameter files | effect | Kalman |',
+            '| --- | --- | --- | --- | --- | --- |']
+    for name, t in TERMS.items():
+        params = ', '.join(f'{s} [{u}]' for s, u in zip(t.symbols, t.units))
+        keys = ', '.join(k.name for k in t.keys if k.name) or '-'
+        listed = t.list_key or (name if t.read is None else '')
+        files = f'list `{listed}`: {keys}' if listed else keys
+        effect = 'no' if not t.effect else (
+            'yes' if t.search_rank is None else f'yes, searched ({t.search_rank + 1})')
+        rows.append(f'| `{name}` | {t.title} | {params} | {files} | {effect} | '
+                    f'{_ROLE_TEXT[t.kalman]} |')
+    return '\n'.join(rows) + '\n'

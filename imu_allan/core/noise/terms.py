@@ -260,8 +260,17 @@ def _key(name: str) -> Key:
 
 
 #: Every term, by name.  Adding a term is adding an entry here (docs/architecture.md).
-#: The order is the order of the simulator's random draws and of the docs' table.
+#: The order (IEEE Std 952's, by slope) is that of the simulator's random draws, of the
+#: diagnosis' effects and of the docs' table.
 TERMS: dict[str, Term] = {
+    'quantization': Term(
+        'quantization', ('Q',), (), lambda tau: 3.0 / _as_tau(tau) ** 2,
+        _gcov_quantization, lambda c: {'Q': _sqrt(c)}, lambda v: v * v, ('u*s',),
+        keys=(_key('Q'),),
+        simulate=lambda p, f, n, rng: gen.quantization_noise(p['Q'], f, n, rng),
+        title='quantization', plain=True, effect=True, search_rank=3,
+        read=_scalar('Q')[0], write=_scalar('Q')[1], discrete=True,
+        psd_phase=_PSD_PHASE['quantization']),
     'white': Term(
         'white', ('N',), (), lambda tau: 1.0 / _as_tau(tau), _gcov_white,
         lambda c: {'N': _sqrt(c)}, lambda v: v * v, ('u*s^0.5',), keys=(_key('N'),),
@@ -287,6 +296,13 @@ TERMS: dict[str, Term] = {
         reach=_reach_gauss_markov,
         tail=lambda d, m1, m2, dt, T: _tail_gauss_markov(d, m1, m2, dt, T) / (T * T),
         psd_phase=lambda f, dt, T: _PSD_PHASE['gauss_markov'](f, dt, T) / (T * T)),
+    'flicker': Term(
+        'flicker', ('B',), (), lambda tau: np.full(_as_tau(tau).shape, FLICKER_AVAR),
+        _gcov_flicker, lambda c: {'B': _sqrt(c)}, lambda v: v * v, ('u',),
+        keys=(_key('B'),), simulate=lambda p, f, n, rng: gen.flicker_noise(p['B'], f, n, rng),
+        title='flicker bias instability', plain=True, effect=True, search_rank=2,
+        read=_read_flicker, write=_write_flicker, reach=_reach_flicker,
+        psd_phase=_PSD_PHASE['flicker']),
     # The paper's Gauss-Markov floor (Maia et al. eq. 8): level B, correlation time T_B.
     'bias_instability': Term(
         'bias_instability', ('B', 'T_B'), ('T_B',),
@@ -310,27 +326,12 @@ TERMS: dict[str, Term] = {
         write=lambda kw, v: kw['gauss_markov'].append(GaussMarkov(*v)),
         bounds=_gm_range, reach=_reach_gauss_markov, tail=_tail_gauss_markov,
         psd_phase=_PSD_PHASE['gauss_markov']),
-    'flicker': Term(
-        'flicker', ('B',), (), lambda tau: np.full(_as_tau(tau).shape, FLICKER_AVAR),
-        _gcov_flicker, lambda c: {'B': _sqrt(c)}, lambda v: v * v, ('u',),
-        keys=(_key('B'),), simulate=lambda p, f, n, rng: gen.flicker_noise(p['B'], f, n, rng),
-        title='flicker bias instability', plain=True, effect=True, search_rank=2,
-        read=_read_flicker, write=_write_flicker, reach=_reach_flicker,
-        psd_phase=_PSD_PHASE['flicker']),
     'random_walk': Term(
         'random_walk', ('K',), (), lambda tau: _as_tau(tau) / 3.0, _gcov_random_walk,
         lambda c: {'K': _sqrt(c)}, lambda v: v * v, ('u/s^0.5',), keys=(_key('K'),),
         simulate=lambda p, f, n, rng: gen.random_walk_noise(p['K'], f, n, rng),
         title='rate random walk', plain=True, kalman='b_rw', effect=True,
         read=_scalar('K')[0], write=_scalar('K')[1], psd_phase=_PSD_PHASE['random_walk']),
-    'quantization': Term(
-        'quantization', ('Q',), (), lambda tau: 3.0 / _as_tau(tau) ** 2,
-        _gcov_quantization, lambda c: {'Q': _sqrt(c)}, lambda v: v * v, ('u*s',),
-        keys=(_key('Q'),),
-        simulate=lambda p, f, n, rng: gen.quantization_noise(p['Q'], f, n, rng),
-        title='quantization', plain=True, effect=True, search_rank=3,
-        read=_scalar('Q')[0], write=_scalar('Q')[1], discrete=True,
-        psd_phase=_PSD_PHASE['quantization']),
     'rate_ramp': Term(
         'rate_ramp', ('R',), (), lambda tau: _as_tau(tau) ** 2 / 2.0, None,
         lambda c: {'R': _sqrt(c)}, lambda v: v * v, ('u/s',), keys=(_key('R'),),

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from imu_allan.core.fit.axis import _n_params
+from imu_allan.core.fit.api import n_params
 from imu_allan.core.fit.judge import shows_quantization
 from imu_allan.core.search.rules import _label_for, DELTA_MIN
 
@@ -36,7 +36,7 @@ def _by_likelihood(fitter, slots_of, labels: list, ranked: list, penalty: float)
         slots = slots_of(labels + [r[3]])
         sol, _ = fitter.irls(slots, phi0=r[4].phi, local=True)
         logdet = 2.0 * float(np.sum(np.log(np.abs(np.diag(fitter.data.chol)))))
-        scored.append((sol.j + logdet + _n_params(slots) * penalty, r))
+        scored.append((sol.j + logdet + n_params(slots) * penalty, r))
     scored.sort(key=lambda x: x[0])
     return [r for _, r in scored] + ranked[N_RIVALS:]
 
@@ -57,7 +57,7 @@ def _second_chance(fitter, slots_of, labels: list, sol, sigma, effects, penalty:
     beats the current model's by :data:`DELTA_MIN`.
     """
     fitter.data.set_sigma(sigma)
-    current = _neg2_loglik(fitter, sol, _n_params(slots_of(labels)), penalty)
+    current = _neg2_loglik(fitter, sol, n_params(slots_of(labels)), penalty)
     best = None
     for effect in effects:
         label = _label_for(effect, labels)
@@ -66,14 +66,14 @@ def _second_chance(fitter, slots_of, labels: list, sol, sigma, effects, penalty:
         if effect == 'quantization' and not shows_quantization(fitter.data.tau, fitter.data.y):
             continue
         slots = slots_of(labels + [label])
-        if _n_params(slots) >= fitter.data.tau.size:
+        if n_params(slots) >= fitter.data.tau.size:
             continue
         new, _ = fitter.irls(slots, phi0=list(sol.phi) + [
             tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)],
             grid_slots=_grid_slots(effect, slots))
         if new.coef[-1] <= 0:
             continue
-        value = _neg2_loglik(fitter, new, _n_params(slots), penalty)
+        value = _neg2_loglik(fitter, new, n_params(slots), penalty)
         if current - value > DELTA_MIN and (best is None or value < best[0]):
             best = (value, (float(current - value), effect, label, new, '',
                             'chosen by likelihood with its own weights'))

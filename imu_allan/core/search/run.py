@@ -11,11 +11,12 @@ import math
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_sf
-from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
+from imu_allan.core.fit import fit_axis
+from imu_allan.core.fit.api import (check_curve, fit_fixed_weights, Fitter, n_params,
+                                    term_slot, thin)
 from imu_allan.core.fit.judge import (follows_curve, P_CONSISTENT, shows_quantization,
                                       white_region, white_share)
 from imu_allan.core.fit.result import AxisFit, Param
-from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
 from imu_allan.core.noise.model import base_name, TERMS
 from imu_allan.core.search.evidence import ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
@@ -54,9 +55,9 @@ class _Run:
 
     def __init__(self, tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit,
                  effects):
-        self.curve = _check_inputs(tau_s, avar, edf, rate_hz, n_samples)
+        self.curve = check_curve(tau_s, avar, edf, rate_hz, n_samples)
         tau0, avar0, edf0 = self.curve
-        keep = _thin(tau0)
+        keep = thin(tau0)
         self.tau, self.y, e = tau0[keep], avar0[keep], edf0[keep]
         if self.tau.size < 3:
             raise InputError(f'the fit needs at least 3 averaging times, got {self.tau.size}')
@@ -64,8 +65,8 @@ class _Run:
         self.effects = effects
         m = np.maximum(np.round(self.tau * rate_hz), 1).astype(np.int64)
         n_terms = np.maximum(self.n_samples + 1 - 2 * m, 1)
-        self.fitter = _Fitter(self.tau, self.y, e, m, n_terms, 1.0 / float(rate_hz),
-                              self.n_samples, 'overlapping')
+        self.fitter = Fitter(self.tau, self.y, e, m, n_terms, 1.0 / float(rate_hz),
+                             self.n_samples, 'overlapping')
         self.k = self.tau.size
         self.penalty = math.log(self.k)
         self.raw = None if raw is None else np.asarray(raw, dtype=np.float64)
@@ -83,7 +84,7 @@ class _Run:
         """Return the slots of the labels, with narrowed sinusoid frequencies."""
         return [replace(s, bounds=self.narrowed[s.label]) if s.label in self.narrowed else
                 _short_sinusoid(s, self.tau)
-                for s in (_slot(lb, self.tau, self.rate_hz) for lb in labels)]
+                for s in (term_slot(lb, self.tau, self.rate_hz) for lb in labels)]
 
     def irls(self, labels, phi0=None, local=False) -> None:
         """Fit ``labels`` by IRLS and make it the current model."""
@@ -91,12 +92,12 @@ class _Run:
         # are scored at those weights, so the model's own J is taken there too.
         slots = self.slots_of(labels)
         sol, self.sigma = self.fitter.irls(slots, phi0=phi0, local=local)
-        self.sol = _fit_fixed_w(self.fitter.data, slots, sol.phi, local=True)
+        self.sol = fit_fixed_weights(self.fitter.data, slots, sol.phi, local=True)
         self.labels = list(labels)
 
     def rejected(self) -> bool:
         """Whether the chi-square rejects the current model."""
-        dof = self.k - _n_params(self.slots_of(self.labels))
+        dof = self.k - n_params(self.slots_of(self.labels))
         return dof > 0 and chi2_sf(self.sol.j, dof) < P_CONSISTENT
 
     def base(self, base_labels) -> None:
@@ -104,9 +105,9 @@ class _Run:
         self.irls(list(base_labels))
         labels = self.labels
         if 'white' in labels and self.rejected() and (
-                self.k - _n_params(self.slots_of(labels)) > 2):
+                self.k - n_params(self.slots_of(labels)) > 2):
             alt = ['filtered_white' if lb == 'white' else lb for lb in labels]
-            trial = _fit_fixed_w(self.fitter.data, self.slots_of(alt))
+            trial = fit_fixed_weights(self.fitter.data, self.slots_of(alt))
             i_f = alt.index('filtered_white')
             # A filter time at the bottom of its range is no filter: plain white noise.
             shows = trial.phi[i_f][0] > 1.05 * self.slots_of(alt)[i_f].bounds[0][0]
@@ -134,7 +135,7 @@ class _Run:
                               f'{check.lr:.1f} against more random walk)')
             return
         slots = self.slots_of(self.labels + ['rate_ramp'])
-        new = _fit_fixed_w(self.fitter.data, slots, list(sol.phi) + [()])
+        new = fit_fixed_weights(self.fitter.data, slots, list(sol.phi) + [()])
         if new.coef[-1] > 0:
             self.steps.append(Step(
                 'rate_ramp', 'rate_ramp', float(sol.j - new.j), '',
@@ -152,12 +153,12 @@ class _Run:
             if effect == 'quantization' and not shows_quantization(self.tau, self.y):
                 continue
             slots = self.slots_of(self.labels + [label])
-            if _n_params(slots) >= self.k:
+            if n_params(slots) >= self.k:
                 continue
             phi0 = list(self.sol.phi) + [tuple(math.sqrt(lo * hi)
                                                for lo, hi in slots[-1].bounds)]
-            new = _fit_fixed_w(self.fitter.data, slots, phi0,
-                               grid_slots=_grid_slots(effect, slots))
+            new = fit_fixed_weights(self.fitter.data, slots, phi0,
+                                    grid_slots=_grid_slots(effect, slots))
             if new.coef[-1] <= 0:
                 continue
             drop = float(self.sol.j - new.j)
@@ -217,10 +218,10 @@ class _Run:
         """Drop an effect whose removal no longer costs its margin at the final weights."""
         for st in list(self.steps):
             rest = [lb for lb in self.labels if lb != st.label]
-            without = _fit_fixed_w(
+            without = fit_fixed_weights(
                 self.fitter.data, self.slots_of(rest),
                 [p for lb, p in zip(self.labels, self.sol.phi) if lb != st.label], local=True)
-            n_par = 1 + len(_slot(st.label, self.tau, self.rate_hz).bounds)
+            n_par = 1 + len(term_slot(st.label, self.tau, self.rate_hz).bounds)
             if without.j - self.sol.j < n_par * self.penalty + DELTA_MIN:
                 self.drop_steps([st], 'lowered the chi-square at first, but the re-weighted '
                                 'model does as well without it')

@@ -1,0 +1,37 @@
+"""
+The fit's public building blocks, for the effect search (:mod:`imu_allan.core.search`).
+
+The search grows a model term by term on one curve: it validates and thins the curve
+as the fit does, builds one slot per term label, scores candidates at fixed weights
+and re-weights (IRLS) with the same :class:`Fitter`.  These names are the fit's
+interface for that; their bodies live in :mod:`.axis` and :mod:`.solver`.
+"""
+
+from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin
+from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter, _Slot, _Solution
+
+#: ``check_curve(tau, avar, edf, rate_hz, n_samples) -> (tau, avar, edf)``: the usable
+#: points of a curve, sorted by tau (InputError for bad arrays, rate or length).
+check_curve = _check_inputs
+#: ``thin(tau_s, per_octave=2.0) -> indices``: at most that many points per octave.
+thin = _thin
+#: ``term_slot(label, tau_s, rate_hz) -> Slot``: a term label with its registry entry
+#: and the search range of its nonlinear parameters over these taus.
+term_slot = _slot
+#: ``n_params(slots) -> int``: parameters of a model (one level plus the nonlinear ones
+#: per slot).
+n_params = _n_params
+#: ``fit_fixed_weights(data, slots, phi0=None, fix=None, local=False, grid_slots=None)
+#: -> Solution``: one model at the fitter's current weights (NNLS inside a search over
+#: the nonlinear parameters).
+fit_fixed_weights = _fit_fixed_w
+#: ``Fitter(tau, avar, edf, m, n_terms, dt, n_samples, method)``: one curve with its
+#: covariance model; ``.irls(slots, ...)`` re-weights, ``.data`` holds the weights.
+Fitter = _Fitter
+#: One term label of a model (label, registry term, bounds of its nonlinear parameters).
+Slot = _Slot
+#: A fit at fixed weights: coefficients (scaled), nonlinear parameters, chi-square J.
+Solution = _Solution
+
+__all__ = ['check_curve', 'fit_fixed_weights', 'Fitter', 'n_params', 'Slot', 'Solution',
+           'term_slot', 'thin']
