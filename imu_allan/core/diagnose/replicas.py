@@ -1,10 +1,12 @@
 """
-The model's own curve: simulated replicas of a fitted model.
+The model's own curve: simulated replicas of a fitted model (paper eqs. 14-23).
 
-Each fitted term (the fit's ``components``) is simulated by its registry entry's
-``simulate`` (:mod:`imu_allan.core.noise.terms`): white noise, the sensor's filter,
-the Gauss-Markov terms (exact discretisation, paper eqs. 18-23), flicker, random walk,
-quantization, ramp and sinusoids.  Part of :mod:`imu_allan.core.diagnose`.
+The terms of the paper's state-space model (registry flag ``state_space``: white
+noise, the Gauss-Markov and random-walk states) run through
+:func:`imu_allan.core.noise.simulate.simulate_state_space`, the way the seed paper
+validates its model; every other fitted term (the sensor's filter, flicker,
+quantization, ramp, sinusoids) is added by its registry entry's ``simulate``.  Part of
+:mod:`imu_allan.core.diagnose`.
 """
 
 import numpy as np
@@ -12,7 +14,8 @@ import numpy as np
 from imu_allan.core.allan import overlapping_avar
 from imu_allan.core.fit import AxisFit
 from imu_allan.core.noise.generators import filtered_white_noise  # noqa: F401
-from imu_allan.core.noise.terms import base_name, TERMS
+from imu_allan.core.noise.simulate import simulate_state_space
+from imu_allan.core.noise.terms import base_name, noise_from_terms, TERMS
 
 #: Default number of simulated replicas.
 N_REPLICAS = 8
@@ -20,7 +23,7 @@ N_REPLICAS = 8
 
 def fit_instances(fit: AxisFit) -> list:
     """
-    Return the fitted terms as (term name, parameters) pairs, from the fit's components.
+    Return the fitted terms as (label, term name, parameters), from the fit's components.
 
     Parameters
     ----------
@@ -29,14 +32,14 @@ def fit_instances(fit: AxisFit) -> list:
 
     Returns
     -------
-    list of (str, dict)
-        The registry name of each positive term and its ``to_params`` dict (SI).
+    list of (str, str, dict)
+        Each positive term's label, registry name and ``to_params`` dict (SI).
 
     """
     out = []
     for label, coef, phi in fit.components:
         term = TERMS[base_name(label)]
-        out.append((term.name, term.to_params(coef, *phi)))
+        out.append((label, term.name, term.to_params(coef, *phi)))
     return out
 
 
@@ -68,15 +71,20 @@ def simulate_fit_avar(fit: AxisFit, rate_hz: float, n_samples: int, m: np.ndarra
         Shape (k,), mean AVAR over the replicas [unit^2].
 
     """
-    instances = fit_instances(fit)
+    found = fit_instances(fit)
+    states = noise_from_terms({lb: p for lb, name, p in found if TERMS[name].state_space})
+    order = list(TERMS)
+    rest = sorted(((name, p) for _, name, p in found if not TERMS[name].state_space),
+                  key=lambda item: order.index(item[0]))
+    n = int(n_samples)
     total = np.zeros(m.size)
     done = 0
     while done < n_replicas:
         r = min(2, n_replicas - done)
-        y = np.zeros((int(n_samples), r))
+        y = simulate_state_space(states, rate_hz, n, rng, r).y
         for j in range(r):
-            for name, params in instances:
-                y[:, j] += TERMS[name].simulate(params, rate_hz, int(n_samples), rng)
+            for name, params in rest:
+                y[:, j] += TERMS[name].simulate(params, rate_hz, n, rng)
         avar, _ = overlapping_avar(y, m)
         total += avar.sum(axis=1)
         done += r

@@ -98,6 +98,10 @@ class Term:
         What the term is, for summaries ('white noise').
     plain : bool
         The fit reports its symbols without the '<term>.' prefix (N, B, T_B, K ...).
+    state_space : bool
+        Part of the paper's discrete state-space model (eqs. 14-23: white measurement
+        noise, Gauss-Markov and random-walk states), through which the diagnosis
+        simulates a fit (:func:`imu_allan.core.noise.simulate.simulate_state_space`).
     kalman : str
         Role in the Kalman model (:data:`KALMAN_ROLES`): 'white' adds c to the white
         PSD S_N, 'b_gm' is the Gauss-Markov bias state (its c is S_B, its nonlinear
@@ -156,6 +160,7 @@ class Term:
     simulate: Callable[..., np.ndarray] | None = None
     title: str = ''
     plain: bool = False
+    state_space: bool = False
     kalman: str = ''
     effect: bool = False
     search_rank: int | None = None
@@ -275,7 +280,7 @@ TERMS: dict[str, Term] = {
         'white', ('N',), (), lambda tau: 1.0 / _as_tau(tau), _gcov_white,
         lambda c: {'N': _sqrt(c)}, lambda v: v * v, ('u*s^0.5',), keys=(_key('N'),),
         simulate=lambda p, f, n, rng: gen.white_noise(p['N'], f, n, rng),
-        title='white noise', plain=True, kalman='white', effect=True,
+        title='white noise', plain=True, state_space=True, kalman='white', effect=True,
         exclusive=('filtered_white',), read=_scalar('N')[0], write=_scalar('N')[1],
         psd_phase=_PSD_PHASE['white']),
     # White noise seen through the sensor's own low-pass filter (anti-aliasing,
@@ -311,7 +316,7 @@ TERMS: dict[str, Term] = {
         ('u', 's'), keys=(_key('B'), Key('T_B')),
         simulate=lambda p, f, n, rng: gen.gauss_markov_noise(
             GaussMarkov(p['B'], p['T_B']), f, n, rng),
-        title='Gauss-Markov bias instability', plain=True, kalman='b_gm',
+        title='Gauss-Markov bias instability', plain=True, state_space=True, kalman='b_gm',
         read=_read_floor, write=_write_floor, bounds=_gm_range, reach=_reach_gauss_markov,
         tail=_tail_gauss_markov, psd_phase=_PSD_PHASE['gauss_markov']),
     'gauss_markov': Term(
@@ -320,8 +325,8 @@ TERMS: dict[str, Term] = {
         lambda v, T: GM_PSD_FACTOR * v * v / T, ('u', 's'), keys=(_key('B'), Key('T')),
         simulate=lambda p, f, n, rng: gen.gauss_markov_noise(
             GaussMarkov(p['B'], p['T']), f, n, rng),
-        title='a further Gauss-Markov process', effect=True, search_rank=1, repeats=2,
-        list_key='gauss_markov',
+        title='a further Gauss-Markov process', state_space=True, effect=True, search_rank=1,
+        repeats=2, list_key='gauss_markov',
         read=lambda noise: [(g.B, g.T) for g in noise.gauss_markov if g.B],
         write=lambda kw, v: kw['gauss_markov'].append(GaussMarkov(*v)),
         bounds=_gm_range, reach=_reach_gauss_markov, tail=_tail_gauss_markov,
@@ -330,7 +335,7 @@ TERMS: dict[str, Term] = {
         'random_walk', ('K',), (), lambda tau: _as_tau(tau) / 3.0, _gcov_random_walk,
         lambda c: {'K': _sqrt(c)}, lambda v: v * v, ('u/s^0.5',), keys=(_key('K'),),
         simulate=lambda p, f, n, rng: gen.random_walk_noise(p['K'], f, n, rng),
-        title='rate random walk', plain=True, kalman='b_rw', effect=True,
+        title='rate random walk', plain=True, state_space=True, kalman='b_rw', effect=True,
         read=_scalar('K')[0], write=_scalar('K')[1], psd_phase=_PSD_PHASE['random_walk']),
     'rate_ramp': Term(
         'rate_ramp', ('R',), (), lambda tau: _as_tau(tau) ** 2 / 2.0, None,
