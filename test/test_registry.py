@@ -1,7 +1,7 @@
 """
-The term registry is the only dispatch: a term added by one entry is fitted, simulated,
-searched, exported and documented.
+The term registry is the only dispatch: one entry adds a term everywhere.
 
+A term added by its entry alone is fitted, simulated, searched, exported and documented.
 The toy term is registered for one test only (the ``toy`` fixture): the diff that adds a
 real term is its entry in imu_allan/core/noise/terms.py plus tests like these.  The
 docs' copy of the registry table is checked against the registry itself.
@@ -34,7 +34,7 @@ W, K = 2e-3, 2e-5      # the toy's level [rad/s*s^0.5] and a random walk beside 
 
 
 def _toy() -> Term:
-    """A second white-noise term, 'toy' with level W: all it needs is this entry."""
+    """Return a second white-noise term, 'toy' with level W: all it needs is this entry."""
     return Term(
         'toy', ('W',), (), lambda tau: 1.0 / np.asarray(tau, dtype=np.float64), _gcov_white,
         lambda c: {'W': math.sqrt(max(c, 0.0))}, lambda v: v * v, ('u*s^0.5',),

@@ -84,7 +84,7 @@ def simulate_fit_avar(fit: AxisFit, rate_hz: float, n_samples: int, m: np.ndarra
         y = simulate_state_space(states, rate_hz, n, rng, r).y
         for j in range(r):
             for name, params in rest:
-                y[:, j] += TERMS[name].simulate(params, rate_hz, n, rng)
+                y[:, j] += TERMS[name].samples(params, rate_hz, n, rng)
         avar, _ = overlapping_avar(y, m)
         total += avar.sum(axis=1)
         done += r

@@ -71,7 +71,7 @@ def simulate_axis(noise: AxisNoise, rate_hz: float, n_samples: int,
     n = int(n_samples)
     y = np.full(n, float(noise.bias))
     for _, name, params in terms_of(noise):
-        y += TERMS[name].simulate(params, rate_hz, n, rng)
+        y += TERMS[name].samples(params, rate_hz, n, rng)
     return y
 
 
@@ -179,6 +179,8 @@ def simulate_state_space(noise: AxisNoise, rate_hz: float, n_samples: int,
         y (n_samples, n_replicas) [unit] and x (n_samples, n_replicas, n_x) [unit].
 
     """
+    from scipy.signal import lfilter    # on first use: reading models stays light
+
     dt = _check_grid(rate_hz, n_samples)
     if int(n_replicas) != n_replicas or n_replicas < 1:
         raise InputError(f'number of replicas must be a positive integer, got {n_replicas!r}')
@@ -189,8 +191,6 @@ def simulate_state_space(noise: AxisNoise, rate_hz: float, n_samples: int,
     # Stationary std of each state: sqrt(q / (1 - phi^2)) for |phi| < 1, 0 at start else.
     x0_std = np.where(phi < 1.0, q_std / np.sqrt(np.maximum(1.0 - phi ** 2, 1e-300)), 0.0)
     x = np.empty((n, r, n_x))
-    from scipy.signal import lfilter
-
     if n:
         for j in range(n_x):  # a handful of states: the loop is over states, not time
             e = rng.standard_normal((n, r))

@@ -36,6 +36,7 @@ from imu_allan.core.noise.shapes import (_as_tau, _gcov_flicker, _gcov_gauss_mar
                                          _reach_gauss_markov, _tail_gauss_markov,
                                          FLICKER_AVAR, GM_PSD_FACTOR)
 from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid, TermValue
+from imu_allan.errors import InputError
 
 #: Kalman roles: white measurement noise (R), the bias state b_gm (a Gauss-Markov
 #: process with its correlation time), the bias state b_rw (a random walk); '' = not
@@ -176,6 +177,13 @@ class Term:
     reach: Callable[..., np.ndarray] | None = None
     tail: Callable[..., np.ndarray] | None = None
     psd_phase: Callable[..., float] | None = None
+
+    def samples(self, params: dict, rate_hz: float, n_samples: int,
+                rng: np.random.Generator) -> np.ndarray:
+        """Return (n_samples,) samples [unit] of one instance (``simulate``)."""
+        if self.simulate is None:
+            raise InputError(f'the term {self.name} has no simulator')
+        return self.simulate(params, rate_hz, n_samples, rng)
 
     def instances(self, noise: AxisNoise) -> list:
         """Return each instance's parameter values (symbol order) held by ``noise``."""
