@@ -23,8 +23,7 @@ from typing import TYPE_CHECKING
 
 from imu_allan import AXES
 from imu_allan.errors import InputError
-from imu_allan.pipeline.workers import (keep_large_blocks, one_blas_thread, start_workers,
-                                        worker_pool)
+from imu_allan.pipeline.workers import one_blas_thread, start_workers, worker_pool
 
 if TYPE_CHECKING:
     from imu_allan.pipeline.session import SessionConfig
@@ -174,8 +173,7 @@ def _run_several(jobs: list, n_workers: int) -> list:
 def run(args) -> int:
     """Analyse every input; write reports; print a summary or one JSON document."""
     paths = [Path(p) for p in args.inputs]
-    keep_large_blocks()         # a batch job: freed large blocks are reused, not re-faulted
-    one_blas_thread()           # and its threads and processes already fill the cores
+    one_blas_thread()           # its threads and processes already fill the cores
     plot = not args.no_plot
     workers = args.jobs or min(2, os.cpu_count() or 1)
     if len(paths) == 1 and workers > 1 and paths[0].exists():

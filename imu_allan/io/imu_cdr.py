@@ -19,8 +19,9 @@ import numpy as np
 from imu_allan.core import native
 from imu_allan.errors import InputError
 
-#: Message type names of sensor_msgs/Imu (ROS 2, ROS 1).
-IMU_MSGTYPES = ('sensor_msgs/msg/Imu', 'sensor_msgs/Imu')
+#: Message type name of sensor_msgs/Imu in ROS 2, and the names it has in ROS 2 and ROS 1.
+IMU_MSGTYPE = 'sensor_msgs/msg/Imu'
+IMU_MSGTYPES = (IMU_MSGTYPE, 'sensor_msgs/Imu')
 
 
 _N_DOUBLES_BYTES = 37 * 8
@@ -398,3 +399,12 @@ def _join(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     starts = np.zeros(lengths.size, np.int64)
     np.cumsum(lengths[:-1], out=starts[1:])
     return np.frombuffer(b''.join(payloads), np.uint8), starts, lengths
+
+
+def imu_msgdef() -> tuple[str, str]:
+    """Return (ros2msg definition text, RIHS01 hash) of sensor_msgs/msg/Imu (Jazzy)."""
+    from rosbags.typesys import get_typestore, Stores
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    text, _ = store.generate_msgdef(IMU_MSGTYPE, ros_version=2)
+    return text, store.hash_rihs01(IMU_MSGTYPE)
