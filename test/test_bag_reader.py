@@ -207,53 +207,7 @@ def test_mcap_library_files_lz4_chunks_without_index_and_unchunked(tmp_path):
         _assert_topic(source.read_all(), stamps[:99], stamps[:99], samples[:99])
 
 
-def _read_both_ways(monkeypatch, path, topic=None) -> tuple:
-    """Read a bag with the compiled chunk path and without it; count the chunks it took."""
-    taken = []
-    plain = native.mcap_imu
-
-    def counted(*args):
-        got = plain(*args)
-        taken.append(got is not None)
-        return got
-    monkeypatch.setattr(native, 'mcap_imu', counted)
-    results = []
-    for lib in (COMPILED, None):
-        monkeypatch.setattr(native, 'LIB', lib)
-        with open_imu(path, topic=topic) as source:
-            results.append((source.read_all(), source.frame_id, list(source.warnings)))
-    return results, taken
-
-
-def test_mcap_chunks_read_in_one_call_equal_the_general_path(tmp_path, monkeypatch):
-    # Indexed chunks of one channel (the project's writer) take the compiled path ...
-    stamps, samples = _recording(7000, seed=11)
-    write_imu_bag(tmp_path / 'a.mcap', stamps, samples, frame_id='imu_link')
-    (fast, general), taken = _read_both_ways(monkeypatch, tmp_path / 'a.mcap')
-    assert taken and all(taken)
-    for got in (fast, general):
-        _assert_topic(got[0], stamps, stamps + DEFAULT_LATENCY_NS, samples)
-        assert got[1:] == ('imu_link', [])
-    # ... and so do two interleaved Imu topics, one channel at a time (the mcap
-    # package's writer indexes each channel's messages per chunk).
-    msgdef, _ = ROS2.generate_msgdef(IMU, ros_version=2)
-    with open(tmp_path / 'two.mcap', 'wb') as stream:
-        writer = McapWriter(stream, chunk_size=20_000)
-        writer.start(profile='ros2')
-        schema = writer.register_schema(IMU, 'ros2msg', msgdef.encode())
-        channels = [writer.register_channel(t, 'cdr', schema) for t in ('/imu/a', '/imu/b')]
-        for i, raw in enumerate(serialize_imu(stamps[:900], samples[:900], 'b')):
-            writer.add_message(channels[i % 2], int(stamps[i]) + 5000, raw.tobytes(),
-                               int(stamps[i]))
-        writer.finish()
-    (fast, general), taken = _read_both_ways(monkeypatch, tmp_path / 'two.mcap', '/imu/b')
-    assert taken and all(taken)
-    _assert_topic(fast[0], stamps[1:900:2], stamps[1:900:2] + 5000, samples[1:900:2])
-    assert_array_equal(fast[0].recv_ns, general[0].recv_ns)
-    assert fast[1:] == general[1:] == ('b', [])
-
-
-def test_mcap_chunks_out_of_order_or_damaged_take_the_general_path(tmp_path, monkeypatch):
+def test_mcap_log_times_out_of_order_and_a_damaged_payload(tmp_path):
     stamps, samples = _recording(400, seed=13)
     payloads = [p.tobytes() for p in serialize_imu(stamps, samples, 'imu')]
     payloads[150] = payloads[150][:20]                      # not an Imu any more
@@ -268,13 +222,15 @@ def test_mcap_chunks_out_of_order_or_damaged_take_the_general_path(tmp_path, mon
         for i in range(stamps.size):
             writer.add_message(channel, int(recv[i]), payloads[i], int(stamps[i]))
         writer.finish()
-    (fast, general), taken = _read_both_ways(monkeypatch, tmp_path / 'odd.mcap')
-    assert not all(taken) and any(taken)        # those two chunks went the general way
-    for f in ('stamp_ns', 'recv_ns', 'samples'):
-        assert_array_equal(getattr(fast[0], f), getattr(general[0], f))
-    assert fast[1:] == general[1:]
-    assert fast[0].stamp_ns.size == 399 and (np.diff(fast[0].recv_ns) >= 0).all()
-    assert any('1 messages on /imu are not decodable' in w for w in fast[2])
+    with open_imu(tmp_path / 'odd.mcap') as source:
+        block = source.read_all()
+        warnings = list(source.warnings)
+        assert (source.n_read, source.n_lost) == (399, 1)
+    keep = np.arange(400) != 150
+    # Header-stamp order, whatever the log times say.
+    _assert_topic(block, stamps[keep], recv[keep][np.argsort(stamps[keep])], samples[keep])
+    assert any('1 messages on /imu are not decodable' in w for w in warnings)
+    assert any('1 of 400 messages on /imu lost (399 read)' in w for w in warnings)
 
 
 def _mixed_cdr(seed: int):
