@@ -16,7 +16,6 @@ one-column file loads in about 0.1 s.
 
 import gzip
 import io
-import mmap
 import os
 from pathlib import Path
 from typing import NamedTuple, Sequence
@@ -58,11 +57,12 @@ class CsvData(NamedTuple):
     rate_hz: float
 
 
-def _read_bytes(path: Path) -> bytes | mmap.mmap:
+def _read_bytes(path: Path) -> bytes:
     """
     Whole file content, gunzipped when the name ends in .gz.
 
-    A plain file is mapped, not copied: the parser reads the page cache in place.
+    Read, not mapped: a file that shrinks while it is read is a short read, not a
+    SIGBUS that would end the process.
     """
     if not path.exists():
         raise InputError(f'{path}: no such file or directory')
@@ -71,15 +71,12 @@ def _read_bytes(path: Path) -> bytes | mmap.mmap:
     try:
         if path.name.lower().endswith('.gz'):
             return gzip.decompress(path.read_bytes())
-        with open(path, 'rb') as f:
-            if os.fstat(f.fileno()).st_size == 0:
-                return b''
-            return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+        return path.read_bytes()
     except (OSError, EOFError, zlib.error, ValueError) as exc:
         raise InputError(f'{path}: cannot read: {exc}') from None
 
 
-def _split_header(raw: bytes | mmap.mmap,
+def _split_header(raw: bytes,
                   path: Path) -> tuple[list | None, memoryview, int]:
     """
     Separate leading comment/blank lines and an optional header from the data.

@@ -399,22 +399,20 @@ class _McapBackend(_Backend):
                     self._add_record(op, raw, pos + 9)
                 pos += stride
                 continue
-            run = 1
-            k = (end - pos) // stride
-            window = 32
+            # Check growing windows of the records that would follow at this stride (a
+            # strided view, no copy): long runs cost a few numpy calls, short ones
+            # (interleaved topics) only a small window.
+            run, k, window = 1, (end - pos) // stride, 64
             while length >= 22 and run < k:
-                cand = pos + stride * np.arange(run, min(k, run + window), dtype=np.int64)
-                if cand[-1] + 31 > end:
-                    cand = cand[:-1]
-                heads = _records(u8, cand, _MCAP_MESSAGE)
+                n = min(k, run + window) - run
+                heads = np.ndarray((n,), _MCAP_MESSAGE, buffer=u8, offset=pos + stride * run,
+                                   strides=(stride,))
                 same = (heads['op'] == _OP_MESSAGE) & (heads['length'] == length)
-                if not same.size:
-                    break
                 if not same.all():
                     run += int(np.argmin(same))
                     break
-                run += cand.size
-                window *= 8
+                run += n
+                window *= 16
             runs.append(pos + stride * np.arange(run, dtype=np.int64))
             pos += stride * run
         return np.concatenate(runs) if runs else np.zeros(0, np.int64)
