@@ -281,8 +281,9 @@ class _McapBackend(_Backend):
         for start, stop in self.indexed:
             if start not in found and stop <= end and self._chunk_ok(start, end):
                 self.items.append(_Chunk(start, stop, self._start_ns(start), None))
-        self.items = [it._replace(counts=counts.get(it.pos)) if isinstance(it, _Chunk) else it
-                      for it in self.items]
+        self.items = self._without_overlap(
+            [it._replace(counts=counts.get(it.pos)) if isinstance(it, _Chunk) else it
+             for it in self.items])
         if not any(isinstance(it, _Loose) for it in self.items):
             # Chunks may overlap in time (valid MCAP): read them in start-time order.
             self.items.sort(key=lambda c: (c.start_ns, c.pos))
@@ -290,6 +291,25 @@ class _McapBackend(_Backend):
             self.counts = self._index_counts()
         if not self.channels or self.counts is None:
             self._discover()
+
+    @staticmethod
+    def _without_overlap(items: list) -> list:
+        """Drop loose messages inside a chunk (found by a resync into its records)."""
+        spans = sorted((it.pos, it.end) for it in items if isinstance(it, _Chunk))
+        if not spans:
+            return items
+        starts = np.array([a for a, _ in spans], np.int64)
+        ends = np.array([b for _, b in spans], np.int64)
+        out = []
+        for it in items:
+            if isinstance(it, _Loose):
+                k = np.searchsorted(starts, it.offsets, 'right') - 1
+                inside = (k >= 0) & (it.offsets < ends[np.maximum(k, 0)])
+                if inside.all():
+                    continue
+                it = it._replace(offsets=it.offsets[~inside])
+            out.append(it)
+        return out
 
     def _start_ns(self, pos: int) -> int:
         head = self._peek(pos + 9, 8)
@@ -431,6 +451,10 @@ class _McapBackend(_Backend):
             else:
                 found[name] = _Topic(name, msgtype, count, encoding)
         return list(found.values())
+
+    def count(self, topic: _Topic) -> int | None:
+        """The topic's count, None for a truncated file (whose summary is lost with it)."""
+        return topic.n_messages if self.complete else None
 
     def _message_piece(self, buf: np.ndarray, offsets: np.ndarray, wanted: set,
                        encoding: str) -> _Piece | None:
