@@ -76,7 +76,7 @@ def list_topics(path: PathLike) -> list[TopicInfo]:
         If the path is missing or not a readable bag.
 
     """
-    backend = _open_backend(path, [])
+    backend = _guarded_open(path, [])
     try:
         return [TopicInfo(t.name, t.msgtype, backend.count(t)) for t in backend.topics()]
     finally:
@@ -103,7 +103,7 @@ def list_imu_topics(path: PathLike) -> list[TopicInfo]:
         If the path is missing or not a readable bag.
 
     """
-    backend = _open_backend(path, [])
+    backend = _guarded_open(path, [])
     try:
         return [TopicInfo(t.name, t.msgtype, backend.count(t))
                 for t in backend.topics() if _is_imu(t)]
@@ -341,13 +341,24 @@ def open_imu(path: PathLike, topic: str | None = None) -> ImuSource:
 
     """
     warnings: list[str] = []
-    backend = _open_backend(path, warnings)
+    backend = _guarded_open(path, warnings)
     try:
         chosen = _choose_topic(Path(path), backend, topic)
     except BaseException:
         backend.close()
         raise
     return ImuSource(Path(path), backend, chosen, warnings)
+
+
+def _guarded_open(path: PathLike, warnings: list[str]) -> _Backend:
+    """Open a bag; any library failure becomes a one-line InputError."""
+    try:
+        return _open_backend(path, warnings)
+    except (InputError, MemoryError, KeyboardInterrupt):
+        raise
+    except Exception as err:   # noqa: B902 - a damaged file can make any library raise
+        text = str(err).strip().splitlines()[0] if str(err).strip() else ''
+        raise InputError(f'{path}: unreadable bag ({type(err).__name__}: {text})') from None
 
 
 def _choose_topic(path: Path, backend: _Backend, name: str | None) -> _Topic:

@@ -18,6 +18,7 @@ import gzip
 import io
 import os
 from pathlib import Path
+import re
 from typing import NamedTuple, Sequence
 import warnings
 import zlib
@@ -227,6 +228,13 @@ def read_csv(path: PathLike, columns: Sequence[str] | None = None,
     path = Path(path)
     raw = _read_bytes(path)
     header, data, first_line = _split_header(raw, path)
+    if raw.count(b'\r') != raw.count(b'\r\n'):
+        # A lone carriage return ends a line for some readers and is blank space for
+        # others (a flipped '-' is one): refuse rather than guess.
+        found = re.search(b'\r(?!\n)', raw)
+        line = raw.count(b'\n', 0, found.start() if found is not None else 0) + 1
+        raise InputError(f'{path}: line {line}: carriage return inside a line (old Mac line '
+                         'ends or a damaged file)')
     if header is None:
         start = len(raw) - len(data)
         end = raw.find(b'\n', start)

@@ -206,6 +206,11 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
         return stamp_ns, samples, ok
     decode = native.decode_imu if native.LIB is not None else _decode_plain
     decode(u8, starts, lengths, ros1, stamp_ns, samples, ok)
+    # The message must end with its last double: a damaged frame_id length that still
+    # fits the payload would shift every value (CDR may pad to 4 bytes).
+    offset, _, _ = _imu_layout(u8, starts, lengths, ros1)
+    slack = lengths - offset - _N_DOUBLES_BYTES
+    ok &= (slack >= 0) & (slack <= (0 if ros1 else 3))
     for i in np.flatnonzero(~ok).tolist():
         decoded = _fallback_decode(u8[starts[i]:starts[i] + lengths[i]].tobytes(), ros1)
         if decoded is not None:

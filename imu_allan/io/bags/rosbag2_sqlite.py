@@ -41,7 +41,7 @@ def _connect_sqlite(path: Path, warnings: list[str]) -> tuple[sqlite3.Connection
     except sqlite3.OperationalError:
         pass
     except sqlite3.DatabaseError as err:
-        raise InputError(f'{path}: damaged or not a sqlite3 database ({err})') from None
+        raise InputError(f'{path}: damaged or not a sqlite3 database ({_line(err)})') from None
     wal = path.with_name(path.name + '-wal')
     if not (wal.exists() and wal.stat().st_size > 0):
         conn = sqlite3.connect(uri + '?immutable=1', uri=True, check_same_thread=False)
@@ -59,6 +59,12 @@ def _connect_sqlite(path: Path, warnings: list[str]) -> tuple[sqlite3.Connection
                     'a temporary directory to read every committed message')
     uri = 'file:' + quote(str(copy))
     return sqlite3.connect(uri + '?mode=ro', uri=True, check_same_thread=False), copy, tmp
+
+
+def _line(err: BaseException) -> str:
+    """The first line of an error's text (sqlite quotes whole schemas in some)."""
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__
 
 
 class _SqliteBackend(_Backend):
@@ -86,7 +92,7 @@ class _SqliteBackend(_Backend):
                 total = self._total()
         except sqlite3.DatabaseError as err:
             self.close()
-            raise InputError(f'{path}: damaged or not a sqlite3 database ({err})') from None
+            raise InputError(f'{path}: damaged or not a sqlite3 database ({_line(err)})') from None
         self.ids: dict[str, list[int]] = {}
         self._topics: dict[str, _Topic] = {}
         for topic_id, name, msgtype, fmt in rows:
@@ -178,7 +184,7 @@ class _SqliteBackend(_Backend):
             except sqlite3.DatabaseError as err:
                 nxt = self._past_damage(after)
                 self.warnings.append(f'{self.path}: damaged sqlite3 page after row {after} '
-                                     f'({err}); ' + ('read stopped' if nxt is None else
+                                     f'({_line(err)}); ' + ('read stopped' if nxt is None else
                                                      f'read resumed after row {nxt}'))
                 after = nxt
 
