@@ -61,6 +61,10 @@ def _connect_sqlite(path: Path, warnings: list[str]) -> tuple[sqlite3.Connection
     return sqlite3.connect(uri + '?mode=ro', uri=True, check_same_thread=False), copy, tmp
 
 
+#: Rowids read one by one around a damaged page at most.
+_MAX_POINT_READS = 1 << 16
+
+
 def _line(err: BaseException) -> str:
     """The first line of an error's text (sqlite quotes whole schemas in some)."""
     text = str(err).strip()
@@ -171,22 +175,51 @@ class _SqliteBackend(_Backend):
         sql = ('SELECT id, timestamp, data FROM messages WHERE id > ? AND topic_id IN '
                f'({",".join("?" * len(ids))}) ORDER BY id')
         while after is not None:
+            rows: list = []
+            error = None
             try:
-                cursor = self.conn.execute(sql, [after, *ids])
-                while True:
-                    rows = cursor.fetchmany(_FETCH_ROWS)
-                    if not rows:
-                        return
-                    rowid, recv, payloads = zip(*rows)
-                    after = rowid[-1]
-                    yield _make_piece(*_join(payloads), np.array(recv, np.int64),
-                                      topic.encoding, self.decompress)
+                # Row by row (as fetchmany steps anyway): an error keeps the rows before it.
+                for row in self.conn.execute(sql, [after, *ids]):
+                    rows.append(row)
+                    if len(rows) >= _FETCH_ROWS:
+                        after = rows[-1][0]
+                        yield self._piece(rows, topic)
+                        rows = []
             except sqlite3.DatabaseError as err:
-                nxt = self._past_damage(after)
-                self.warnings.append(f'{self.path}: damaged sqlite3 page after row {after} '
-                                     f'({_line(err)}); ' + ('read stopped' if nxt is None else
-                                                     f'read resumed after row {nxt}'))
-                after = nxt
+                error = err
+            if rows:
+                after = rows[-1][0]
+                yield self._piece(rows, topic)
+            if error is None:
+                return
+            nxt = self._past_damage(after)
+            # The rows between, one at a time: all but those on the damaged page come back.
+            rows = self._one_by_one(after, nxt, ids)
+            if rows:
+                yield self._piece(rows, topic)
+            self.warnings.append(f'{self.path}: damaged sqlite3 page after row {after} '
+                                 f'({_line(error)}); ' + ('read stopped' if nxt is None else
+                                                          f'read resumed after row {nxt}'))
+            after = nxt
+
+    def _one_by_one(self, after: int, bound: int | None, ids: list[int]) -> list:
+        """Rows after < id <= bound of the topic that SQL reads one rowid at a time."""
+        rows = []
+        stop = after + _MAX_POINT_READS if bound is None else min(bound, after + _MAX_POINT_READS)
+        for rowid in range(after + 1, stop + 1):
+            try:
+                row = self.conn.execute('SELECT id, topic_id, timestamp, data FROM messages '
+                                        'WHERE id = ?', (rowid,)).fetchone()
+            except sqlite3.DatabaseError:
+                continue
+            if row is not None and row[1] in ids:
+                rows.append((row[0], row[2], row[3]))
+        return rows
+
+    def _piece(self, rows: list, topic: _Topic) -> _Piece:
+        _, recv, payloads = zip(*rows)
+        return _make_piece(*_join(payloads), np.array(recv, np.int64), topic.encoding,
+                           self.decompress)
 
     def _past_damage(self, after: int) -> int | None:
         """Return the smallest rowid bound past a damaged page that SQL reads again."""
