@@ -151,10 +151,27 @@ class InputSource:
     def __init__(self, path: Path, label: str, kind: str, topic: str | None,
                  n_messages: int | None, blocks: Callable[[], Iterator],
                  warnings: list, close: Callable[[], None] = lambda: None,
-                 frame_id: Callable[[], str] = lambda: ''):
+                 frame_id: Callable[[], str] = lambda: '',
+                 counts: Callable[[], tuple] | None = None):
         self.path, self.label, self.kind, self.topic = path, label, kind, topic
         self.n_messages, self.warnings = n_messages, warnings
         self._blocks, self._close, self._frame_id = blocks, close, frame_id
+        self._counts = counts if counts is not None else lambda: (n_messages, 0)
+
+    @property
+    def read_counts(self) -> dict:
+        """
+        Return what the reader delivered and lost, once ``blocks()`` has been consumed.
+
+        Returns
+        -------
+        dict
+            ``n_read``: messages (rows) delivered; ``n_lost``: messages the input counts
+            but could not deliver (damaged, undecodable), None when it states no count.
+
+        """
+        n_read, n_lost = self._counts()
+        return {'n_read': n_read, 'n_lost': n_lost}
 
     @property
     def frame_id(self) -> str:
@@ -252,7 +269,7 @@ def open_input(path, topic: str | None = None) -> InputSource:
             yield block.stamp_ns, block.samples
     return InputSource(path, f'{path.name} {source.topic}', source.storage, source.topic,
                        source.n_messages, bag_blocks, source.warnings, source.close,
-                       lambda: source.frame_id)
+                       lambda: source.frame_id, lambda: (source.n_read, source.n_lost))
 
 
 def stream_input(source: InputSource, config: SessionConfig,
@@ -415,8 +432,10 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
             reader_warnings = list(source.warnings)
             for text in reader_warnings:
                 warn(text)
+            counts = source.read_counts
             if session.stats.n_received == 0:
-                raise InputError(f'{path}: no Imu samples in the input')
+                raise InputError(f'{path}: no Imu samples in the input'
+                                 + (f' ({reader_warnings[0]})' if reader_warnings else ''))
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
             result = analyze(session, source=source.label, raw=keeper,
@@ -444,5 +463,6 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                          f'{kept}, {stats.n_used} samples used')
         warn(extra[-1])
     result = replace(result, warnings=tuple(extra) + result.warnings,
+                     hygiene={**result.hygiene, **counts},
                      start_ns=session.first_stamp_ns, frame_id=source.frame_id)
     return result, time.monotonic() - start
