@@ -110,11 +110,11 @@ def _fields_dtype(doubles_offset: int, big: bool, ros1: bool, itemsize: int,
 
 def _fallback_decode(payload: bytes, ros1: bool) -> tuple[int, list] | None:
     """Decode one odd payload with rosbags; return (stamp_ns, six values) or None."""
-    from rosbags.typesys import get_typestore, Stores
-
     msg: Any
 
     try:
+        # Inside the try: a robot without rosbags has no fallback, not a lost batch.
+        from rosbags.typesys import get_typestore, Stores
         if ros1:
             msg = get_typestore(Stores.ROS1_NOETIC).deserialize_ros1(payload, IMU_MSGTYPES[0])
         else:
