@@ -316,7 +316,7 @@ class LiveInput:
 
 
 def _one_line(exc: BaseException) -> str:
-    """An exception as one short line: its type and the first line of its text."""
+    """Return an exception as one short line: its type and the first line of its text."""
     text = str(exc).strip().splitlines()
     return f'{type(exc).__name__}: {text[0][:200]}' if text else type(exc).__name__
 

@@ -132,7 +132,7 @@ class NodeReports:
         return self.status('data', DiagnosticStatus.OK, f'receiving {self.topic}', values)
 
     def diagnostics(self) -> list[DiagnosticStatus]:
-        """The statuses for /diagnostics: data, progress, the last fit's axes, input."""
+        """Return the /diagnostics statuses: data, progress, the last fit's axes, input."""
         session = self.live.session
         return ([self.data_status(), self.progress_status()] + self.axis_statuses
                 + [self.input_status(session)])
