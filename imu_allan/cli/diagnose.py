@@ -15,6 +15,7 @@ from pathlib import Path
 import sys
 
 from imu_allan.cli.analyze import add_input_options, session_config_from_args
+from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
 from imu_allan.core.diagnose import DEFAULT_BASE, diagnose_session, EFFECTS, N_REPLICAS
 from imu_allan.errors import InputError
 from imu_allan.io.inputs import open_input, Progress, raw_tap, stream_input
@@ -121,12 +122,22 @@ def run(args) -> int:
     if not args.input.exists():
         raise InputError(f'{args.input}: no such file or directory')
     config = session_config_from_args(args)
+    created = prepare_out_dir(args.out)     # before the minutes of the diagnosis
+    try:
+        return _run(args, config, base)
+    except BaseException:
+        remove_if_unused(args.out, created)
+        raise
+
+
+def _run(args, config: SessionConfig, base: tuple) -> int:
     result = diagnose_input(args.input, args.topic, config, base, args.replicas, args.seed,
                             quiet=args.format == 'json')
     if all(d is None for d in result.axes.values()):
         raise InputError(f'{args.input}: no axis could be diagnosed (frozen, constant or too '
                          f'short: {result.n_samples} samples)')
-    files = write_diagnosis_files(result, args.out, plot=not args.no_plot)
+    with writing(args.out):
+        files = write_diagnosis_files(result, args.out, plot=not args.no_plot)
     if args.format == 'json':
         doc = result.to_json()
         doc['files'] = [str(f) for f in files]
