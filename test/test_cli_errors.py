@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope='module')
 def csv_rec(tmp_path_factory) -> Path:
-    """A 60 s, 100 Hz still Xsens MTi-7 as CSV."""
+    """Return a CSV of a still Xsens MTi-7, 60 s at 100 Hz."""
     spec = load_params(REPO / 'config' / 'xsens_mti7.yaml')
     t_s, samples = simulate_imu(spec, 100.0, 60.0, seed=7)
     path = tmp_path_factory.mktemp('rec') / 'rec.csv'
