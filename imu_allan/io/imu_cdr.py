@@ -123,6 +123,7 @@ def _fallback_decode(payload: bytes, ros1: bool) -> tuple[int, list] | None:
     if len(payload) < _N_DOUBLES_BYTES + 12:
         return None     # shorter than any Imu message: not worth asking rosbags
     try:
+        # Inside the try: a robot without rosbags has no fallback, not a lost batch.
         if ros1:
             msg = _typestore(True).deserialize_ros1(payload, IMU_MSGTYPES[0])
         else:
