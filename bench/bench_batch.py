@@ -88,10 +88,10 @@ def main() -> int:
     t_at6 = t_at / k_at * 6
     print(f'allantools.oadev     {t_at / k_at:7.3f} s per axis -> {t_at6:7.3f} s for 6 axes')
 
-    threads = allan.kernels._MAX_THREADS
+    threads = allan.sums._MAX_THREADS
     results = {}
     for label, n_threads in (('threads', threads), ('1 thread', 1)):
-        allan.kernels._MAX_THREADS = n_threads
+        allan.sums._MAX_THREADS = n_threads
         (avar, _), t_avar = timed(allan.overlapping_avar, y, m)
         curve, t_curve = timed(allan.allan_curve, y, args.rate, 'octave')
         results[label] = (avar, curve)
@@ -99,7 +99,7 @@ def main() -> int:
               f'{t_at6 / t_avar:5.1f}x faster')
         print(f'imu_allan curve ({label:8s}) {t_curve:7.3f} s for 6 axes -> '
               f'{t_at6 / t_curve:5.1f}x faster (noise id, EDF, bounds included)')
-    allan.kernels._MAX_THREADS = threads
+    allan.sums._MAX_THREADS = threads
 
     # Exactness: against allantools and against the plain formula (three taus).
     avar, curve = results['threads']

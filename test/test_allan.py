@@ -155,8 +155,8 @@ def test_octave_gram_levels_match_extended_precision(monkeypatch, n, kind, pyram
     # Forces the Gram-matrix kernel onto most levels (it normally starts at m = 2^18),
     # with and without a ragged last row (2^16 + 1 has one term past the full rows at
     # the longest tau), then past its row limit, where the exact kernel takes over.
-    monkeypatch.setattr(allan.kernels, '_PYRAMID_LEVELS', pyramid_levels)
-    monkeypatch.setattr(allan.kernels, '_GRAM_MAX_ROWS', gram_rows)
+    monkeypatch.setattr(allan.sums, '_PYRAMID_LEVELS', pyramid_levels)
+    monkeypatch.setattr(allan.sums, '_GRAM_MAX_ROWS', gram_rows)
     rng = np.random.default_rng(12)
     w = rng.standard_normal(n) * 1e-4
     y = {'white_accel': 9.81 + w, 'random_walk': np.cumsum(w) + w,
@@ -175,9 +175,9 @@ def test_octave_kernels_on_random_lengths_subsets_and_splits(monkeypatch):
         octaves = 2 ** np.arange(int(allan.max_cluster_size(n)).bit_length())
         m = np.sort(rng.choice(octaves, size=int(rng.integers(3, octaves.size + 1)),
                                replace=False))
-        monkeypatch.setattr(allan.kernels, '_PYRAMID_LEVELS', int(rng.integers(1, 8)))
-        monkeypatch.setattr(allan.kernels, '_GRAM_MAX_ROWS', int(rng.integers(1, 40)))
-        monkeypatch.setattr(allan.kernels, '_TILE_ELEMS', int(rng.choice([16, 64, 65536])))
+        monkeypatch.setattr(allan.sums, '_PYRAMID_LEVELS', int(rng.integers(1, 8)))
+        monkeypatch.setattr(allan.sums, '_GRAM_MAX_ROWS', int(rng.integers(1, 40)))
+        monkeypatch.setattr(allan.sums, '_TILE_ELEMS', int(rng.choice([16, 64, 65536])))
         w = rng.standard_normal(n)
         y = (w + 9.81, np.cumsum(w) * 0.01 + w, w + np.linspace(0, 3, n))[case % 3]
         ref = exact_sums(y, m) / (2.0 * m * m * (n + 1 - 2 * m))
@@ -195,7 +195,7 @@ def test_octave_fast_path_identifies_like_the_exact_path(monkeypatch):
     m = m[n // m >= allan.MIN_B1_POINTS]  # beyond, alpha comes from the curve's slope
     single = np.stack([allan.identify_alpha(y, m[j:j + 1])[0] for j in range(m.size)])
     assert_array_equal(allan.identify_alpha(y, m), single)
-    monkeypatch.setattr(allan.kernels, '_PYRAMID_LEVELS', 6)
+    monkeypatch.setattr(allan.sums, '_PYRAMID_LEVELS', 6)
     assert_array_equal(allan.identify_alpha(y, m), single)
 
 

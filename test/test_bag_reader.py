@@ -7,6 +7,7 @@ float64 values and integer nanoseconds must come back bit for bit).
 """
 
 import os
+import re
 from pathlib import Path
 
 from mcap.reader import make_reader
@@ -207,53 +208,7 @@ def test_mcap_library_files_lz4_chunks_without_index_and_unchunked(tmp_path):
         _assert_topic(source.read_all(), stamps[:99], stamps[:99], samples[:99])
 
 
-def _read_both_ways(monkeypatch, path, topic=None) -> tuple:
-    """Read a bag with the compiled chunk path and without it; count the chunks it took."""
-    taken = []
-    plain = native.mcap_imu
-
-    def counted(*args):
-        got = plain(*args)
-        taken.append(got is not None)
-        return got
-    monkeypatch.setattr(native, 'mcap_imu', counted)
-    results = []
-    for lib in (COMPILED, None):
-        monkeypatch.setattr(native, 'LIB', lib)
-        with open_imu(path, topic=topic) as source:
-            results.append((source.read_all(), source.frame_id, list(source.warnings)))
-    return results, taken
-
-
-def test_mcap_chunks_read_in_one_call_equal_the_general_path(tmp_path, monkeypatch):
-    # Indexed chunks of one channel (the project's writer) take the compiled path ...
-    stamps, samples = _recording(7000, seed=11)
-    write_imu_bag(tmp_path / 'a.mcap', stamps, samples, frame_id='imu_link')
-    (fast, general), taken = _read_both_ways(monkeypatch, tmp_path / 'a.mcap')
-    assert taken and all(taken)
-    for got in (fast, general):
-        _assert_topic(got[0], stamps, stamps + DEFAULT_LATENCY_NS, samples)
-        assert got[1:] == ('imu_link', [])
-    # ... and so do two interleaved Imu topics, one channel at a time (the mcap
-    # package's writer indexes each channel's messages per chunk).
-    msgdef, _ = ROS2.generate_msgdef(IMU, ros_version=2)
-    with open(tmp_path / 'two.mcap', 'wb') as stream:
-        writer = McapWriter(stream, chunk_size=20_000)
-        writer.start(profile='ros2')
-        schema = writer.register_schema(IMU, 'ros2msg', msgdef.encode())
-        channels = [writer.register_channel(t, 'cdr', schema) for t in ('/imu/a', '/imu/b')]
-        for i, raw in enumerate(serialize_imu(stamps[:900], samples[:900], 'b')):
-            writer.add_message(channels[i % 2], int(stamps[i]) + 5000, raw.tobytes(),
-                               int(stamps[i]))
-        writer.finish()
-    (fast, general), taken = _read_both_ways(monkeypatch, tmp_path / 'two.mcap', '/imu/b')
-    assert taken and all(taken)
-    _assert_topic(fast[0], stamps[1:900:2], stamps[1:900:2] + 5000, samples[1:900:2])
-    assert_array_equal(fast[0].recv_ns, general[0].recv_ns)
-    assert fast[1:] == general[1:] == ('b', [])
-
-
-def test_mcap_chunks_out_of_order_or_damaged_take_the_general_path(tmp_path, monkeypatch):
+def test_mcap_log_times_out_of_order_and_a_damaged_payload(tmp_path):
     stamps, samples = _recording(400, seed=13)
     payloads = [p.tobytes() for p in serialize_imu(stamps, samples, 'imu')]
     payloads[150] = payloads[150][:20]                      # not an Imu any more
@@ -268,13 +223,15 @@ def test_mcap_chunks_out_of_order_or_damaged_take_the_general_path(tmp_path, mon
         for i in range(stamps.size):
             writer.add_message(channel, int(recv[i]), payloads[i], int(stamps[i]))
         writer.finish()
-    (fast, general), taken = _read_both_ways(monkeypatch, tmp_path / 'odd.mcap')
-    assert not all(taken) and any(taken)        # those two chunks went the general way
-    for f in ('stamp_ns', 'recv_ns', 'samples'):
-        assert_array_equal(getattr(fast[0], f), getattr(general[0], f))
-    assert fast[1:] == general[1:]
-    assert fast[0].stamp_ns.size == 399 and (np.diff(fast[0].recv_ns) >= 0).all()
-    assert any('1 messages on /imu are not decodable' in w for w in fast[2])
+    with open_imu(tmp_path / 'odd.mcap') as source:
+        block = source.read_all()
+        warnings = list(source.warnings)
+        assert (source.n_read, source.n_lost) == (399, 1)
+    keep = np.arange(400) != 150
+    # Header-stamp order, whatever the log times say.
+    _assert_topic(block, stamps[keep], recv[keep][np.argsort(stamps[keep])], samples[keep])
+    assert any('1 messages on /imu are not decodable' in w for w in warnings)
+    assert any('1 of 400 messages on /imu lost (399 read)' in w for w in warnings)
 
 
 def _mixed_cdr(seed: int):
@@ -546,11 +503,12 @@ def _sqlite_both_ways(db3: Path, topic: str):
         backend = source._backend
         own = next(t for t in backend.topics() if t.name == source.topic)
         pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
-        located = pages.locate(backend.ids[own.name], backend.count(own))
-        assert located[1].size == backend.count(own)
+        got = list(pages.pieces(backend.ids[own.name], own.encoding))
+        assert sum(p.recv_ns.size for p, _ in got) == backend.count(own)
         fast = source.read_all()
     with open_imu(db3, topic) as source:
-        source._backend.pieces = source._backend._sql_pieces
+        backend = source._backend
+        backend.pieces = lambda topic: backend._sql_pieces(topic, 0)
         slow = source.read_all()
     for field in ImuBlock._fields:
         assert_array_equal(getattr(fast, field), getattr(slow, field))
@@ -608,7 +566,7 @@ def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
         backend = source._backend
         pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
         with pytest.raises(rosbag2_sqlite._NotPlain, match='overflow'):
-            pages.locate(list(backend.ids['/imu/data']), 500)
+            list(pages.pieces(list(backend.ids['/imu/data']), 'cdr'))
         _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
     # A write-ahead log next to the file: SQL reads it (committed rows live in the log).
     db3 = tmp_path / 'wal.db3'
@@ -625,3 +583,199 @@ def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
             assert source.read_all().stamp_ns.size == 400
     finally:
         conn.close()
+
+
+# -- damaged and unusual inputs: what is lost is counted ------------------------------
+
+def _mcap_by_library(path: Path, stamps, recv, samples, **options) -> None:
+    """Write an MCAP file with the mcap package, messages in the given order."""
+    payloads = serialize_imu(stamps, samples, 'imu')
+    with open(path, 'wb') as stream:
+        writer = McapWriter(stream, **options)
+        writer.start(profile='ros2')
+        schema = writer.register_schema(IMU, 'ros2msg', b'')
+        channel = writer.register_channel('/imu', 'cdr', schema)
+        for i in range(stamps.size):
+            writer.add_message(channel, int(recv[i]), payloads[i].tobytes(), int(stamps[i]))
+        writer.finish()
+
+
+def test_mcap_overlapping_chunks_and_jittered_log_times_lose_nothing(tmp_path):
+    stamps, samples = _recording(4000, seed=21)
+    # Even messages first, then odd ones: the chunks overlap in time (valid MCAP).
+    order = np.r_[np.arange(0, 4000, 2), np.arange(1, 4000, 2)]
+    _mcap_by_library(tmp_path / 'overlap.mcap', stamps[order], stamps[order], samples[order],
+                     chunk_size=20_000)
+    # Log times that jitter by more than the sample period against the stamps.
+    rng = np.random.default_rng(22)
+    jitter = stamps + rng.integers(0, 6_000_000, 4000)
+    _mcap_by_library(tmp_path / 'jitter.mcap', stamps, jitter, samples, chunk_size=20_000)
+    for name, recv in (('overlap.mcap', stamps), ('jitter.mcap', jitter)):
+        with open_imu(tmp_path / name) as source:
+            block = source.read_all()
+            assert (source.warnings, source.n_read, source.n_lost) == ([], 4000, 0)
+        _assert_topic(block, stamps, recv, samples)
+
+
+def _chunks(path: Path) -> list:
+    with open(path, 'rb') as stream:
+        return make_reader(stream).get_summary().chunk_indexes
+
+
+@pytest.mark.parametrize('compression, damage', [
+    (CompressionType.NONE, 'flip'), (CompressionType.ZSTD, 'flip'),
+    (CompressionType.ZSTD, 'length')])
+def test_mcap_damaged_chunk_or_record_length_costs_that_chunk_only(tmp_path, compression,
+                                                                   damage):
+    stamps, samples = _recording(3000, seed=23)
+    path = tmp_path / 'bag.mcap'
+    _mcap_by_library(path, stamps, stamps, samples, chunk_size=20_000, compression=compression)
+    second = _chunks(path)[1]
+    inside = (stamps >= second.message_start_time) & (stamps <= second.message_end_time)
+    lost = int(np.count_nonzero(inside))
+    data = bytearray(path.read_bytes())
+    if damage == 'flip':        # one byte of the chunk's last message or compressed data
+        data[second.chunk_start_offset + second.chunk_length - 100] ^= 0x10
+    else:                       # a record length of 2**64 - 1
+        data[second.chunk_start_offset + 1:second.chunk_start_offset + 9] = b'\xff' * 8
+    path.write_bytes(bytes(data))
+    with open_imu(path) as source:
+        block = source.read_all()
+        assert (source.n_read, source.n_lost) == (3000 - lost, lost)
+        assert f'{lost} of 3000 messages on /imu lost ({3000 - lost} read)' in source.warnings
+    _assert_topic(block, stamps[~inside], stamps[~inside], samples[~inside])
+
+
+def test_mcap_resync_reads_the_messages_of_an_uncompressed_chunk_whose_length_is_bad(
+        tmp_path):
+    stamps, samples = _recording(3000, seed=23)
+    path = tmp_path / 'bag.mcap'
+    _mcap_by_library(path, stamps, stamps, samples, chunk_size=20_000,
+                     compression=CompressionType.NONE)
+    second = _chunks(path)[1]
+    data = bytearray(path.read_bytes())
+    data[second.chunk_start_offset + 1:second.chunk_start_offset + 9] = b'\xff' * 8
+    path.write_bytes(bytes(data))
+    with open_imu(path) as source:
+        _assert_topic(source.read_all(), stamps, stamps, samples)
+        assert source.n_lost == 0 and any('resumed at byte' in w for w in source.warnings)
+
+
+def test_mcap_file_that_shrinks_while_read_is_a_truncation(tmp_path):
+    stamps, samples = _recording(20000, seed=24)
+    path = tmp_path / 'shrinks.mcap'
+    _mcap_by_library(path, stamps, stamps, samples, chunk_size=50_000)
+    with open_imu(path) as source:
+        blocks = source.blocks(block_size=1000)
+        next(blocks)
+        os.truncate(path, path.stat().st_size // 3)
+        rest = sum(b.stamp_ns.size for b in blocks)
+        assert 1000 + rest < 20000 and source.n_lost == 20000 - source.n_read
+        assert any('lost' in w for w in source.warnings)
+
+
+def _rowwise(db3: Path) -> int:
+    """Rows SQL can read one rowid at a time (the most a damaged file gives)."""
+    import sqlite3
+
+    conn = sqlite3.connect(f'file:{db3}?immutable=1', uri=True)
+    good = 0
+    for rowid in range(1, 3001):
+        try:
+            good += conn.execute('SELECT data FROM messages WHERE id = ?',
+                                 (rowid,)).fetchone() is not None
+        except sqlite3.DatabaseError:
+            pass
+    conn.close()
+    return good
+
+
+def test_sqlite_damaged_page_is_read_around(tmp_path):
+    stamps, samples = _recording(3000, seed=25)
+    db3 = tmp_path / 'bag.db3'
+    write_imu_bag(db3, stamps, samples)
+    data = bytearray(db3.read_bytes())
+    page = int.from_bytes(data[16:18], 'big')
+    middle = len(data) // page // 2
+    data[middle * page:(middle + 1) * page] = bytes(page)     # one leaf page zeroed
+    db3.write_bytes(bytes(data))
+    readable = _rowwise(db3)
+    assert 2900 < readable < 3000
+    with open_imu(db3) as source:
+        block = source.read_all()
+        assert (source.n_read, source.n_lost) == (readable, 3000 - readable)
+        assert any('damaged sqlite3 page' in w for w in source.warnings)
+    assert np.isin(block.stamp_ns, stamps).all()
+
+
+def test_sqlite_wal_bag_in_a_read_only_place_is_copied_aside(tmp_path, monkeypatch):
+    import sqlite3
+
+    from imu_allan.io.bags import rosbag2_sqlite
+
+    stamps, samples = _recording(600, seed=26)
+    db3 = tmp_path / 'wal.db3'
+    write_imu_bag(db3, stamps[:300], samples[:300])
+    writer = sqlite3.connect(db3)
+    writer.execute('PRAGMA journal_mode = WAL')
+    writer.execute('PRAGMA wal_autocheckpoint = 0')
+    rows = writer.execute('SELECT topic_id, timestamp, data FROM messages').fetchall()
+    payloads = serialize_imu(stamps[300:], samples[300:])
+    writer.executemany('INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)',
+                       [(rows[0][0], int(s), p.tobytes()) for s, p in zip(stamps[300:],
+                                                                          payloads)])
+    writer.commit()
+    assert (tmp_path / 'wal.db3-wal').stat().st_size > 0
+    # As in a read-only directory: read-only mode cannot make its shared-memory file.
+    connect = sqlite3.connect
+
+    def read_only_place(database, *args, **kwargs):
+        if str(tmp_path) in str(database) and 'mode=ro' in str(database):
+            raise sqlite3.OperationalError('unable to open database file')
+        return connect(database, *args, **kwargs)
+    monkeypatch.setattr(rosbag2_sqlite.sqlite3, 'connect', read_only_place)
+    try:
+        with open_imu(db3) as source:
+            block = source.read_all()
+            assert any('copied to a temporary directory' in w for w in source.warnings)
+        assert (block.stamp_ns.size, source.n_lost) == (600, 0)
+    finally:
+        writer.close()
+
+
+def test_metadata_counts_are_hints_and_odd_file_names_are_skipped(tmp_path):
+    stamps, samples = _recording(500, seed=27)
+    bag = tmp_path / 'bag'
+    write_imu_bag(bag, stamps, samples, storage='sqlite3')
+    meta = bag / 'metadata.yaml'
+    text = meta.read_text().replace('message_count: 500', 'message_count: 0')
+    meta.write_text(text)
+    with open_imu(bag) as source:
+        assert source.read_all().stamp_ns.size == 500 and source.n_lost == 0
+    meta.write_text(re.sub(r'relative_file_paths:\n(\s+- .*\n)+',
+                           'relative_file_paths:\n  - 17\n  - null\n', text))
+    with open_imu(bag) as source:
+        assert source.read_all().stamp_ns.size == 500
+        assert any('not a file name' in w for w in source.warnings)
+
+
+def test_undecompressable_message_is_counted(tmp_path):
+    import sqlite3
+
+    stamps, samples = _recording(200, seed=28)
+    bag = tmp_path / 'bag'
+    writer = Ros2Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    with writer:
+        conn = writer.add_connection('/imu', IMU, typestore=ROS2)
+        for i in range(200):
+            msg = _imu_msg(ROS2, stamps[i], samples[i], 'imu')
+            writer.write(conn, int(stamps[i]), bytes(ROS2.serialize_cdr(msg, IMU)))
+    db = sqlite3.connect(next(bag.glob('*.db3')))
+    db.execute("UPDATE messages SET data = x'28b52ffd0000' WHERE id = 7")
+    db.commit()
+    db.close()
+    with open_imu(bag) as source:
+        assert source.read_all().stamp_ns.size == 199
+        assert (source.n_read, source.n_lost) == (199, 1)
+        assert any('1 messages on /imu are not decodable' in w for w in source.warnings)

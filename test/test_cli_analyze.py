@@ -526,22 +526,3 @@ def test_main_process_of_a_two_worker_analysis_imports_no_fitting(tmp_path, rec)
     res = _python(code)
     assert res.stderr.strip().splitlines()[-1] == '[]', res.stderr
     assert (tmp_path / 'o' / 'adev.png').exists() and (tmp_path / 'o' / 'adev.svg').exists()
-
-
-def test_the_workers_server_ends_by_signal_with_the_command(tmp_path):
-    # The fork server holds the command's stdout and stderr; it is ended at once when
-    # the command exits (not after tearing scipy and matplotlib down), so a pipe reader
-    # sees the end of the output with the command's exit.
-    code = ('import atexit, os, sys\n'
-            'from multiprocessing import forkserver\n'
-            'from imu_allan.pipeline import workers\n'
-            'workers.start_workers()\n'
-            'workers.start_workers()\n'
-            'atexit.unregister(workers._end_server)      # run here instead, then reaped\n'
-            'pid = forkserver._forkserver._forkserver_pid\n'
-            'workers._end_server()\n'
-            'print(pid, os.waitpid(pid, 0)[1])\n')
-    res = _python(code)
-    pid, status = map(int, res.stdout.split())
-    assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == 15, status
-    assert res.stderr == ''

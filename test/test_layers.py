@@ -128,3 +128,95 @@ def test_live_input_and_fleet_free_of_what_they_must_not_need():
     assert out.returncode == 0, out.stderr
     node = (PKG / 'ros' / 'node.py').read_text()
     assert 'fleet' not in node and 'dask' not in node
+
+
+def _modules() -> dict:
+    """Return {dotted module name: path} of every module of the package."""
+    out = {}
+    for path in PKG.rglob('*.py'):
+        name = _module(path)
+        out[name[:-len('.__init__')] if name.endswith('.__init__') else name] = path
+    return out
+
+
+def _import_graph(modules: dict) -> dict:
+    """Return {module: modules it imports}, lazy imports included, at module granularity."""
+    graph = {}
+    for name, path in modules.items():
+        own = name if path.name == '__init__.py' else name.rpartition('.')[0]
+        edges = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                edges.update(a.name for a in node.names if a.name in modules)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ''
+                if node.level:
+                    parts = own.split('.')[:len(own.split('.')) - node.level + 1]
+                    base = '.'.join(parts + ([node.module] if node.module else []))
+                for alias in node.names:
+                    target = f'{base}.{alias.name}'
+                    edges.add(target if target in modules else base)
+        graph[name] = {t for t in edges if t in modules and t != name}
+    return graph
+
+
+def _cycles(graph: dict) -> list:
+    """Return the strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_cycle_in_the_package():
+    # Lazy imports inside functions count too: they only hide a cycle.
+    assert _cycles(_import_graph(_modules())) == []
+
+
+def test_cycle_check_can_fail():
+    graph = {'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}
+    assert _cycles(graph) == [['a', 'b', 'c']]
+
+
+def _subpackage(module: str) -> str:
+    """imu_allan.core.<sub> inside the core, imu_allan.<layer> elsewhere."""
+    parts = module.split('.')
+    return '.'.join(parts[:3] if parts[1:2] == ['core'] else parts[:2])
+
+
+def test_no_private_name_imported_across_subpackages():
+    # A name with a leading underscore is its subpackage's own; another one calls a
+    # public API instead.
+    modules, bad = _modules(), []
+    for name, path in modules.items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom) and not node.level and node.module and \
+                    node.module.startswith('imu_allan'):
+                for alias in node.names:
+                    private = alias.name.startswith('_') and not alias.name.startswith('__')
+                    if private and _subpackage(node.module) != _subpackage(name):
+                        bad.append(f'{name} imports {node.module}.{alias.name}')
+    assert not bad, '\n'.join(bad)

@@ -635,9 +635,166 @@ def test_resume_is_confirmed_across_a_gap_in_the_first_samples(context, tmp_path
         # A fresh session (the checkpoint refused) would count only the new samples.
         wait(lambda: second.node.session.stats.n_received == 2000 + keep.size, 20,
              'the checkpoint plus the new samples')
-        assert not list(tmp_path.glob('checkpoint.*.npz'))  # nothing set aside
+        assert not list(tmp_path.glob('checkpoint.npz.*'))  # nothing set aside
     finally:
         second.close()
+
+
+def _good_checkpoint(path: Path, n: int = 4000) -> int:
+    """Write a checkpoint of n still samples at 200 Hz with the pipeline; return n_used."""
+    t, y = _record(200.0, n / 200.0, seed=3)
+    session = Session(SessionConfig())
+    session.add(t, y)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    session.save_state(path)
+    return session.stats.n_used
+
+
+def _rewrite_meta(path: Path, **changes) -> None:
+    """Rewrite fields of a checkpoint's session metadata (a file that loads but lies)."""
+    with np.load(path) as z:
+        arrays = dict(z)
+    meta = json.loads(str(arrays['session_meta']))
+    for key, value in changes.items():
+        target = meta
+        *parents, leaf = key.split('__')
+        for k in parents:
+            target = target[k]
+        target[leaf] = value
+    arrays['session_meta'] = np.array(json.dumps(meta))
+    with open(path, 'wb') as f:
+        np.savez(f, **arrays)
+
+
+@pytest.mark.parametrize('damage', ['empty', 'truncated', 'garbage', 'rate_zero',
+                                    'negative_count', 'string_stamp', 'directory'])
+def test_a_damaged_checkpoint_is_set_aside_and_the_node_starts_fresh(
+        context, tmp_path, capfd, damage):
+    ck = tmp_path / 'checkpoint.npz'
+    _good_checkpoint(ck)
+    good = ck.read_bytes()
+    if damage == 'empty':
+        ck.write_bytes(b'')
+    elif damage == 'truncated':
+        ck.write_bytes(good[:len(good) // 2])
+    elif damage == 'garbage':
+        ck.write_bytes(np.random.default_rng(4).bytes(5000))
+    elif damage == 'rate_zero':
+        _rewrite_meta(ck, rate_hz=0.0)
+    elif damage == 'negative_count':
+        _rewrite_meta(ck, stats__n_used=-5)
+    elif damage == 'string_stamp':
+        _rewrite_meta(ck, first_stamp_ns='yesterday')
+    else:
+        ck.unlink()
+        ck.mkdir()
+    damaged = None if ck.is_dir() else ck.read_bytes()
+    r = Rig(context, tmp_path, resume=True)
+    try:
+        aside = list(tmp_path.glob('checkpoint.npz.bad-*'))
+        assert len(aside) == 1 and not ck.exists()
+        if damaged is not None:
+            assert aside[0].read_bytes() == damaged            # kept as it was
+        assert r.node.session.stats.n_received == 0           # a fresh session
+        t, y = _record(200.0, 5.0, t0_ns=T0_NS + 3600 * 10 ** 9)
+        r.feed(t, y)
+        wait(lambda: r.node.session.stats.n_used == t.size, 20, 'the new samples')
+    finally:
+        r.close()
+    err = capfd.readouterr().err
+    assert 'not resuming: the checkpoint is damaged' in err and 'starting fresh' in err, err
+    assert 'Traceback' not in err
+
+
+_SAVE_LOOP = """
+import sys
+import numpy as np
+from imu_allan.pipeline.session import Session, SessionConfig
+path, seed = sys.argv[1], int(sys.argv[2])
+rng = np.random.default_rng(seed)
+session = Session(SessionConfig())
+t0, k = 1_700_000_000 * 10 ** 9, 0
+while True:          # add a second of samples, save, again: until SIGKILL
+    t = t0 + (k + np.arange(200, dtype=np.int64)) * 5_000_000
+    y = 1e-3 * rng.standard_normal((200, 6))
+    y[:, 5] += 9.81
+    session.add(t, y)
+    k += 200
+    if k >= 1000:
+        session.save_state(path)
+        print(k, flush=True)
+"""
+
+
+def test_a_sigkill_during_a_save_never_leaves_a_checkpoint_that_stops_the_next_start(
+        context, tmp_path):
+    ck = tmp_path / 'checkpoint.npz'
+    rng = np.random.default_rng(11)
+    left_temporaries = 0
+    for round_ in range(5):
+        proc = subprocess.Popen([sys.executable, '-c', _SAVE_LOOP, str(ck), str(round_)],
+                                stdout=subprocess.PIPE, text=True)
+        assert proc.stdout.readline().strip()       # the first checkpoint is written
+        time.sleep(float(rng.uniform(0.05, 0.5)))   # then killed at a random moment
+        proc.kill()
+        proc.wait(10)
+        assert proc.returncode == -signal.SIGKILL
+        left_temporaries += bool(list(tmp_path.glob('.checkpoint.npz.*.tmp')))
+        on_disk = Session.load_state(ck)             # whole: the last completed save
+        r = Rig(context, tmp_path, resume=True)
+        try:
+            session = r.node.session
+            session.break_segment()
+            on_disk.break_segment()
+            assert session.stats.n_used == on_disk.stats.n_used >= 1000
+            assert not list(tmp_path.glob('checkpoint.npz.bad-*'))
+            assert not list(tmp_path.glob('.checkpoint.npz.*.tmp'))   # cleaned at start
+        finally:
+            r.close()
+    # The kills did land inside saves (a temporary file left behind) at least once.
+    assert left_temporaries >= 1
+
+
+def test_reset_deletes_the_checkpoint_so_a_resume_starts_from_nothing(context, tmp_path):
+    ck = tmp_path / 'checkpoint.npz'
+    first = Rig(context, tmp_path)
+    try:
+        first.feed(*_record(200.0, 10.0))
+        assert _call(first, 'save').success and ck.exists()
+        assert _call(first, 'reset').success
+        assert not ck.exists()
+    finally:
+        first.close()
+    second = Rig(context, tmp_path, resume=True)
+    try:
+        assert second.node.session.stats.n_received == 0
+        assert not list(tmp_path.glob('checkpoint.npz.*'))
+    finally:
+        second.close()
+
+
+def test_an_undecodable_payload_drops_only_itself(rig):
+    r = rig()
+    t, y = _record(200.0, 10.0)
+    rows = [row.tobytes() for row in serialize_imu(t, y)]
+    bad = {500: rows[500][:40], 1200: b'\x00\x01\x00\x00' + b'\xff' * 60,
+           1900: rows[1900][:-120]}
+    pub = r.publisher()
+    start = r.node.n_received
+    for k, row in enumerate(rows):
+        if k % 100 == 0:
+            wait(lambda: r.node.n_received - start >= k - WINDOW, 30, 'the node')
+        if k in bad:
+            pub.publish(bad[k])
+        pub.publish(row)
+    wait(lambda: r.node.n_received - start == len(rows) + len(bad), 30, 'every message')
+    r.node.live.process()
+    # Every good message of the batches the bad ones came in still counts.
+    assert r.node.live.n_undecodable == len(bad)
+    assert r.node.session.stats.n_received == len(rows)
+    level, message, values = input_status(r)
+    assert values['n_undecodable'] == str(len(bad))
+    assert f'{len(bad)} messages were not decodable' in message
 
 
 def test_diagnose_service_runs_in_the_background_and_publishes_the_summary(rig):
@@ -768,7 +925,7 @@ def test_checkpoint_and_resume_across_a_killed_process(context, tmp_path):
         _, err = proc.communicate(timeout=60)
         assert 'not resuming: the checkpoint was taken at 200.000 Hz but the data now ' \
             'arrive at 100.000 Hz' in err, err[-3000:]
-        assert list(out.glob('checkpoint.*.npz'))             # old state kept aside
+        assert list(out.glob('checkpoint.npz.other-rate-*'))  # old state kept aside
     finally:
         player.close()
 

@@ -8,7 +8,6 @@ errors end with a non-zero exit and one clear line on stderr, never a traceback.
 """
 
 import argparse
-import gc
 import importlib
 import sys
 
@@ -80,16 +79,8 @@ def main(argv=None) -> int:
 
 
 def entry() -> None:
-    """
-    Run the CLI as the ``imu-allan`` program (console script, ``python -m imu_allan``).
-
-    Before the exit, every object goes to the collector's permanent generation: the
-    interpreter's final collections then skip them (20 ms of an analysis' exit).  Not
-    in :func:`main`, which tests and scripts call in their own process.
-    """
-    code = main()
-    gc.freeze()
-    sys.exit(code)
+    """Run the CLI as the ``imu-allan`` program (console script, ``python -m imu_allan``)."""
+    sys.exit(main())
 
 
 if __name__ == '__main__':

@@ -22,11 +22,12 @@ import sys
 from typing import TYPE_CHECKING
 
 from imu_allan import AXES
+from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
 from imu_allan.errors import InputError
-from imu_allan.pipeline.workers import (keep_large_blocks, one_blas_thread, start_workers,
-                                        worker_pool)
+from imu_allan.pipeline.workers import one_blas_thread, start_workers, worker_pool
 
 if TYPE_CHECKING:
+    from imu_allan.core.noise.unit_check import DeclaredUnits
     from imu_allan.pipeline.session import SessionConfig
 
 
@@ -37,12 +38,27 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
                    help='nominal rate in Hz (default: estimated from the stamps)')
     p.add_argument('--on-motion', choices=('warn', 'pause', 'restart'), default='pause',
                    help='what to do with samples where the IMU moved')
+    p.add_argument('--units', default='', metavar='LIST',
+                   help='units the input is written in, converted before the analysis: '
+                        'gyro=deg/s, accel=g or accel=mg, time=ms|us|ns (a CSV t column, '
+                        'or bag stamps read as one count), e.g. gyro=deg/s,accel=g '
+                        '(default: rad/s, m/s^2 and the time unit of the format)')
 
 
 def session_config_from_args(args) -> 'SessionConfig':
     """Return the SessionConfig of the options added by :func:`add_input_options`."""
     from imu_allan.pipeline.session import SessionConfig
+    if not (math.isfinite(args.rate) and args.rate >= 0):
+        raise InputError(f'--rate must be a finite number of Hz >= 0 (0: estimated), '
+                         f'got {args.rate:g}')
     return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
+
+
+def units_from_args(args) -> 'DeclaredUnits | None':
+    """Return the units declared with ``--units`` (None when none was)."""
+    from imu_allan.core.noise.unit_check import parse_units
+    units = parse_units(args.units)
+    return None if units.is_si else units
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -68,12 +84,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, config, out, plot = args
+    path, topic, config, out, plot, units = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
-        result, seconds = analyze_input(path, topic, config, quiet=True)
-        files = write_outputs(result, out, plot=plot)
+        result, seconds = analyze_input(path, topic, config, quiet=True, units=units)
+        with writing(out):
+            files = write_outputs(result, out, plot=plot)
     except InputError as exc:
         return None, str(exc), [], 0.0
     except Exception as exc:  # noqa: B902 - one line per failed input, the others go on
@@ -173,9 +190,12 @@ def _run_several(jobs: list, n_workers: int) -> list:
 
 def run(args) -> int:
     """Analyse every input; write reports; print a summary or one JSON document."""
+    if args.jobs < 0:
+        raise InputError(f'--jobs must be >= 0, got {args.jobs}')
+    config = session_config_from_args(args)    # bad values: one line, before the work
+    units = units_from_args(args)
     paths = [Path(p) for p in args.inputs]
-    keep_large_blocks()         # a batch job: freed large blocks are reused, not re-faulted
-    one_blas_thread()           # and its threads and processes already fill the cores
+    one_blas_thread()           # its threads and processes already fill the cores
     plot = not args.no_plot
     workers = args.jobs or min(2, os.cpu_count() or 1)
     if len(paths) == 1 and workers > 1 and paths[0].exists():
@@ -183,14 +203,28 @@ def run(args) -> int:
         # scipy and matplotlib on the other core while this process imports the readers
         # below and reads the input.
         start_workers(('imu_allan.io.plot_preload',) if plot else ())
-    from imu_allan.io.inputs import analyze_input, check_path, Progress
+    from imu_allan.io.inputs import check_path
     for p in paths:
         check_path(p)
-    config = session_config_from_args(args)
+    # Before the work: an --out that cannot take the outputs is one line now, not a
+    # traceback after the analysis.
+    created = prepare_out_dir(args.out, len(paths))
+    try:
+        code = _run(args, config, units, paths, plot, workers)
+    except BaseException:
+        remove_if_unused(args.out, created)
+        raise
+    if code:
+        remove_if_unused(args.out, created)
+    return code
+
+
+def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
+    from imu_allan.io.inputs import analyze_input, Progress
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]
-    jobs = [(p, args.topic, config, o, plot) for p, o in zip(paths, outs)]
+    jobs = [(p, args.topic, config, o, plot, units) for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
@@ -198,9 +232,10 @@ def run(args) -> int:
         # One input: its six axes are searched on the cores (several inputs: one each).
         if workers > 1:   # and the accumulator sums on a thread of its own
             config = replace(config, background_accumulator=True)
-        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers)
+        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
+                                        units=units)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
-        with Progress(paths[0].name) as bar, \
+        with Progress(paths[0].name) as bar, writing(outs[0]), \
                 (worker_pool(min(workers, 2) if plot else 1) or nullcontext()) as pool:
             bar.set_stage('writing the report of')
             files = write_outputs(result, outs[0], plot=plot, pool=pool)
@@ -213,7 +248,8 @@ def run(args) -> int:
         return 2
     comparison = None
     if len(good) > 1:
-        comparison = _compare(good, args.out, plot=not args.no_plot)
+        with writing(args.out):
+            comparison = _compare(good, args.out, plot=not args.no_plot)
     if args.format == 'json':
         docs = []
         for p, _, (result, _, files, seconds) in good:

@@ -7,6 +7,7 @@ imu_allan node in this process; then the node's result is printed beside the tru
 """
 
 import argparse
+import math
 from pathlib import Path
 import sys
 import time
@@ -14,6 +15,7 @@ import time
 import numpy as np
 
 from imu_allan import AXES
+from imu_allan.cli.outdir import prepare_out_dir
 from imu_allan.errors import InputError
 
 DEFAULT_PARAMS = Path(__file__).resolve().parents[2] / 'config' / 'xsens_mti7.yaml'
@@ -109,6 +111,9 @@ def run(args) -> int:
     from imu_allan.io.bag_writer import serialize_imu
     from imu_allan.ros.node import create_executor, ImuAllanNode
 
+    if not (math.isfinite(args.speed) and args.speed > 0):
+        raise InputError(f'--speed must be a positive number of messages/s, got {args.speed:g}')
+    prepare_out_dir(args.out)
     params = _params_file(args.params)
     spec = load_params(params)
     t_start = t0 = time.monotonic()

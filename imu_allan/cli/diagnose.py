@@ -14,7 +14,8 @@ import json
 from pathlib import Path
 import sys
 
-from imu_allan.cli.analyze import add_input_options, session_config_from_args
+from imu_allan.cli.analyze import add_input_options, session_config_from_args, units_from_args
+from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
 from imu_allan.core.diagnose import (base_terms, DEFAULT_BASE, diagnose_session, EFFECTS,
                                      N_REPLICAS)
 from imu_allan.errors import InputError
@@ -58,7 +59,8 @@ def _base_model(text: str) -> tuple:
 
 
 def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_model,
-                   n_replicas: int = N_REPLICAS, seed: int = 0, quiet: bool = False):
+                   n_replicas: int = N_REPLICAS, seed: int = 0, quiet: bool = False,
+                   units=None):
     """
     Stream one input through a Session with a raw copy and diagnose it.
 
@@ -74,7 +76,8 @@ def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_mo
 
     keep_raw, keeper = raw_tap()
 
-    with open_input(path, topic) as source, Progress(path.name, source.n_messages) as progress:
+    with open_input(path, topic, units) as source, \
+            Progress(path.name, source.n_messages) as progress:
         session = stream_input(source, config, on_warning=warn, progress=progress,
                                tap=keep_raw)
         progress.set_stage('diagnosing')
@@ -123,12 +126,23 @@ def run(args) -> int:
     if not args.input.exists():
         raise InputError(f'{args.input}: no such file or directory')
     config = session_config_from_args(args)
+    units_from_args(args)                   # a bad --units: one line, before the work
+    created = prepare_out_dir(args.out)     # before the minutes of the diagnosis
+    try:
+        return _run(args, config, base)
+    except BaseException:
+        remove_if_unused(args.out, created)
+        raise
+
+
+def _run(args, config: SessionConfig, base: tuple) -> int:
     result = diagnose_input(args.input, args.topic, config, base, args.replicas, args.seed,
-                            quiet=args.format == 'json')
+                            quiet=args.format == 'json', units=units_from_args(args))
     if all(d is None for d in result.axes.values()):
         raise InputError(f'{args.input}: no axis could be diagnosed (frozen, constant or too '
                          f'short: {result.n_samples} samples)')
-    files = write_diagnosis_files(result, args.out, plot=not args.no_plot)
+    with writing(args.out):
+        files = write_diagnosis_files(result, args.out, plot=not args.no_plot)
     if args.format == 'json':
         doc = result.to_json()
         doc['files'] = [str(f) for f in files]

@@ -52,7 +52,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Analyse the inputs not yet in the store, then report; print a summary."""
     from imu_allan.fleet.inputs import fleet_inputs
-    from imu_allan.fleet.report import _finite, fleet_summary, write_fleet_report
+    from imu_allan.fleet.report import fleet_summary, json_finite, write_fleet_report
     from imu_allan.fleet.store import FleetStore
 
     store = FleetStore(args.store)
@@ -85,7 +85,7 @@ def run(args) -> int:
     if args.format == 'json':
         doc = {'run': summary._asdict() if summary else None, 'views': views,
                'files': [str(f) for f in files]}
-        json.dump(_finite(doc), sys.stdout, indent=1, allow_nan=False)
+        json.dump(json_finite(doc), sys.stdout, indent=1, allow_nan=False)
         print()
         return 0
     if summary is not None:

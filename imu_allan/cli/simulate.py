@@ -14,10 +14,12 @@ DESIGN.md) to the same bags, through :func:`imu_allan.io.bag_writer.csv_to_bag`.
 """
 
 import argparse
+from contextlib import contextmanager
 import math
 from pathlib import Path
 import sys
 import time
+from typing import Iterator
 
 import numpy as np
 
@@ -27,6 +29,9 @@ from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.errors import InputError
 
 BAG_SUFFIXES = ('.mcap', '.db3', '.bag')
+#: Most samples one simulation makes: six float64 axes and the times, 56 bytes each
+#: (5.6 GB at the limit), before writing.
+MAX_SAMPLES = 1e8
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -85,12 +90,24 @@ def run_csv_to_bag(args) -> int:
     columns = [c.strip() for c in args.columns.split(',')] if args.columns else None
     if columns is not None and len(columns) != len(AXES):
         raise InputError(f'--columns needs {len(AXES)} names, got {len(columns)}')
-    n = csv_to_bag(args.csv, args.out, topic=args.topic, frame_id=args.frame_id,
-                   storage=args.storage, columns=columns,
-                   start_ns=int(round(args.start * 1e9)))
+    try:
+        n = csv_to_bag(args.csv, args.out, topic=args.topic, frame_id=args.frame_id,
+                       storage=args.storage, columns=columns,
+                       start_ns=int(round(args.start * 1e9)))
+    except OSError as exc:    # a parent that is a file, a read-only place, a full disk
+        raise InputError(f'{args.out}: cannot write ({exc.strerror or exc})') from None
     print(f'imu-allan: wrote {n} sensor_msgs/Imu messages on {args.topic} -> {args.out}',
           file=sys.stderr)
     return 0
+
+
+@contextmanager
+def _writing(out: Path) -> Iterator[None]:
+    """Turn an OSError while writing ``out`` into a one-line InputError."""
+    try:
+        yield
+    except OSError as exc:
+        raise InputError(f'{out}: cannot write ({exc.strerror or exc})') from None
 
 
 def _output_kind(path: Path) -> str:
@@ -115,9 +132,18 @@ def run(args) -> int:
         args.start = 0.0 if kind == 'csv' else float(int(time.time()))
     if not math.isfinite(args.start):
         raise InputError(f'--start must be finite, got {args.start:g}')
+    if args.seed is not None and args.seed < 0:
+        raise InputError(f'--seed must be >= 0, got {args.seed}')
+    n = args.rate * args.duration
+    if n > MAX_SAMPLES:
+        raise InputError(f'--rate {args.rate:g} Hz for --duration {args.duration:g} s is '
+                         f'{n:.3g} samples; at most {MAX_SAMPLES:.0e} fit in memory')
     spec = load_params(args.params)
     seed = args.seed if args.seed is not None else int(np.random.default_rng().integers(2**63))
-    t_s, samples = simulate_imu(spec, args.rate, args.duration, seed=seed)
+    try:
+        t_s, samples = simulate_imu(spec, args.rate, args.duration, seed=seed)
+    except MemoryError:
+        raise InputError(f'not enough memory for {n:.3g} samples') from None
     if t_s.size < 2:
         raise InputError(f'--duration {args.duration:g} s at {args.rate:g} Hz gives '
                          f'{t_s.size} sample(s); need at least 2')
@@ -126,7 +152,8 @@ def run(args) -> int:
             from imu_allan.io.csv_io import write_csv
         except ImportError:
             raise InputError('CSV output needs imu_allan.io.csv_io') from None
-        write_csv(out, t_s + args.start, samples, AXES)
+        with _writing(out):
+            write_csv(out, t_s + args.start, samples, AXES)
     else:
         try:
             from imu_allan.io.bag_writer import write_imu_bag
@@ -138,8 +165,9 @@ def run(args) -> int:
                      + np.round(np.arange(t_s.size) * (1e9 / args.rate)).astype(np.int64))
         # Per-sample white-noise variance N^2 * rate, what robot_localization reads.
         variances = [spec.axes[a].N ** 2 * args.rate for a in AXES]
-        write_imu_bag(out, stamps_ns, samples, topic=args.topic, frame_id=args.frame_id,
-                      covariances=(variances[:3], variances[3:]))
+        with _writing(out):
+            write_imu_bag(out, stamps_ns, samples, topic=args.topic, frame_id=args.frame_id,
+                          covariances=(variances[:3], variances[3:]))
     label = spec.name or Path(args.params).name
     print(f'imu-allan: simulated {t_s.size} samples x {len(AXES)} axes at {args.rate:g} Hz '
           f'({t_s.size / args.rate:g} s) of {label!r}, seed {seed} -> {out}', file=sys.stderr)

@@ -91,14 +91,14 @@ def _markdown(summary: dict) -> str:
 
 
 def _plot_fleet(rows: list[dict], param: str, base: Path) -> list:
-    from imu_allan.io.plot import _save, _subplots
+    from imu_allan.io.plot import save_figure, subplots
 
     latest: dict = {}
     for r in by_imu(rows).values():
         for row in r:
             latest[(row['imu_id'], row['axis'])] = row
     imus = sorted({imu for imu, _ in latest})
-    fig, axes = _subplots(2, 3, figsize=(12, 6.5), squeeze=False)
+    fig, axes = subplots(2, 3, figsize=(12, 6.5), squeeze=False)
     for ax, axis in zip(axes.ravel(), AXES):
         for i, imu in enumerate(imus):
             found = latest.get((imu, axis))
@@ -116,16 +116,16 @@ def _plot_fleet(rows: list[dict], param: str, base: Path) -> list:
         for o in s.outliers:
             ax.plot([imus.index(o.imu_id)], [o.value], 'o', mfc='none', mec='tab:red', ms=9)
     fig.suptitle(f'{param} of every IMU (latest night, 95 % intervals; red: outlier)')
-    return _save(fig, base)
+    return save_figure(fig, base)
 
 
 def _plot_trend(rows: list[dict], param: str, base: Path) -> list:
-    from imu_allan.io.plot import _save, _subplots
+    from imu_allan.io.plot import save_figure, subplots
 
     moved = {(c.imu_id, c.axis, c.path) for c in changes(rows, params=(param,))}
     stamps = [r['start_ns'] for r in rows if r['status'] == 'ok' and r['start_ns'] >= 0]
     t0 = min(stamps) if stamps else 0
-    fig, axes = _subplots(2, 3, figsize=(12, 6.5), squeeze=False, sharex=True)
+    fig, axes = subplots(2, 3, figsize=(12, 6.5), squeeze=False, sharex=True)
     for ax, axis in zip(axes.ravel(), AXES):
         for imu, imu_rows in by_imu(rows).items():
             pts = [((r['start_ns'] - t0) / 86400e9, r[param], r['path']) for r in imu_rows
@@ -144,7 +144,7 @@ def _plot_trend(rows: list[dict], param: str, base: Path) -> list:
     for ax in axes[-1]:
         ax.set_xlabel(f'days since {_time(t0)}', fontsize=8)
     fig.suptitle(f'{param} of each IMU over time (red: moved beyond its intervals)')
-    return _save(fig, base)
+    return save_figure(fig, base)
 
 
 def write_fleet_report(rows: list[dict], out, plot: bool = True) -> list[Path]:
@@ -168,7 +168,7 @@ def write_fleet_report(rows: list[dict], out, plot: bool = True) -> list[Path]:
     summary = fleet_summary(rows)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        text = json.dumps(_finite(summary), indent=1, allow_nan=False)
+        text = json.dumps(json_finite(summary), indent=1, allow_nan=False)
         paths = [write_atomic(out / 'fleet.json', lambda f: f.write(text), mode='w')]
         md = _markdown(summary)
         paths.append(write_atomic(out / 'fleet_report.md', lambda f: f.write(md), mode='w'))
@@ -181,12 +181,12 @@ def write_fleet_report(rows: list[dict], out, plot: bool = True) -> list[Path]:
     return paths
 
 
-def _finite(obj):
+def json_finite(obj):
     """Return obj with NaN and inf replaced by None (strict JSON), numpy scalars as Python."""
     if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
+        return {k: json_finite(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
+        return [json_finite(v) for v in obj]
     if isinstance(obj, (float, np.floating)):
         return float(obj) if math.isfinite(obj) else None
     if isinstance(obj, np.integer):

@@ -29,9 +29,12 @@ from imu_allan.fleet.inputs import content_key, FleetInput, stat_key
 from imu_allan.fleet.store import FleetStore
 from imu_allan.fleet.task import analyze_job, failed_rows, FleetJob
 from imu_allan.pipeline.session import SessionConfig
-from imu_allan.pipeline.workers import HEAP_ENV, HEAP_KEEP_BYTES
 
-
+#: glibc's heap settings (bytes): blocks below this stay on the heap, and the heap keeps
+#: this much freed memory (the environment's names for mallopt M_MMAP_THRESHOLD and
+#: M_TRIM_THRESHOLD).
+HEAP_KEEP_BYTES = 1 << 28
+HEAP_ENV = ('MALLOC_MMAP_THRESHOLD_', 'MALLOC_TRIM_THRESHOLD_')
 #: Set in every local worker before it starts.  Dask sets MALLOC_TRIM_THRESHOLD_, and any
 #: malloc variable freezes glibc's mmap threshold at 128 KiB: every large numpy temporary
 #: is then a fresh mmap and page-faults anew, which made each analysis 1.5x slower in a

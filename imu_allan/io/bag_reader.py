@@ -76,7 +76,7 @@ def list_topics(path: PathLike) -> list[TopicInfo]:
         If the path is missing or not a readable bag.
 
     """
-    backend = _open_backend(path, [])
+    backend = _guarded_open(path, [])
     try:
         return [TopicInfo(t.name, t.msgtype, backend.count(t)) for t in backend.topics()]
     finally:
@@ -103,7 +103,7 @@ def list_imu_topics(path: PathLike) -> list[TopicInfo]:
         If the path is missing or not a readable bag.
 
     """
-    backend = _open_backend(path, [])
+    backend = _guarded_open(path, [])
     try:
         return [TopicInfo(t.name, t.msgtype, backend.count(t))
                 for t in backend.topics() if _is_imu(t)]
@@ -130,6 +130,11 @@ class ImuSource:
     warnings : list of str
         Problems met so far (truncation, skipped messages, unfilled headers ...);
         complete once ``blocks()`` has been consumed.
+    n_read : int
+        Messages delivered (complete once ``blocks()`` has been consumed).
+    n_lost : int or None
+        Messages the bag counts that were not delivered (damaged, undecodable);
+        None when the bag states no count and damage was met.
     frame_id : str
         header.frame_id of the first message read ('' before any).
 
@@ -144,8 +149,11 @@ class ImuSource:
         self.storage = backend.storage
         self.warnings = warnings
         self.frame_id = ''
+        self.n_read = 0
+        self.n_lost: int | None = None
         self._backend = backend
         self._topic = topic
+        self._counts = [0, 0, 0]
 
     def _warn(self, text: str) -> None:
         if text not in self.warnings:
@@ -154,6 +162,11 @@ class ImuSource:
     def blocks(self, block_size: int = DEFAULT_BLOCK_SIZE) -> Iterator[ImuBlock]:
         """
         Yield the messages in blocks of ``block_size`` (the last one may be shorter).
+
+        Messages come in header-stamp order: overlapping chunks, and log times that
+        jitter against the stamps, are merged (see :func:`_in_stamp_order`).  Afterwards
+        ``n_read`` holds the messages delivered and ``n_lost`` the messages the bag
+        counts but that could not be read (None when the bag states no count).
 
         Parameters
         ----------
@@ -169,32 +182,64 @@ class ImuSource:
         if block_size < 1:
             raise ValueError('block_size must be positive')
         pending: list[_Piece] = []
-        n_pending = n_total = n_bad = n_zero = 0
-        for piece in self._backend.pieces(self._topic):
-            n_bad += piece.n_bad
-            if not piece.recv_ns.size:
-                continue
-            n_zero += int(np.count_nonzero(piece.stamp_ns == 0))
-            self.frame_id = self.frame_id or piece.frame_id
+        n_pending = 0
+        self._counts = [0, 0, 0]      # good, undecodable, zero stamps
+        for piece in _in_stamp_order(self._guarded()):
             pending.append(piece)
             n_pending += piece.recv_ns.size
             while n_pending >= block_size:
                 block, rest = _split(pending, block_size)
                 pending = [rest] if rest is not None else []
                 n_pending -= block_size
-                n_total += block_size
                 yield block
         if n_pending:
-            n_total += n_pending
             yield _split(pending, n_pending)[0]
+        self._account()
+
+    def _guarded(self) -> Iterator[_Piece]:
+        """The backend's pieces, counted; a library failure ends the read with a warning."""
+        try:
+            for piece in self._backend.pieces(self._topic):
+                self._counts[1] += piece.n_bad
+                if not piece.recv_ns.size:
+                    continue
+                self._counts[0] += piece.recv_ns.size
+                self._counts[2] += int(np.count_nonzero(piece.stamp_ns == 0))
+                self.frame_id = self.frame_id or piece.frame_id
+                yield piece
+        except InputError:
+            raise
+        except Exception as err:   # noqa: B902 - any library failure: keep what was read
+            text = str(err).splitlines()[0] if str(err) else ''
+            self._warn(f'{self.path}: reading stopped ({type(err).__name__}: {text}) after '
+                       f'{self._counts[0]} messages of {self.topic}')
+
+    def _account(self) -> None:
+        """Compare what was read with the bag's count; warn with the count lost."""
+        n_good, n_bad, n_zero = self._counts
+        self.n_read = n_good
+        try:
+            expected = self._backend.count(self._topic)
+        except InputError:
+            expected = self.n_messages
+        if expected is None:
+            self.n_lost = n_bad if n_bad or not self._damaged() else None
+        else:
+            self.n_lost = max(expected - n_good, 0)
         if n_bad:
             self._warn(f'{n_bad} messages on {self.topic} are not decodable sensor_msgs/Imu '
                        'and were skipped')
+        if self.n_lost and expected is not None:
+            self._warn(f'{self.n_lost} of {expected} messages on {self.topic} lost '
+                       f'({n_good} read)')
         if n_zero:
-            self._warn(f'header.stamp is 0 in {n_zero} of {n_total} messages on {self.topic}: '
+            self._warn(f'header.stamp is 0 in {n_zero} of {n_good} messages on {self.topic}: '
                        'the publisher does not fill the header; only recv_ns carries time')
-        if not n_total:
+        if not n_good:
             self._warn(f'no readable messages on {self.topic} in {self.path}')
+
+    def _damaged(self) -> bool:
+        return any(w.startswith(str(self.path)) for w in self.warnings)
 
     def read_all(self) -> ImuBlock:
         """Return every message as one ImuBlock."""
@@ -215,14 +260,56 @@ class ImuSource:
         self.close()
 
 
+#: Messages held back for ordering at most; beyond, the oldest go on unmerged.
+_MAX_HELD = 1 << 20
+
+
+def _in_stamp_order(pieces: Iterator[_Piece]) -> Iterator[_Piece]:
+    """
+    Yield the messages of consecutive pieces in header-stamp order.
+
+    Each piece is sorted by stamp (stable); messages are held back until a later
+    piece's first stamp passes them, so pieces that overlap in time (overlapping MCAP
+    chunks, log times that jitter against the stamps) merge without loss.  At most
+    ``_MAX_HELD`` messages wait: an isolated far-future stamp cannot hold the rest.
+    """
+    held: _Piece | None = None
+    for piece in pieces:
+        piece = _sorted(piece)
+        if held is None:
+            held = piece
+            continue
+        cut = int(np.searchsorted(held.stamp_ns, piece.stamp_ns[0], 'right'))
+        cut = max(cut, held.recv_ns.size + piece.recv_ns.size - _MAX_HELD)
+        cut = min(cut, held.recv_ns.size)
+        if cut:
+            yield _take(held, slice(0, cut))
+        rest = _take(held, slice(cut, None))
+        held = piece if not rest.recv_ns.size else _sorted(_concat([rest, piece]))
+    if held is not None:
+        yield held
+
+
+def _sorted(piece: _Piece) -> _Piece:
+    if piece.stamp_ns.size < 2 or (np.diff(piece.stamp_ns) >= 0).all():
+        return piece
+    return _take(piece, np.argsort(piece.stamp_ns, kind='stable'))
+
+
+def _take(piece: _Piece, index) -> _Piece:
+    return _Piece(piece.recv_ns[index], piece.stamp_ns[index], piece.samples[index], 0,
+                  piece.frame_id)
+
+
+def _concat(pieces: list[_Piece]) -> _Piece:
+    return _Piece(np.concatenate([p.recv_ns for p in pieces]),
+                  np.concatenate([p.stamp_ns for p in pieces]),
+                  np.concatenate([p.samples for p in pieces]), 0, pieces[0].frame_id)
+
+
 def _split(pieces: list[_Piece], n: int) -> tuple[ImuBlock, _Piece | None]:
     """Concatenate pieces and cut the first n messages off as a block."""
-    if len(pieces) == 1:
-        joined = pieces[0]
-    else:
-        joined = _Piece(np.concatenate([p.recv_ns for p in pieces]),
-                        np.concatenate([p.stamp_ns for p in pieces]),
-                        np.concatenate([p.samples for p in pieces]), 0)
+    joined = pieces[0] if len(pieces) == 1 else _concat(pieces)
     block = ImuBlock(joined.stamp_ns[:n], joined.recv_ns[:n], joined.samples[:n])
     if joined.recv_ns.size == n:
         return block, None
@@ -254,13 +341,24 @@ def open_imu(path: PathLike, topic: str | None = None) -> ImuSource:
 
     """
     warnings: list[str] = []
-    backend = _open_backend(path, warnings)
+    backend = _guarded_open(path, warnings)
     try:
         chosen = _choose_topic(Path(path), backend, topic)
     except BaseException:
         backend.close()
         raise
     return ImuSource(Path(path), backend, chosen, warnings)
+
+
+def _guarded_open(path: PathLike, warnings: list[str]) -> _Backend:
+    """Open a bag; any library failure becomes a one-line InputError."""
+    try:
+        return _open_backend(path, warnings)
+    except (InputError, MemoryError, KeyboardInterrupt):
+        raise
+    except Exception as err:   # noqa: B902 - a damaged file can make any library raise
+        text = str(err).strip().splitlines()[0] if str(err).strip() else ''
+        raise InputError(f'{path}: unreadable bag ({type(err).__name__}: {text})') from None
 
 
 def _choose_topic(path: Path, backend: _Backend, name: str | None) -> _Topic:
@@ -289,7 +387,7 @@ def _choose_topic(path: Path, backend: _Backend, name: str | None) -> _Topic:
     if chosen.encoding not in ('cdr', 'ros1'):
         raise InputError(f'{path}: topic {chosen.name} is serialised as {chosen.encoding!r}; '
                          'only CDR (ROS 2) and ROS 1 messages are supported')
-    if chosen.n_messages == 0:
+    if chosen.n_messages == 0 and backend.count(chosen) == 0:
         total = sum(t.n_messages or 0 for t in topics)
         raise InputError(f'{path}: topic {chosen.name} has no messages'
                          + (' (empty bag)' if not total else ''))

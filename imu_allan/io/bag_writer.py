@@ -29,8 +29,8 @@ import yaml
 
 from imu_allan import __version__, AXES
 from imu_allan.errors import InputError
+from imu_allan.io.imu_cdr import imu_msgdef, IMU_MSGTYPE
 
-IMU_MSGTYPE = 'sensor_msgs/msg/Imu'
 #: Receive time minus header.stamp of every written message [ns] (transport latency).
 DEFAULT_LATENCY_NS = 500_000
 #: Target uncompressed MCAP chunk size [bytes].
@@ -39,7 +39,6 @@ MCAP_CHUNK_BYTES = 1 << 20
 ROSBAG2_VERSION = 9
 ROS_DISTRO = 'jazzy'
 
-_MCAP_MAGIC = b'\x89MCAP0\r\n'
 _CDR_LE_HEADER = np.array([0, 1, 0, 0], np.uint8)
 _STORAGES = ('mcap', 'sqlite3', 'ros1')
 _SQLITE_SCHEMA = """
@@ -238,13 +237,6 @@ def _resolve_storage(path: Path, storage: str | None) -> tuple:
     return storage, True
 
 
-def _msgdef() -> tuple:
-    """Return (ros2msg definition text, RIHS01 hash) of sensor_msgs/msg/Imu (Jazzy)."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    text, _ = store.generate_msgdef(IMU_MSGTYPE, ros_version=2)
-    return text, store.hash_rihs01(IMU_MSGTYPE)
-
-
 def _bag_info(storage: str, file_name: str, topic: str, rihs01: str,
               recv_ns: np.ndarray) -> dict:
     """Return the rosbag2_bagfile_information mapping (metadata.yaml, version 9)."""
@@ -288,7 +280,7 @@ def _write_sqlite(db_path: Path, topic: str, batches, info: dict) -> None:
         rosbag2_bagfile_information, stored in the metadata table.
 
     """
-    msgdef, rihs01 = _msgdef()
+    msgdef, rihs01 = imu_msgdef()
     conn = sqlite3.connect(db_path)
     try:
         # A fresh file that nobody else reads yet: no journal, no fsync per page.
@@ -389,7 +381,7 @@ def write_imu_bag(path: PathLike, stamps_ns: np.ndarray, samples: np.ndarray,
             path.parent.mkdir(parents=True, exist_ok=True)
             _write_ros1(path, topic, batches())
             return
-        _, rihs01 = _msgdef()
+        _, rihs01 = imu_msgdef()
         if is_dir:
             path.mkdir(parents=True)
             file_path = path / f'{path.name}_0.{"mcap" if storage == "mcap" else "db3"}'
@@ -398,7 +390,7 @@ def write_imu_bag(path: PathLike, stamps_ns: np.ndarray, samples: np.ndarray,
             file_path = path
         info = _bag_info(storage, file_path.name, topic, rihs01, recv_ns)
         if storage == 'mcap':
-            from imu_allan.io.mcap_writer import _write_mcap  # mcap_writer imports this module
+            from imu_allan.io.mcap_writer import _write_mcap  # the mcap library, when needed
             _write_mcap(file_path, topic, batches(), info)
         else:
             _write_sqlite(file_path, topic, batches(), info)

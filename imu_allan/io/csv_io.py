@@ -16,9 +16,9 @@ one-column file loads in about 0.1 s.
 
 import gzip
 import io
-import mmap
 import os
 from pathlib import Path
+import re
 from typing import NamedTuple, Sequence
 import warnings
 import zlib
@@ -58,11 +58,12 @@ class CsvData(NamedTuple):
     rate_hz: float
 
 
-def _read_bytes(path: Path) -> bytes | mmap.mmap:
+def _read_bytes(path: Path) -> bytes:
     """
     Whole file content, gunzipped when the name ends in .gz.
 
-    A plain file is mapped, not copied: the parser reads the page cache in place.
+    Read, not mapped: a file that shrinks while it is read is a short read, not a
+    SIGBUS that would end the process.
     """
     if not path.exists():
         raise InputError(f'{path}: no such file or directory')
@@ -71,15 +72,12 @@ def _read_bytes(path: Path) -> bytes | mmap.mmap:
     try:
         if path.name.lower().endswith('.gz'):
             return gzip.decompress(path.read_bytes())
-        with open(path, 'rb') as f:
-            if os.fstat(f.fileno()).st_size == 0:
-                return b''
-            return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+        return path.read_bytes()
     except (OSError, EOFError, zlib.error, ValueError) as exc:
         raise InputError(f'{path}: cannot read: {exc}') from None
 
 
-def _split_header(raw: bytes | mmap.mmap,
+def _split_header(raw: bytes,
                   path: Path) -> tuple[list | None, memoryview, int]:
     """
     Separate leading comment/blank lines and an optional header from the data.
@@ -230,6 +228,13 @@ def read_csv(path: PathLike, columns: Sequence[str] | None = None,
     path = Path(path)
     raw = _read_bytes(path)
     header, data, first_line = _split_header(raw, path)
+    if raw.count(b'\r') != raw.count(b'\r\n'):
+        # A lone carriage return ends a line for some readers and is blank space for
+        # others (a flipped '-' is one): refuse rather than guess.
+        found = re.search(b'\r(?!\n)', raw)
+        line = raw.count(b'\n', 0, found.start() if found is not None else 0) + 1
+        raise InputError(f'{path}: line {line}: carriage return inside a line (old Mac line '
+                         'ends or a damaged file)')
     if header is None:
         start = len(raw) - len(data)
         end = raw.find(b'\n', start)

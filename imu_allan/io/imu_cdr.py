@@ -11,7 +11,7 @@ tests.  Only payloads that fit neither layout go through rosbags' own deserialis
 imported on demand.
 """
 
-
+import functools
 from typing import Any
 
 import numpy as np
@@ -19,8 +19,9 @@ import numpy as np
 from imu_allan.core import native
 from imu_allan.errors import InputError
 
-#: Message type names of sensor_msgs/Imu (ROS 2, ROS 1).
-IMU_MSGTYPES = ('sensor_msgs/msg/Imu', 'sensor_msgs/Imu')
+#: Message type name of sensor_msgs/Imu in ROS 2, and the names it has in ROS 2 and ROS 1.
+IMU_MSGTYPE = 'sensor_msgs/msg/Imu'
+IMU_MSGTYPES = (IMU_MSGTYPE, 'sensor_msgs/Imu')
 
 
 _N_DOUBLES_BYTES = 37 * 8
@@ -108,17 +109,25 @@ def _fields_dtype(doubles_offset: int, big: bool, ros1: bool, itemsize: int,
                      'offsets': offsets, 'itemsize': itemsize})
 
 
-def _fallback_decode(payload: bytes, ros1: bool) -> tuple[int, list] | None:
-    """Decode one odd payload with rosbags; return (stamp_ns, six values) or None."""
+@functools.lru_cache(maxsize=2)
+def _typestore(ros1: bool) -> Any:
+    """rosbags' type store, built once (building it costs milliseconds)."""
     from rosbags.typesys import get_typestore, Stores
 
-    msg: Any
+    return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
 
+
+def _fallback_decode(payload: bytes, ros1: bool) -> tuple[int, list] | None:
+    """Decode one odd payload with rosbags; return (stamp_ns, six values) or None."""
+    msg: Any
+    if len(payload) < _N_DOUBLES_BYTES + 12:
+        return None     # shorter than any Imu message: not worth asking rosbags
     try:
+        # Inside the try: a robot without rosbags has no fallback, not a lost batch.
         if ros1:
-            msg = get_typestore(Stores.ROS1_NOETIC).deserialize_ros1(payload, IMU_MSGTYPES[0])
+            msg = _typestore(True).deserialize_ros1(payload, IMU_MSGTYPES[0])
         else:
-            msg = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(payload, IMU_MSGTYPES[0])
+            msg = _typestore(False).deserialize_cdr(payload, IMU_MSGTYPES[0])
         av, la = msg.angular_velocity, msg.linear_acceleration
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         return stamp, [av.x, av.y, av.z, la.x, la.y, la.z]
@@ -199,6 +208,11 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
         return stamp_ns, samples, ok
     decode = native.decode_imu if native.LIB is not None else _decode_plain
     decode(u8, starts, lengths, ros1, stamp_ns, samples, ok)
+    # The message must end with its last double: a damaged frame_id length that still
+    # fits the payload would shift every value (CDR may pad to 4 bytes).
+    offset, _, _ = _imu_layout(u8, starts, lengths, ros1)
+    slack = lengths - offset - _N_DOUBLES_BYTES
+    ok &= (slack >= 0) & (slack <= (0 if ros1 else 3))
     for i in np.flatnonzero(~ok).tolist():
         decoded = _fallback_decode(u8[starts[i]:starts[i] + lengths[i]].tobytes(), ros1)
         if decoded is not None:
@@ -398,3 +412,12 @@ def _join(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     starts = np.zeros(lengths.size, np.int64)
     np.cumsum(lengths[:-1], out=starts[1:])
     return np.frombuffer(b''.join(payloads), np.uint8), starts, lengths
+
+
+def imu_msgdef() -> tuple[str, str]:
+    """Return (ros2msg definition text, RIHS01 hash) of sensor_msgs/msg/Imu (Jazzy)."""
+    from rosbags.typesys import get_typestore, Stores
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    text, _ = store.generate_msgdef(IMU_MSGTYPE, ros_version=2)
+    return text, store.hash_rihs01(IMU_MSGTYPE)

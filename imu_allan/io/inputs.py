@@ -21,6 +21,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from imu_allan import AXES
+from imu_allan.core.noise.unit_check import DeclaredUnits
 from imu_allan.errors import InputError
 from imu_allan.pipeline.session import Session, SessionConfig
 from imu_allan.pipeline.workers import start_workers
@@ -151,10 +152,27 @@ class InputSource:
     def __init__(self, path: Path, label: str, kind: str, topic: str | None,
                  n_messages: int | None, blocks: Callable[[], Iterator],
                  warnings: list, close: Callable[[], None] = lambda: None,
-                 frame_id: Callable[[], str] = lambda: ''):
+                 frame_id: Callable[[], str] = lambda: '',
+                 counts: Callable[[], tuple] | None = None):
         self.path, self.label, self.kind, self.topic = path, label, kind, topic
         self.n_messages, self.warnings = n_messages, warnings
         self._blocks, self._close, self._frame_id = blocks, close, frame_id
+        self._counts = counts if counts is not None else lambda: (n_messages, 0)
+
+    @property
+    def read_counts(self) -> dict:
+        """
+        Return what the reader delivered and lost, once ``blocks()`` has been consumed.
+
+        Returns
+        -------
+        dict
+            ``n_read``: messages (rows) delivered; ``n_lost``: messages the input counts
+            but could not deliver (damaged, undecodable), None when it states no count.
+
+        """
+        n_read, n_lost = self._counts()
+        return {'n_read': n_read, 'n_lost': n_lost}
 
     @property
     def frame_id(self) -> str:
@@ -204,7 +222,8 @@ def check_path(path: Path) -> None:
         raise InputError(f'{path}: permission denied')
 
 
-def open_input(path, topic: str | None = None) -> InputSource:
+def open_input(path, topic: str | None = None,
+               units: DeclaredUnits | None = None) -> InputSource:
     """
     Open any supported input for streaming.
 
@@ -216,6 +235,9 @@ def open_input(path, topic: str | None = None) -> InputSource:
         (``t,gyro_x,...,accel_z``, optional ``.gz``).
     topic : str, optional
         Imu topic of a bag; by default its only Imu topic.  Ignored for CSV.
+    units : DeclaredUnits, optional
+        The units the input is written in (``--units``): the blocks are converted to
+        ns, rad/s and m/s^2.
 
     Returns
     -------
@@ -238,21 +260,37 @@ def open_input(path, topic: str | None = None) -> InputSource:
         data = read_csv(path, columns=list(AXES))
         if data.t_s is None:
             raise InputError(f'{path}: a t column (seconds) is needed for analyze')
-        stamp_ns = np.round(data.t_s * 1e9).astype(np.int64)
+        # The declared time unit applies before nanoseconds (ms since the epoch in ns
+        # would overflow int64).
+        t_s = data.t_s * units.time_scale(1.0) if units is not None else data.t_s
+        stamp_ns = np.round(t_s * 1e9).astype(np.int64)
+        samples = _to_si(data.samples, units)
 
         def csv_blocks():
             for k in range(0, stamp_ns.size, CSV_BLOCK):
-                yield stamp_ns[k:k + CSV_BLOCK], data.samples[k:k + CSV_BLOCK]
+                yield stamp_ns[k:k + CSV_BLOCK], samples[k:k + CSV_BLOCK]
         return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
     from imu_allan.io.bag_reader import open_imu
     source = open_imu(path, topic)
+    time_scale = units.time_scale(1e-9) if units is not None else 1.0
 
     def bag_blocks():
         for block in source.blocks():
-            yield block.stamp_ns, block.samples
+            stamp_ns = block.stamp_ns
+            if time_scale != 1.0:
+                stamp_ns = np.round(stamp_ns * time_scale).astype(np.int64)
+            yield stamp_ns, _to_si(block.samples, units)
     return InputSource(path, f'{path.name} {source.topic}', source.storage, source.topic,
                        source.n_messages, bag_blocks, source.warnings, source.close,
-                       lambda: source.frame_id)
+                       lambda: source.frame_id, lambda: (source.n_read, source.n_lost))
+
+
+def _to_si(samples: np.ndarray, units: DeclaredUnits | None) -> np.ndarray:
+    """Return (n, 6) samples in rad/s and m/s^2 (the same array when already SI)."""
+    if units is None:
+        return samples
+    scale = units.sample_scale()
+    return samples * scale if (scale != 1.0).any() else samples
 
 
 def stream_input(source: InputSource, config: SessionConfig,
@@ -366,7 +404,7 @@ def raw_tap() -> tuple:
 
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
-                  prefetch: bool = True):
+                  prefetch: bool = True, units: DeclaredUnits | None = None):
     """
     Stream one input through a Session and fit it.
 
@@ -387,6 +425,8 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         :func:`imu_allan.pipeline.analysis.analyze`).
     prefetch : bool
         See :func:`stream_input`.
+    units : DeclaredUnits, optional
+        The units of the input (see :func:`open_input`).
 
     Returns
     -------
@@ -407,7 +447,7 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
 
     show = (not quiet) if progress is None else progress
     tap, keeper = raw_tap()
-    with open_input(path, topic) as source:
+    with open_input(path, topic, units) as source:
         bar = Progress(path.name, source.n_messages) if show else None
         try:
             session = stream_input(source, config, on_warning=warn, progress=bar, tap=tap,
@@ -415,8 +455,10 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
             reader_warnings = list(source.warnings)
             for text in reader_warnings:
                 warn(text)
+            counts = source.read_counts
             if session.stats.n_received == 0:
-                raise InputError(f'{path}: no Imu samples in the input')
+                raise InputError(f'{path}: no Imu samples in the input'
+                                 + (f' ({reader_warnings[0]})' if reader_warnings else ''))
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
             result = analyze(session, source=source.label, raw=keeper,
@@ -429,6 +471,9 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                          f'{session.stats.n_received}) for any Allan deviation'
                          + (f' ({session.warnings[0]})' if session.warnings else ''))
     extra = list(reader_warnings)
+    for text in result.warnings:    # the analysis' own (unit mistakes), on stderr too
+        if text not in session.warnings:
+            warn(text)
     stats = session.stats
     if stats.n_motion_events:
         share = stats.n_motion_dropped / max(stats.n_received, 1)
@@ -444,5 +489,6 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                          f'{kept}, {stats.n_used} samples used')
         warn(extra[-1])
     result = replace(result, warnings=tuple(extra) + result.warnings,
+                     hygiene={**result.hygiene, **counts},
                      start_ns=session.first_stamp_ns, frame_id=source.frame_id)
     return result, time.monotonic() - start

@@ -21,7 +21,8 @@ import yaml
 import zstandard
 
 from imu_allan import __version__
-from imu_allan.io.bag_writer import _MCAP_MAGIC, _msgdef, IMU_MSGTYPE
+from imu_allan.io.bags.base import _MCAP_MAGIC
+from imu_allan.io.imu_cdr import imu_msgdef, IMU_MSGTYPE
 
 
 def _mcap_message_records(payloads: np.ndarray, recv_ns: np.ndarray,
@@ -76,7 +77,7 @@ def _write_mcap(mcap_path: Path, topic: str, batches, info: dict) -> None:
         rosbag2_bagfile_information, stored as the 'rosbag2' metadata record.
 
     """
-    msgdef, rihs01 = _msgdef()
+    msgdef, rihs01 = imu_msgdef()
     builder = RecordBuilder()
     schema = Schema(id=1, name=IMU_MSGTYPE, encoding='ros2msg', data=msgdef.encode())
     channel = Channel(id=1, topic=topic, message_encoding='cdr', schema_id=1,

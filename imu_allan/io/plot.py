@@ -14,13 +14,13 @@ import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
 from imu_allan.core.noise.model import base_name, TERMS
-from imu_allan.io.report import FIGURE_FORMATS
+from imu_allan.io import FIGURE_FORMATS
 
 _COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
 _PANELS = ((GYRO_AXES, 'gyro ADEV [rad/s]'), (ACCEL_AXES, 'accel ADEV [m/s\u00b2]'))
 
 
-def _subplots(nrows: int, ncols: int, **kwargs):
+def subplots(nrows: int, ncols: int, **kwargs):
     """
     Return a Figure and its axes without pyplot (its import and a GUI backend).
 
@@ -58,7 +58,7 @@ def warm_fonts() -> None:
     get_font(findfont(FontProperties()))
 
 
-def _save(fig, base: Path, tight: bool = True, formats: tuple = FIGURE_FORMATS) -> list:
+def save_figure(fig, base: Path, tight: bool = True, formats: tuple = FIGURE_FORMATS) -> list:
     """Write base.png and/or base.svg; ``tight`` crops to the artists (one more draw each)."""
     _plain_log_labels(fig)
     paths = []
@@ -93,7 +93,7 @@ def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
     curve = result.curve
     tau = curve.tau_s
     tau_fine = np.geomspace(tau[0], tau[-1], 200)
-    fig, panels = _subplots(1, 2, figsize=(13, 5.2))
+    fig, panels = subplots(1, 2, figsize=(13, 5.2))
     for ax, (axes, ylabel) in zip(panels, _PANELS):
         cols = [AXES.index(a) for a in axes]
         lo_hi = curve.adev_lo[:, cols], curve.adev_hi[:, cols]
@@ -145,7 +145,7 @@ def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
                  fontsize=10)
     # A fixed layout: every analysis draws this figure, and cropping costs a draw.
     fig.subplots_adjust(left=0.06, right=0.985, bottom=0.1, top=0.9, wspace=0.2)
-    return _save(fig, Path(base), tight=False, formats=formats)
+    return save_figure(fig, Path(base), tight=False, formats=formats)
 
 
 def plot_comparison(results: list, labels: list, base) -> list:
@@ -167,7 +167,7 @@ def plot_comparison(results: list, labels: list, base) -> list:
         The PNG and SVG files.
 
     """
-    fig, panels = _subplots(2, 3, figsize=(15, 8), sharex=True)
+    fig, panels = subplots(2, 3, figsize=(15, 8), sharex=True)
     cmap = colormaps['viridis'].resampled(max(len(results), 2))
     for j, axis in enumerate(AXES):
         ax = panels[j // 3, j % 3]
@@ -185,7 +185,7 @@ def plot_comparison(results: list, labels: list, base) -> list:
             ax.set_xlabel('tau [s]')
     panels[0, 0].legend(fontsize=7)
     fig.suptitle('Run-to-run comparison of the Allan deviation (95 % bands)', fontsize=10)
-    return _save(fig, Path(base))
+    return save_figure(fig, Path(base))
 
 
 def plot_diagnosis(diag, path) -> Path:
@@ -211,7 +211,7 @@ def plot_diagnosis(diag, path) -> Path:
     """
     path = Path(path)
     tau, adev, s = diag.tau_s, diag.adev, diag.s_ln
-    fig, ax = _subplots(1, 1, figsize=(6.4, 4.4))
+    fig, ax = subplots(1, 1, figsize=(6.4, 4.4))
     ax.fill_between(tau, adev * np.exp(-1.96 * s), adev * np.exp(1.96 * s), color='0.6',
                     alpha=0.35, lw=0, label='measured, 95 % band')
     ax.loglog(tau, adev, 'ko', ms=3.5, label='measured')

@@ -16,6 +16,7 @@ import yaml
 
 from imu_allan.atomic import write_atomic
 from imu_allan.core.noise.params import dump_params, NoiseSpec
+from imu_allan.io import FIGURE_FORMATS
 from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
 
 #: File names inside the output directory (stable: other tools read them).
@@ -30,8 +31,6 @@ FILES = {
     'driver': 'imu_driver_noise.yaml',
     'vins': 'vins_imu.yaml',
 }
-#: The ADEV figure's files, adev.<format> (drawn by :mod:`imu_allan.io.plot`).
-FIGURE_FORMATS = ('png', 'svg')
 
 
 def _atomic_write(path: Path, text: str) -> Path:

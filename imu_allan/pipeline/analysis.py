@@ -18,6 +18,7 @@ from imu_allan.core.allan import AllanCurve, confidence_bounds
 from imu_allan.core.allan.raw import raw_evidence
 from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.unit_check import unit_warnings
 from imu_allan.core.noise.units import format_quoted, sensor_of
 from imu_allan.core.outputs.exports import (driver_yaml, kalibr_yaml, robot_localization_yaml,
                                             vins_yaml)
@@ -299,11 +300,25 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     fits.update(zip(jobs, found))
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
+    units = unit_warnings(session.rate_hz, None if samples is None else samples.mean(axis=0),
+                          _gyro_white(curve, fits))
     return AnalysisResult(
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
-        n_samples=int(session.stats.n_used), warnings=tuple(session.warnings),
+        n_samples=int(session.stats.n_used), warnings=tuple(session.warnings) + tuple(units),
         hygiene=asdict(session.stats), curve=curve, fits=fits,
         kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic)
+
+
+def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:
+    """(3,) white noise N of the gyro axes [rad/s/sqrt(Hz)]: the fit's, else ADEV(tau0)."""
+    out = np.full(3, np.nan)
+    for j, axis in enumerate(AXES[:3]):
+        p = fits[axis].optimised.get('N') if fits.get(axis) is not None else None
+        if p is not None and p.kind == 'estimate':
+            out[j] = p.value
+        elif curve.tau_s.size:    # white noise: ADEV(tau) = N / sqrt(tau)
+            out[j] = curve.adev[0, j] * math.sqrt(curve.tau_s[0])
+    return out
 
 
 def _trust_problems(fit: AxisFit) -> list:

@@ -8,10 +8,16 @@ the pipeline :class:`~imu_allan.pipeline.session.Session`, the resume from a che
 consistent snapshots for fits on a worker thread.  It imports no rclpy, so it can be
 driven and tested with plain bytes; :class:`~imu_allan.ros.node.ImuAllanNode` adds the
 parameters, topics, services and timers.
+
+The checkpoint can never stop the node: one that cannot be read, or whose values make no
+sense, is set aside as ``checkpoint.npz.bad-<time>`` with a warning and the node starts
+fresh; ``~/reset`` deletes it; a payload that is not an Imu message is counted and
+dropped alone.
 """
 
 from collections import deque
 import copy
+import math
 import os
 from pathlib import Path
 import threading
@@ -23,7 +29,7 @@ from imu_allan import AXES
 from imu_allan.core.allan import confidence_bounds
 from imu_allan.core.diagnose import RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.io.imu_cdr import decode_imu_cdr, imu_frame_id
+from imu_allan.io.imu_cdr import decode_imu_payloads, imu_frame_id
 from imu_allan.pipeline.analysis import CONFIDENCE
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.params import session_config
@@ -89,6 +95,7 @@ class LiveInput:
         self.buffer: deque = deque()
         self.n_received = 0
         self.n_buffer_dropped = 0
+        self.n_undecodable = 0
         self.frame_id = ''
         self.last_rx: float | None = None
         self._last_handover = time.monotonic()
@@ -138,17 +145,31 @@ class LiveInput:
         if not raws:
             return
         self.frame_id = imu_frame_id(raws[-1]) or self.frame_id
-        try:
-            stamp_ns, samples = decode_imu_cdr(raws)
-        except InputError as exc:
-            self.log.error(f'undecodable Imu messages dropped: {exc}')
-            return
+        stamp_ns, samples = self._decode(raws)
         with self.lock:
             if self._resume_hold is not None:
                 stamp_ns, samples = self._check_resume(stamp_ns, samples)
             if stamp_ns.size:
                 self.session.add(stamp_ns, samples)
                 self._keep_raw(samples)
+
+    def _decode(self, raws: list) -> tuple[np.ndarray, np.ndarray]:
+        """Decode a batch; a payload that is not an Imu message is dropped alone."""
+        lengths = np.fromiter(map(len, raws), np.int64, len(raws))
+        starts = np.zeros(lengths.size, np.int64)
+        np.cumsum(lengths[:-1], out=starts[1:])
+        stamp_ns, samples, ok = decode_imu_payloads(
+            np.frombuffer(b''.join(raws), np.uint8), starts, lengths, 'cdr')
+        if ok.all():
+            return stamp_ns, samples
+        bad = int(ok.size - np.count_nonzero(ok))
+        before = self.n_undecodable
+        self.n_undecodable += bad
+        # Logged when the count passes 1, 2, 4, 8 ...: visible without flooding the log.
+        if self.n_undecodable.bit_length() > before.bit_length():
+            self.log.warning(f'{bad} of {ok.size} messages are not CDR sensor_msgs/msg/Imu: '
+                             f'dropped ({self.n_undecodable} so far)')
+        return stamp_ns[ok], samples[ok]
 
     def _keep_raw(self, samples: np.ndarray) -> None:
         rows = self.values['diagnose_raw_samples']
@@ -163,11 +184,15 @@ class LiveInput:
     def _new_session(self, resume: bool) -> Session:
         config = session_config(self.values)
         path = self.checkpoint_path
+        self._remove_stale_temporaries()
         if resume and path.exists():
             try:
                 session = Session.load_state(path, config, on_warning=self.log.warning)
-            except InputError as exc:
-                self._set_aside(str(exc))
+                _check_restored(session)
+            # Whatever reading a damaged file raises (BadZipFile, EOFError, KeyError,
+            # ZeroDivisionError, InputError ...): the node starts fresh, it never dies.
+            except Exception as exc:  # noqa: B902
+                self._set_aside(f'the checkpoint is damaged ({_one_line(exc)})', 'bad')
             else:
                 # Samples after the last checkpoint are lost: no Allan term may span them,
                 # and the step to the first new stamp is not a step of the sensor clock.
@@ -187,11 +212,37 @@ class LiveInput:
             self.log.info(f'resume requested but {path} does not exist: starting fresh')
         return Session(config, on_warning=self.log.warning)
 
-    def _set_aside(self, why: str) -> None:
+    def _set_aside(self, why: str, tag: str) -> None:
+        """Rename the checkpoint to checkpoint.npz.<tag>-<time>[.k]; never overwrite one."""
         path = self.checkpoint_path
-        kept = path.with_name(f'checkpoint.{time.strftime("%Y%m%d-%H%M%S")}.npz')
-        os.replace(path, kept)
+        base = f'{path.name}.{tag}-{time.strftime("%Y%m%dT%H%M%S")}'
+        kept = path.with_name(base)
+        k = 1
+        while kept.exists():
+            kept = path.with_name(f'{base}.{k}')
+            k += 1
+        try:
+            os.replace(path, kept)
+        except OSError as exc:
+            self.log.warning(f'not resuming: {why}; starting fresh (could not set the old '
+                             f'checkpoint aside: {exc.strerror or exc}; it will be overwritten)')
+            return
         self.log.warning(f'not resuming: {why}; starting fresh, old state kept as {kept}')
+
+    def _remove_stale_temporaries(self) -> None:
+        """Delete the temporary files of checkpoints a killed process left half written."""
+        # write_atomic writes .checkpoint.npz.<random>.tmp and renames it: the checkpoint
+        # itself is always whole, but a SIGKILL during a save leaves the temporary file.
+        try:
+            stale = list(self.output_dir.glob(f'.{CHECKPOINT}.*.tmp'))
+        except OSError:
+            return
+        for tmp in stale:
+            try:
+                tmp.unlink()
+            except OSError:
+                continue
+            self.log.info(f'removed {tmp}, left by a save that was interrupted')
 
     def _check_resume(self, stamp_ns: np.ndarray, samples: np.ndarray) -> tuple:
         """Hold the first samples after a resume; compare their rate with the checkpoint."""
@@ -208,7 +259,7 @@ class LiveInput:
         saved = self.session.rate_hz
         if rate <= 0 or abs(rate / saved - 1) > self.values['rate_tolerance']:
             self._set_aside(f'the checkpoint was taken at {saved:.3f} Hz but the data now '
-                            f'arrive at {rate:.3f} Hz')
+                            f'arrive at {rate:.3f} Hz', 'other-rate')
             self.session = Session(session_config(self.values), on_warning=self.log.warning)
         else:
             self.log.info(f'resume confirmed: incoming rate {rate:.3f} Hz matches the '
@@ -216,9 +267,14 @@ class LiveInput:
         return t, y
 
     def reset(self) -> None:
-        """Drop the buffer and start a new session (no resume)."""
+        """Drop the buffer, delete the checkpoint and start a new session (no resume)."""
         with self.process_lock, self.lock:
             self._take_buffer()
+            # A restart with resume must not bring the reset data back.
+            try:
+                self.checkpoint_path.unlink(missing_ok=True)
+            except OSError as exc:
+                self.log.error(f'could not delete {self.checkpoint_path} on reset: {exc}')
             self.session = self._new_session(resume=False)
             self._resume_hold = None
 
@@ -257,3 +313,51 @@ class LiveInput:
                     return False
             self.session.save_state(self.checkpoint_path)
         return True
+
+
+def _one_line(exc: BaseException) -> str:
+    """Return an exception as one short line: its type and the first line of its text."""
+    text = str(exc).strip().splitlines()
+    return f'{type(exc).__name__}: {text[0][:200]}' if text else type(exc).__name__
+
+
+_INT = (int, np.integer)
+
+
+def _check_restored(session: Session) -> None:
+    """
+    Refuse a restored session whose values cannot come from a real recording.
+
+    Raises
+    ------
+    InputError
+        A rate that is not a finite positive number, negative or inconsistent
+        counters, stamps that are not integers in order, or an Allan curve that cannot
+        be computed from the restored sums.
+
+    """
+    rate = session.rate_hz
+    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and 0 < rate <= 1e9):
+        raise InputError(f'rate {rate!r} Hz')
+    stats = session.stats
+    for name, value in vars(stats).items():
+        if name.startswith('n_') and not (isinstance(value, _INT) and value >= 0):
+            raise InputError(f'counter {name} = {value!r}')
+    if stats.n_used > stats.n_received:
+        raise InputError(f'{stats.n_used} samples used of {stats.n_received} received')
+    first, last = session.first_stamp_ns, session.last_stamp_ns
+    for name, value in (('first stamp', first), ('last stamp', last)):
+        if value is not None and not isinstance(value, _INT):
+            raise InputError(f'{name} {value!r}')
+    if first is not None and last is not None and last < first:
+        raise InputError(f'last stamp {last} before the first {first}')
+    if not math.isfinite(session.duration_s):
+        raise InputError(f'duration {session.duration_s!r} s')
+    curve = session.curve(bounds=False)
+    if curve is None:
+        return
+    if not np.isfinite(curve.avar).all():
+        raise InputError('its Allan sums give non-finite variances')
+    if not math.isclose(curve.rate_hz, rate, rel_tol=1e-9):
+        raise InputError(f'its accumulator runs at {curve.rate_hz!r} Hz, the session at '
+                         f'{rate!r} Hz')

@@ -10,7 +10,9 @@ vectorised step (:func:`~imu_allan.io.imu_cdr.decode_imu_cdr`) and feeds the pip
 ROS-free :class:`~imu_allan.ros.live.LiveInput`.  The fit (seconds
 of CPU) runs on a worker thread on a snapshot of the Allan curve, so the executor keeps
 taking messages while it runs.  Other timers report progress, publish /diagnostics at
-1 Hz and checkpoint.  ``main`` spins the node with rclpy's EventsExecutor (measured in
+1 Hz and checkpoint.  The statuses come from a :class:`~imu_allan.ros.reports.NodeReports`
+and the services from a :class:`~imu_allan.ros.services.NodeServices`, plain objects the
+node owns.  ``main`` spins the node with rclpy's EventsExecutor (measured in
 bench/bench_node.py: several times cheaper per message than the SingleThreadedExecutor,
 which it falls back to when unavailable).
 """
@@ -19,7 +21,6 @@ import os
 from pathlib import Path
 import sys
 import threading
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -43,8 +44,8 @@ from imu_allan.pipeline.session import Session
 from imu_allan.ros.live import LiveInput, SessionView
 from imu_allan.ros.params import BY_NAME, PARAMS
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
-from imu_allan.ros.reports import _matrix_msg, _Reports
-from imu_allan.ros.services import _Services
+from imu_allan.ros.reports import matrix_msg, NodeReports
+from imu_allan.ros.services import NodeServices
 from imu_allan.ros.spin import create_executor, spin_until_shutdown
 
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
@@ -78,8 +79,8 @@ def _result_qos() -> QoSProfile:
 
 
 # Long because __init__ declares every parameter, topic, service and timer in one place
-# (the ROS convention); the work is in LiveInput, _Reports and _Services.
-class ImuAllanNode(_Reports, _Services, Node):
+# (the ROS convention); the work is in LiveInput, NodeReports and NodeServices.
+class ImuAllanNode(Node):
     """
     Subscribe to sensor_msgs/Imu, characterise its noise, publish the results.
 
@@ -123,13 +124,8 @@ class ImuAllanNode(_Reports, _Services, Node):
             raise
         self.relay = CovarianceRelay(initial)
         self.live = LiveInput(self.values, self.output_dir, self.get_logger())
-        self.n_fits = 0
         self._last_result = None
-        self._axis_statuses: list = []
-        self._started = time.monotonic()
         self._fit_thread: threading.Thread | None = None
-        self._diagnose_thread: threading.Thread | None = None
-        self._progress_mark = (time.monotonic(), 0.0)
 
         qos = QoSProfile(
             depth=self.values['qos_depth'], history=HistoryPolicy.KEEP_LAST,
@@ -152,9 +148,14 @@ class ImuAllanNode(_Reports, _Services, Node):
         self.pub_imu = None
         if self.values['publish_imu_with_covariance']:
             self.pub_imu = self.create_publisher(Imu, '~/imu_with_covariance', qos)
-        self.create_service(Trigger, '~/reset', self._on_reset)
-        self.create_service(Trigger, '~/save', self._on_save)
-        self.create_service(Trigger, '~/diagnose', self._on_diagnose)
+        topic = self.subscription.topic_name
+        self.reports = NodeReports(self.diag_prefix, self.values, self.live, topic)
+        self.service_handlers = NodeServices(
+            self.live, self.get_logger(), topic, save=self.save, forget=self._forget,
+            publish_diagnosis=lambda text: self.pub_diagnosis.publish(String(data=text)))
+        self.create_service(Trigger, '~/reset', self.service_handlers.on_reset)
+        self.create_service(Trigger, '~/save', self.service_handlers.on_save)
+        self.create_service(Trigger, '~/diagnose', self.service_handlers.on_diagnose)
         self._make_timers()
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics)
         self.get_logger().info(
@@ -169,7 +170,7 @@ class ImuAllanNode(_Reports, _Services, Node):
             key: self.create_timer(max(self.values[f'{key}_period_s'], 1.0), callback)
             for key, callback in (('process', self._on_process_timer),
                                   ('publish', self._publish),
-                                  ('progress', self._progress),
+                                  ('progress', self._on_progress_timer),
                                   ('checkpoint', self._checkpoint))}
         for key in self._period_timers:
             self._set_period(key, self.values[f'{key}_period_s'])
@@ -207,6 +208,34 @@ class ImuAllanNode(_Reports, _Services, Node):
     def n_received(self) -> int:
         """Return the number of messages received since start."""
         return self.live.n_received
+
+    @property
+    def n_fits(self) -> int:
+        """Return the number of fits published since start."""
+        return self.reports.n_fits
+
+    def diagnose(self, view=None, raw: RawKeeper | None = None) -> str:
+        """Diagnose the data so far and publish it (:meth:`NodeServices.diagnose`)."""
+        return self.service_handlers.diagnose(view, raw)
+
+    def _forget(self) -> None:
+        self._last_result = None
+        self.reports.clear()
+
+    def _stamped(self, statuses: list) -> DiagnosticArray:
+        array = DiagnosticArray(status=statuses)
+        array.header.stamp = self.get_clock().now().to_msg()
+        return array
+
+    def _on_diagnostics(self) -> None:
+        # 1 Hz, within the aggregator's 5 s stale timeout.
+        self.pub_diag.publish(self._stamped(self.reports.diagnostics()))
+
+    def _on_progress_timer(self) -> None:
+        statuses = self.reports.progress()
+        if statuses:
+            self.get_logger().info(statuses[0].message)
+            self.pub_params.publish(self._stamped(statuses))
 
     # ----------------------------------------------------------- callbacks
     def _on_imu(self, raw: bytes) -> None:
@@ -268,13 +297,9 @@ class ImuAllanNode(_Reports, _Services, Node):
             return None
         self._last_result = result
         self.relay.update(result.imu_covariances())
-        self.n_fits += 1
-        self._axis_statuses = self._statuses(result)
-        array = DiagnosticArray(status=self._axis_statuses + [self._input_status(view)])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self.pub_params.publish(array)
-        self.pub_q.publish(_matrix_msg(*result.process_noise()))
-        self.pub_r.publish(_matrix_msg(*result.measurement_noise()))
+        self.pub_params.publish(self._stamped(self.reports.fitted(result, view)))
+        self.pub_q.publish(matrix_msg(*result.process_noise()))
+        self.pub_r.publish(matrix_msg(*result.measurement_noise()))
         self.pub_kalibr.publish(String(data=result.kalibr_yaml()))
         self.get_logger().info('published: ' + '; '.join(result.summary_lines()))
         return result

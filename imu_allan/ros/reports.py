@@ -1,20 +1,23 @@
 """
 What the node reports: diagnostic statuses (per axis, input, progress, data) and matrices.
 
-A mixin of :class:`imu_allan.ros.node.ImuAllanNode`, whose state it reads: statuses are
-named after the node (``<namespace/name>: <what>``) so two nodes never collide, and go
-to /diagnostics at 1 Hz; progress is logged and published on ~/noise_parameters every
-``progress_period_s`` until ``min_duration_s``.
+:class:`NodeReports` is a plain object the node owns: it reads the node's input
+(:class:`~imu_allan.ros.live.LiveInput`) and parameter values, keeps the count of fits and
+the last fit's per-axis statuses, and builds the statuses; the node stamps and publishes
+them.  Statuses are named after the node (``<namespace/name>: <what>``) so two nodes
+never collide, and go to /diagnostics at 1 Hz; progress is logged and published on
+~/noise_parameters every ``progress_period_s`` until ``min_duration_s``.
 """
 
 import math
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from imu_allan import AXES
+from imu_allan.ros.live import LiveInput
 
 #: No message for this long is reported as a WARN on /diagnostics.
 NO_DATA_WARN_S = 2.0
@@ -22,44 +25,76 @@ _LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
            'error': DiagnosticStatus.ERROR}
 
 
-class _Reports:
-    """Diagnostic statuses of the node, built from its session, counters and last fit."""
+class NodeReports:
+    """
+    Diagnostic statuses of one node, built from its input, parameters and last fit.
 
-    _progress_mark: tuple[float, float]   # (wall time, duration) of the last progress log
+    Parameters
+    ----------
+    prefix : str
+        The node's fully qualified name without the leading slash (status names).
+    values : dict
+        The node's parameter values (read at every use: changes apply at once).
+    live : LiveInput
+        The node's input side.
+    topic : str
+        The Imu topic the node listens to.
+
+    """
+
+    def __init__(self, prefix: str, values: dict, live: LiveInput, topic: str):
+        self.prefix, self.values, self.live, self.topic = prefix, values, live, topic
+        self.started = time.monotonic()
+        self.n_fits = 0
+        #: The last fit's per-axis statuses; they persist between fits.
+        self.axis_statuses: list[DiagnosticStatus] = []
+        # (wall time, duration) of the last progress log: the ETA's speed.
+        self._progress_mark = (self.started, 0.0)
 
     @property
     def hardware_id(self) -> str:
         """hardware_id of the statuses: the parameter, else the messages' frame_id."""
         return self.values['hardware_id'] or self.live.frame_id
 
-    def _status(self, what: str, level, message: str, values: list) -> DiagnosticStatus:
-        return DiagnosticStatus(name=f'{self.diag_prefix}: {what}', level=level,
+    def status(self, what: str, level, message: str, values: list) -> DiagnosticStatus:
+        """Return one status named ``<prefix>: <what>`` with (key, value) string pairs."""
+        return DiagnosticStatus(name=f'{self.prefix}: {what}', level=level,
                                 message=message, hardware_id=self.hardware_id,
                                 values=[KeyValue(key=k, value=v) for k, v in values])
 
-    def _statuses(self, result) -> list:
-        out = []
+    def fitted(self, result, view) -> list[DiagnosticStatus]:
+        """Count a published fit; return its per-axis statuses plus the input status."""
+        self.n_fits += 1
+        self.axis_statuses = []
         for axis in AXES:
             level, message, values = result.axis_status(axis)
-            out.append(self._status(axis, _LEVELS[level], message, values))
-        return out
+            self.axis_statuses.append(self.status(axis, _LEVELS[level], message, values))
+        return self.axis_statuses + [self.input_status(view)]
 
-    def _input_status(self, session) -> DiagnosticStatus:
+    def clear(self) -> None:
+        """Forget the last fit's statuses (after ~/reset)."""
+        self.axis_statuses = []
+
+    def input_status(self, session) -> DiagnosticStatus:
         """One status with the input-hygiene counters and the warnings, if any."""
         stats = session.stats
         values = [(k, str(v) if not isinstance(v, list) else ','.join(v))
                   for k, v in vars(stats).items()]
         values += [('n_buffer_dropped', str(self.live.n_buffer_dropped)),
+                   ('n_undecodable', str(self.live.n_undecodable)),
                    ('warnings', ' | '.join(session.warnings))]
-        message = (' | '.join(session.warnings) if session.warnings
+        problems = list(session.warnings)
+        if self.live.n_undecodable:
+            problems.append(f'{self.live.n_undecodable} messages were not decodable Imu '
+                            'messages and were dropped')
+        message = (' | '.join(problems) if problems
                    else 'input clean: no gaps, bad stamps, bad values or motion')
-        return self._status(
-            'input', DiagnosticStatus.WARN if session.warnings else DiagnosticStatus.OK,
-            message, values)
+        return self.status('input', DiagnosticStatus.WARN if problems else DiagnosticStatus.OK,
+                           message, values)
 
-    def _progress_status(self, log: bool = False) -> DiagnosticStatus:
+    def progress_status(self, log: bool = False) -> DiagnosticStatus:
         """Return the progress status: collection before min_duration_s, then the fits."""
-        s = self.session
+        s = self.live.session
         target = self.values['min_duration_s']
         values = [('samples', str(s.stats.n_used)), ('rate_hz', f'{s.rate_hz:.4f}'),
                   ('duration_s', f'{s.duration_s:.1f}'), ('fits', str(self.n_fits)),
@@ -84,39 +119,33 @@ class _Reports:
         if self.live.n_buffer_dropped:
             text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
         level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
-        return self._status('progress', level, text, values)
+        return self.status('progress', level, text, values)
 
-    def _data_status(self) -> DiagnosticStatus:
+    def data_status(self) -> DiagnosticStatus:
         """WARN while no message arrives on the input topic."""
-        topic = self.subscription.topic_name
-        since = time.monotonic() - (self.live.last_rx or self._started)
+        since = time.monotonic() - (self.live.last_rx or self.started)
+        values = [('topic', self.topic), ('received', str(self.live.n_received))]
         if since > NO_DATA_WARN_S:
             what = 'no message yet' if self.live.last_rx is None else 'no message'
-            return self._status('data', DiagnosticStatus.WARN,
-                                f'{what} on {topic} for {since:.0f} s',
-                                [('topic', topic), ('received', str(self.n_received))])
-        return self._status('data', DiagnosticStatus.OK, f'receiving {topic}',
-                            [('topic', topic), ('received', str(self.n_received))])
+            return self.status('data', DiagnosticStatus.WARN,
+                               f'{what} on {self.topic} for {since:.0f} s', values)
+        return self.status('data', DiagnosticStatus.OK, f'receiving {self.topic}', values)
 
-    def _on_diagnostics(self) -> None:
-        # 1 Hz, within the aggregator's 5 s stale timeout; the last fit's per-axis
-        # statuses persist between fits.
-        array = DiagnosticArray(status=[self._data_status(), self._progress_status()]
-                                + self._axis_statuses + [self._input_status(self.session)])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(array)
+    def diagnostics(self) -> list[DiagnosticStatus]:
+        """Return the /diagnostics statuses: data, progress, the last fit's axes, input."""
+        session = self.live.session
+        return ([self.data_status(), self.progress_status()] + self.axis_statuses
+                + [self.input_status(session)])
 
-    def _progress(self) -> None:
-        if self.session.duration_s >= self.values['min_duration_s']:
-            return
-        status = self._progress_status(log=True)
-        self.get_logger().info(status.message)
-        array = DiagnosticArray(status=[status, self._input_status(self.session)])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self.pub_params.publish(array)
+    def progress(self) -> list[DiagnosticStatus]:
+        """Progress and input statuses while collecting (empty once min_duration_s is met)."""
+        session = self.live.session
+        if session.duration_s >= self.values['min_duration_s']:
+            return []
+        return [self.progress_status(log=True), self.input_status(session)]
 
 
-def _matrix_msg(matrix: np.ndarray, labels: list) -> Float64MultiArray:
+def matrix_msg(matrix: np.ndarray, labels: list) -> Float64MultiArray:
     """Float64MultiArray of a square matrix; the state order is in the dimension labels."""
     n = matrix.shape[0]
     order = ','.join(labels)

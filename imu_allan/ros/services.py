@@ -1,35 +1,61 @@
 """
 The node's services: ~/reset, ~/save and ~/diagnose, and the diagnosis itself.
 
-A mixin of :class:`imu_allan.ros.node.ImuAllanNode`, whose input
-(:class:`~imu_allan.ros.live.LiveInput`), publishers and logger it uses.  A diagnosis
-takes seconds to minutes, so the service starts it on a worker thread and answers at
-once; the summary follows on ~/diagnosis.
+:class:`NodeServices` is a plain object the node owns; it is given the node's input
+(:class:`~imu_allan.ros.live.LiveInput`), logger and the few node actions it needs (save
+the result files, forget the last result, publish a diagnosis) as callables.  A
+diagnosis takes seconds to minutes, so the service starts it on a worker thread and
+answers at once; the summary follows on ~/diagnosis.
 """
 
 import threading
-
-from std_msgs.msg import String
+from typing import Callable
 
 from imu_allan.core.diagnose import diagnose_session, RawKeeper
 from imu_allan.errors import InputError
+from imu_allan.ros.live import LiveInput
 
 
-class _Services:
-    """Service callbacks and the diagnosis of :class:`~imu_allan.ros.node.ImuAllanNode`."""
+class NodeServices:
+    """
+    Service callbacks and the diagnosis of one node.
 
-    def _on_reset(self, request, response):
+    Parameters
+    ----------
+    live : LiveInput
+        The node's input side (reset, processed and snapshotted here).
+    logger : object
+        Has ``info`` and ``warning`` taking one string (the node's logger).
+    source : str
+        The Imu topic, named in the diagnosis.
+    save : callable
+        ``save() -> list of Path``: write the result files (raises InputError or OSError).
+    forget : callable
+        ``forget()``: drop the node's last result and statuses (after a reset).
+    publish_diagnosis : callable
+        ``publish_diagnosis(text)``: publish a diagnosis summary on ~/diagnosis.
+
+    """
+
+    def __init__(self, live: LiveInput, logger, source: str, save: Callable[[], list],
+                 forget: Callable[[], None], publish_diagnosis: Callable[[str], None]):
+        self.live, self.log, self.source = live, logger, source
+        self._save, self._forget, self._publish_diagnosis = save, forget, publish_diagnosis
+        self.diagnose_thread: threading.Thread | None = None
+
+    def on_reset(self, request, response):
+        """~/reset: a new session, no checkpoint left to resume from, no last result."""
         self.live.reset()
-        self._last_result = None
-        self._axis_statuses = []
+        self._forget()
         response.success = True
         response.message = 'accumulator reset: a new characterisation starts now'
-        self.get_logger().info(response.message)
+        self.log.info(response.message)
         return response
 
-    def _on_save(self, request, response):
+    def on_save(self, request, response):
+        """~/save: write the result files; the message lists them or says why not."""
         try:
-            paths = self.save()
+            paths = self._save()
         except (InputError, OSError) as exc:
             response.success, response.message = False, str(exc)
         else:
@@ -37,11 +63,11 @@ class _Services:
             response.message = 'wrote ' + ', '.join(str(p) for p in paths)
         return response
 
-    def _on_diagnose(self, request, response):
+    def on_diagnose(self, request, response):
+        """~/diagnose: start a diagnosis on a worker thread; answer at once."""
         # A diagnosis takes seconds to minutes (refits and re-simulations): it runs on a
-        # worker thread so the executor keeps taking input; the summary follows on
-        # ~/diagnosis.
-        if self._diagnose_thread is not None and self._diagnose_thread.is_alive():
+        # worker thread so the executor keeps taking input.
+        if self.diagnose_thread is not None and self.diagnose_thread.is_alive():
             response.success = False
             response.message = 'a diagnosis is already running; its summary will be ' \
                 'published on ~/diagnosis'
@@ -52,10 +78,10 @@ class _Services:
             response.success = False
             response.message = 'not enough data for any Allan deviation yet'
             return response
-        self._diagnose_thread = threading.Thread(target=self._diagnose_and_log,
-                                                 args=(view, raw), name='imu_allan_diagnose',
-                                                 daemon=True)
-        self._diagnose_thread.start()
+        self.diagnose_thread = threading.Thread(target=self._diagnose_and_log,
+                                                args=(view, raw), name='imu_allan_diagnose',
+                                                daemon=True)
+        self.diagnose_thread.start()
         response.success = True
         response.message = (f'diagnosing {view.stats.n_used:,} samples in the background; '
                             'the summary will be published on ~/diagnosis')
@@ -65,7 +91,7 @@ class _Services:
         try:
             self.diagnose(view, raw)
         except InputError as exc:
-            self.get_logger().warning(f'diagnosis failed: {exc}')
+            self.log.warning(f'diagnosis failed: {exc}')
 
     def diagnose(self, view=None, raw: RawKeeper | None = None) -> str:
         """
@@ -96,10 +122,10 @@ class _Services:
         if view is None:
             self.live.process()
             view, raw = self.live.snapshot()
-        result = diagnose_session(view, raw, source=self.subscription.topic_name)
+        result = diagnose_session(view, raw, source=self.source)
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
         text = '\n'.join(result.summary_lines())
-        self.pub_diagnosis.publish(String(data=text))
-        self.get_logger().info('diagnosis:\n' + text)
+        self._publish_diagnosis(text)
+        self.log.info('diagnosis:\n' + text)
         return text

@@ -54,9 +54,8 @@ import numpy as np
 from imu_allan.core import native
 from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
 from imu_allan.core.allan.accumulator_state import _Persistence
+from imu_allan.core.allan.taus import dense_m_grid
 from imu_allan.errors import InputError
-
-#: Format tag and version written into every state file.
 
 #: Decimated levels serve m = m' D_L with _M_LO < m' <= 2 * _M_LO.
 _M_LO = 64
@@ -69,28 +68,6 @@ _MAX_EXACT_M = 2 ** 14
 #: L2; wider tiles cost more, narrower ones hand the GIL over more often (offline, the
 #: accumulator runs on a thread beside the checks and the reader).
 _TILE_COLS = 16384
-
-
-def dense_m_grid(max_m: int, per_decade: int) -> np.ndarray:
-    """
-    Log-spaced cluster sizes, ``per_decade`` per decade, rounded and deduplicated.
-
-    Parameters
-    ----------
-    max_m : int
-        Largest cluster size [samples].
-    per_decade : int
-        Grid points per decade of tau.
-
-    Returns
-    -------
-    np.ndarray
-        Shape (k,), int64 cluster sizes 1 .. max_m [samples], ascending.
-
-    """
-    n = int(np.floor(per_decade * np.log10(max_m) + 1e-9)) + 1
-    m = np.round(10.0 ** (np.arange(n) / per_decade)).astype(np.int64)
-    return np.unique(m[m <= max_m])
 
 
 class _Level:

@@ -179,3 +179,25 @@ def _check_m(m: np.ndarray, n: int, method: str) -> np.ndarray:
     if m.size and (m.min() < 1 or m.max() > m_max):
         raise ValueError(f'cluster sizes must lie in 1..{m_max} for {n} samples ({method})')
     return m
+
+
+def dense_m_grid(max_m: int, per_decade: int) -> np.ndarray:
+    """
+    Log-spaced cluster sizes, ``per_decade`` per decade, rounded and deduplicated.
+
+    Parameters
+    ----------
+    max_m : int
+        Largest cluster size [samples].
+    per_decade : int
+        Grid points per decade of tau.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (k,), int64 cluster sizes 1 .. max_m [samples], ascending.
+
+    """
+    n = int(np.floor(per_decade * np.log10(max_m) + 1e-9)) + 1
+    m = np.round(10.0 ** (np.arange(n) / per_decade)).astype(np.int64)
+    return np.unique(m[m <= max_m])

@@ -65,10 +65,6 @@ def _load() -> ctypes.CDLL | None:
             lib.imu_allan_repeats.restype = None
             lib.imu_allan_repeats.argtypes = [ctypes.c_void_p, _LONG, _LONG, _LONG,
                                               ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-            lib.imu_allan_mcap_imu.restype = _LONG
-            lib.imu_allan_mcap_imu.argtypes = [
-                ctypes.c_void_p, _LONG, ctypes.c_void_p, _LONG, _LONG, _LONG, ctypes.c_void_p,
-                ctypes.c_void_p, ctypes.c_void_p]
             lib.imu_allan_gm_shape.restype = None
             lib.imu_allan_gm_shape.argtypes = [ctypes.c_void_p, _LONG, ctypes.c_void_p, _LONG,
                                                ctypes.c_void_p]
@@ -378,45 +374,6 @@ def repeats(y: np.ndarray, last: np.ndarray, run: np.ndarray) -> np.ndarray:
     LIB.imu_allan_repeats(y.ctypes.data, y.strides[0] // 8, y.shape[0], y.shape[1],
                           last.ctypes.data, run.ctypes.data, longest.ctypes.data)
     return longest
-
-
-def mcap_imu(u8: np.ndarray, offsets: np.ndarray, channel: int,
-             ros1: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """
-    Read the Imu messages of one MCAP channel at given record offsets of a chunk.
-
-    The plain case of :class:`imu_allan.io.bags.mcap_storage.McapStorage`'s chunk path
-    in one call: every record a Message of ``channel``, log times in order, every
-    payload of the plain layout (:func:`decode_imu`).
-
-    Parameters
-    ----------
-    u8 : np.ndarray
-        Shape (size,), contiguous uint8 decompressed chunk records.
-    offsets : np.ndarray
-        Shape (k,), int64 byte offsets of the records (from the chunk's message index).
-    channel : int
-        The channel id every record must carry.
-    ros1 : bool
-        ROS 1 payloads (else ROS 2 CDR).
-
-    Returns
-    -------
-    tuple of np.ndarray or None
-        (recv_ns (k,) int64 log times [ns], stamp_ns (k,) int64 header stamps [ns],
-        samples (k, 6) float64 [rad/s, m/s^2]); None when a record is not of that plain
-        case (the caller reads the chunk on its general path).
-
-    """
-    assert LIB is not None and u8.dtype == np.uint8 and u8.flags.c_contiguous
-    offsets = np.ascontiguousarray(offsets, dtype=np.int64)
-    k = offsets.size
-    recv_ns, stamp_ns = np.empty(k, np.int64), np.empty(k, np.int64)
-    samples = np.empty((k, 6))
-    done = LIB.imu_allan_mcap_imu(u8.ctypes.data, u8.size, offsets.ctypes.data, k, int(channel),
-                                  int(ros1), recv_ns.ctypes.data, stamp_ns.ctypes.data,
-                                  samples.ctypes.data)
-    return (recv_ns, stamp_ns, samples) if done == k else None
 
 
 def gm_shape(x: np.ndarray, series: np.ndarray) -> np.ndarray:

@@ -435,44 +435,6 @@ long imu_allan_decode_imu(const uint8_t *buf, long size, const int64_t *starts,
     return misfits;
 }
 
-/*
- * The Message records of one MCAP channel at given offsets of a decompressed chunk
- * (imu_allan/io/bags/mcap_storage.py, _pieces and _message_piece, in the plain case):
- * opcode 0x05, uint64 record length, uint16 channel id, uint32 sequence, uint64
- * log_time, uint64 publish_time, then the payload, all little-endian.  Sets recv_ns[i]
- * (log_time) and decodes each payload as imu_allan_decode_imu does.  Returns k, or -1
- * as soon as a record is not a Message of that channel inside the buffer, the log
- * times go backwards or a payload does not fit the plain Imu layout: the caller then
- * reads the chunk on its general path (which sorts, drops and warns).
- */
-long imu_allan_mcap_imu(const uint8_t *buf, long size, const int64_t *offsets, long k,
-                        long channel, long ros1, int64_t *recv_ns, int64_t *stamp_ns,
-                        double *samples)
-{
-    for (long i = 0; i < k; i++) {
-        int64_t off = offsets[i];
-        if (off < 0 || off > size - 31 || buf[off] != 0x05)
-            return -1;
-        uint64_t length;
-        uint16_t chan;
-        int64_t log_time;
-        memcpy(&length, buf + off + 1, 8);
-        memcpy(&chan, buf + off + 9, 2);
-        memcpy(&log_time, buf + off + 15, 8);
-        if (chan != channel || length < 22 || length > (uint64_t)(size - off - 9)
-            || (i > 0 && log_time < recv_ns[i - 1]))
-            return -1;
-        recv_ns[i] = log_time;
-        int64_t start = off + 31, len = (int64_t)length - 22;
-        uint8_t ok = 0;
-        imu_allan_decode_imu(buf, size, &start, &len, 1, ros1, stamp_ns + i, samples + 6 * i,
-                             &ok);
-        if (!ok)
-            return -1;
-    }
-    return k;
-}
-
 /* ------------------------------------------------------------ sqlite varints */
 
 /*

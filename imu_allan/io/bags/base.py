@@ -80,7 +80,8 @@ def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns
     """Decode payloads into a _Piece, dropping undecodable ones."""
     if decompress is not None:
         # rosbag2 'message' compression: every payload is its own zstd frame.
-        payloads = [decompress(u8[s:s + n].tobytes())
+        # A frame that does not decompress becomes an empty, undecodable payload.
+        payloads = [_safely(decompress, u8[s:s + n].tobytes())
                     for s, n in zip(starts.tolist(), lengths.tolist())]
         u8, starts, lengths = _join(payloads)
     stamp_ns, samples, ok = decode_imu_payloads(u8, starts, lengths, encoding)
@@ -92,6 +93,13 @@ def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns
     if n_bad:
         return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, frame_id)
     return _Piece(recv_ns, stamp_ns, samples, 0, frame_id)
+
+
+def _safely(decompress: Callable[[bytes], bytes], data: bytes) -> bytes:
+    try:
+        return decompress(data)
+    except Exception:   # noqa: B902 - zstd and friends raise their own error types
+        return b''
 
 
 class _Backend:
@@ -109,9 +117,9 @@ class _Backend:
         """Return every topic with its type, count (or None) and encoding."""
         raise NotImplementedError
 
-    def count(self, topic: _Topic) -> int:
-        """Return the number of messages of a topic (may read the bag)."""
-        return 0 if topic.n_messages is None else topic.n_messages
+    def count(self, topic: _Topic) -> int | None:
+        """Return the number of messages of a topic (may read the bag; None: unknown)."""
+        return topic.n_messages
 
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield decoded Imu messages of a topic in the bag's order."""

@@ -1,43 +1,59 @@
 """
-MCAP storage: whole chunks located through the message indexes, decoded in bulk.
+MCAP storage: chunks found by a record walk and the summary, checked, decoded in bulk.
 
-Part of :mod:`imu_allan.io.bag_reader`.
+Part of :mod:`imu_allan.io.bag_reader`.  The file is read with plain reads, never
+mapped: a file that shrinks while it is read is a short read (a truncation), not a
+SIGBUS.  Every chunk whose uncompressed CRC is stated is checked (MCAP specification,
+Chunk record, https://mcap.dev/spec); a damaged chunk is skipped with a warning and the
+walk goes on past a damaged record, to the next chunk the summary's chunk index names
+or the next plausible record header.  Message indexes are only counts here: every
+chunk is walked record by record, so a damaged index loses nothing.
 """
 
-import mmap
+import os
 from pathlib import Path
 import struct
 from typing import Callable, Iterator, NamedTuple
+import zlib
 
 import lz4.frame
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 import numpy as np
 import zstandard
 
-from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _MCAP_MAGIC, _Piece, _Topic
-from imu_allan.io.imu_cdr import _records, payload_frame_id
+from imu_allan.io.imu_cdr import _records
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
 _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_DATA_END = 0x05, 0x06, 0x07, 0x0F
 _MCAP_MESSAGE = np.dtype({'names': ['op', 'length', 'channel', 'log_time'],
                           'formats': ['u1', '<u8', '<u2', '<u8'], 'offsets': [0, 1, 9, 15],
                           'itemsize': 31})
+#: Bytes read at a time while walking small records.
+_WINDOW = 1 << 16
+_COMPRESSIONS = (b'', b'zstd', b'lz4')
 
 
-class _ChunkInfo(NamedTuple):
-    """Location of one MCAP chunk and its message index (None when absent)."""
+class _Chunk(NamedTuple):
+    """One chunk record: where it is, its start log time and its indexed counts."""
 
-    record_pos: int
-    body_end: int
-    complete: bool
-    indexes: dict[int, np.ndarray] | None
+    pos: int
+    end: int                           # end of the record (or of the file, if cut)
+    start_ns: int
+    counts: dict[int, int] | None      # message index entries per channel, if indexed
+
+
+class _Loose(NamedTuple):
+    """A run of Message records outside chunks: [start, end) and their offsets."""
+
+    start: int
+    end: int
+    offsets: np.ndarray
 
 
 # Long by design: one reader of one MCAP file; its state (open file, summary, chunk
-# index, channel table) is shared by the reading steps, each a short method.
+# list, channel table) is shared by the reading steps, each a short method.
 class _McapBackend(_Backend):
     """MCAP storage (ros2 or ros1 profile), chunked or not, with or without a summary."""
 
@@ -48,46 +64,66 @@ class _McapBackend(_Backend):
         super().__init__(path, warnings, decompress)
         self.zstd = zstandard.ZstdDecompressor()
         self.file = open(path, 'rb')
-        self.mm = mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ)
-        self.u8 = np.frombuffer(self.mm, np.uint8)
-        self._released = 0   # pages before this offset were handed back (_release)
+        self.size = os.fstat(self.file.fileno()).st_size
         self.schemas: dict[int, str] = {}
         self.channels: dict[int, tuple[str, int, str]] = {}
         self.counts: dict[int, int] | None = None
+        self.indexed: list[tuple[int, int]] = []      # (start, end) from the chunk index
+        self.items: list[_Chunk | _Loose] = []
+        self.damage: list[str] = []
+        self.data_crc = (0, 0)                        # (DataEnd position, its CRC)
+        self._window = (0, b'')
         try:
             self._open()
         except BaseException as err:
             self.close()
-            if isinstance(err, (struct.error, ValueError, IndexError, UnicodeDecodeError)):
+            if isinstance(err, (struct.error, ValueError, IndexError, UnicodeDecodeError,
+                                OverflowError, OSError)):
                 raise InputError(f'{path}: damaged MCAP file ({err})') from None
             raise
 
+    # -- plain reads ----------------------------------------------------------------
+    def _read(self, pos: int, n: int) -> bytes:
+        """Return up to n bytes at pos (fewer at the end of the file)."""
+        if n <= 0 or pos >= self.size:
+            return b''
+        return os.pread(self.file.fileno(), min(n, self.size - pos), pos)
+
+    def _peek(self, pos: int, n: int) -> bytes:
+        """Return n bytes at pos through a small read-ahead window (short at the end)."""
+        start, data = self._window
+        if not (start <= pos and pos + n <= start + len(data)):
+            data = self._read(pos, max(n, _WINDOW))
+            self._window = start, data = pos, data
+        return data[pos - start:pos - start + n]
+
+    # -- opening --------------------------------------------------------------------
     def _open(self) -> None:
-        path, size = self.path, self.mm.size()
-        if self.mm[:8] != _MCAP_MAGIC or size < 17 or self.mm[8] != _OP_HEADER:
-            raise InputError(f'{path}: not an MCAP file (bad magic or header)')
-        self.data_start = 9 + 8 + struct.unpack_from('<Q', self.mm, 9)[0]
-        tail = self.mm[size - 37:] if size >= self.data_start + 37 else b''
+        head = self._read(0, 17)
+        if head[:8] != _MCAP_MAGIC or len(head) < 17 or head[8] != _OP_HEADER:
+            raise InputError(f'{self.path}: not an MCAP file (bad magic or header)')
+        self.data_start = 17 + struct.unpack_from('<Q', head, 9)[0]
+        tail = self._read(self.size - 37, 37) if self.size >= self.data_start + 37 else b''
         self.complete = tail[-8:] == _MCAP_MAGIC and tail[:1] == bytes([_OP_FOOTER])
-        self.data_end = size
+        self.data_end = self.size
         if self.complete:
             summary_start = struct.unpack_from('<Q', tail, 9)[0]
-            self.data_end = summary_start or size - 37
+            if self.data_start <= summary_start <= self.size - 37:
+                self.data_end = summary_start or self.size - 37
             if summary_start:
                 self._read_summary()
-        if not self.channels or self.counts is None:
-            self._discover()
+        self._scan()
         if not self.complete:
-            self.warnings.append(f'{path}: MCAP file is truncated (no footer: recording cut '
+            self.warnings.append(f'{self.path}: MCAP file is truncated (no footer: recording cut '
                                  'short?); every complete message is read')
 
-    # -- summary and discovery ------------------------------------------------------
     def _read_summary(self) -> None:
         try:
             self.file.seek(0)
             summary = make_reader(self.file).get_summary()
-        except (McapError, struct.error, ValueError, EOFError, OSError) as err:
-            self.warnings.append(f'{self.path}: unreadable MCAP summary ({err}); scanning')
+        except Exception as err:   # noqa: B902 - any failure of the library: scan instead
+            self.warnings.append(f'{self.path}: unreadable MCAP summary '
+                                 f'({type(err).__name__}: {err}); scanning the data')
             return
         if summary is None:
             return
@@ -98,145 +134,267 @@ class _McapBackend(_Backend):
                                          channel.message_encoding)
         if summary.statistics is not None:
             self.counts = dict(summary.statistics.channel_message_counts)
+        self.indexed = sorted((c.chunk_start_offset, c.chunk_start_offset + c.chunk_length)
+                              for c in summary.chunk_indexes)
 
-    def _add_record(self, op: int, buf, pos: int) -> None:
+    def _add_record(self, op: int, buf: bytes, pos: int) -> None:
         """Register a Schema or Channel record whose body starts at pos in buf."""
-        if op == _OP_SCHEMA:
-            schema_id = struct.unpack_from('<H', buf, pos)[0]
-            size = struct.unpack_from('<I', buf, pos + 2)[0]
-            name = bytes(buf[pos + 6:pos + 6 + size])
-            self.schemas[schema_id] = name.decode('utf-8', 'replace')
-        elif op == _OP_CHANNEL:
-            channel_id, schema_id = struct.unpack_from('<HH', buf, pos)
-            size = struct.unpack_from('<I', buf, pos + 4)[0]
-            topic = bytes(buf[pos + 8:pos + 8 + size]).decode('utf-8', 'replace')
-            pos += 8 + size
-            size2 = struct.unpack_from('<I', buf, pos)[0]
-            encoding = bytes(buf[pos + 4:pos + 4 + size2]).decode('utf-8', 'replace')
-            self.channels[channel_id] = (topic, schema_id, encoding)
-
-    def _discover(self) -> None:
-        """Scan the data section for channels and message counts (no usable summary)."""
-        counts: dict[int, int] = {}
-        for item in self._scan():
-            if isinstance(item, _ChunkInfo):
-                if item.indexes is not None and all(c in self.channels for c in item.indexes):
-                    for channel_id, index in item.indexes.items():
-                        counts[channel_id] = counts.get(channel_id, 0) + len(index)
-                    continue
-                raw = self._chunk_data(item)
-                if raw is None:
-                    continue
-                offsets = self._walk(raw)
-                channel_ids = _records(np.frombuffer(raw, np.uint8), offsets,
-                                       _MCAP_MESSAGE)['channel']
+        try:
+            if op == _OP_SCHEMA:
+                schema_id, size = struct.unpack_from('<HI', buf, pos)
+                self.schemas.setdefault(schema_id, bytes(buf[pos + 6:pos + 6 + size])
+                                        .decode('utf-8', 'replace'))
             else:
-                channel_ids = _records(self.u8, item, _MCAP_MESSAGE)['channel']
-            for channel_id, k in zip(*np.unique(channel_ids, return_counts=True)):
-                counts[int(channel_id)] = counts.get(int(channel_id), 0) + int(k)
-        self.counts = counts
+                channel_id, schema_id, size = struct.unpack_from('<HHI', buf, pos)
+                topic = bytes(buf[pos + 8:pos + 8 + size]).decode('utf-8', 'replace')
+                size2 = struct.unpack_from('<I', buf, pos + 8 + size)[0]
+                start = pos + 12 + size
+                encoding = bytes(buf[start:start + size2]).decode('utf-8', 'replace')
+                self.channels.setdefault(channel_id, (topic, schema_id, encoding))
+        except struct.error:
+            self.damage.append(f'damaged schema or channel record at byte {pos}')
 
-    # -- data section scan ----------------------------------------------------------
-    def _scan(self) -> Iterator[_ChunkInfo | np.ndarray]:
+    # -- data section walk ----------------------------------------------------------
+    def _header(self, pos: int) -> tuple[int, int] | None:
+        """(opcode, record end) of the record at pos, or None where none can be."""
+        head = self._peek(pos, 9)
+        if len(head) < 9:
+            return None
+        op, length = head[0], struct.unpack_from('<Q', head, 1)[0]
+        if op == 0 or 0x10 <= op < 0x80:
+            return None
+        return op, pos + 9 + length
+
+    def _chunk_ok(self, pos: int, end: int) -> bool:
+        """Whether a plausible Chunk record starts at pos (its lengths add up)."""
+        head = self._peek(pos, 45)
+        if len(head) < 41 or head[0] != _OP_CHUNK:
+            return False
+        length = struct.unpack_from('<Q', head, 1)[0]
+        name_len = struct.unpack_from('<I', head, 37)[0]
+        if name_len > 4:
+            return False
+        body = self._peek(pos + 41, name_len + 8)
+        if len(body) < name_len + 8 or body[:name_len] not in _COMPRESSIONS:
+            return False
+        data_len = struct.unpack_from('<Q', body, name_len)[0]
+        return length == 40 + name_len + data_len and (pos + 9 + length <= end
+                                                       or not self.complete)
+
+    def _message_ok(self, pos: int, end: int) -> bool:
+        """Whether a plausible loose Message record starts at pos, followed by another."""
+        head = self._peek(pos, 11)
+        if len(head) < 11 or head[0] != _OP_MESSAGE:
+            return False
+        length = struct.unpack_from('<Q', head, 1)[0]
+        channel = struct.unpack_from('<H', head, 9)[0]
+        nxt = pos + 9 + length
+        return (22 <= length and nxt <= end and channel in self.channels
+                and (nxt == end or self._header(nxt) is not None))
+
+    def _resync(self, pos: int, end: int) -> int | None:
+        """Return the next position after pos where a plausible record starts."""
+        known = [s for s, _ in self.indexed if s > pos]
+        limit = min(known[0] if known else end, end)
+        at = pos + 1
+        while at < limit:
+            window = self._read(at, min(1 << 20, limit - at))
+            if not window:
+                break
+            for k in np.flatnonzero((np.frombuffer(window, np.uint8) == _OP_CHUNK)
+                                    | (np.frombuffer(window, np.uint8) == _OP_MESSAGE)).tolist():
+                if self._chunk_ok(at + k, end) or self._message_ok(at + k, end):
+                    return at + k
+            at += len(window)
+        return known[0] if known and known[0] < end else None
+
+    def _scan(self) -> None:
         """
-        Walk the records of the data section.
+        Walk the data section's records: chunks and loose message runs in file order.
 
-        Yields
-        ------
-        _ChunkInfo or numpy.ndarray
-            Each chunk (with the message indexes that follow it), or (k,) int64 record
-            offsets of a run of messages stored outside chunks.
-
+        A record that cannot be (opcode 0, a length past the data section of a complete
+        file) is damage: the walk resumes at the next plausible record; chunks that the
+        summary's chunk index names and the walk missed are added.
         """
-        mm, end = self.mm, self.data_end
-        pos = self.data_start
-        pending: _ChunkInfo | None = None
+        pos, end = self.data_start, self.data_end
+        counts: dict[int, dict[int, int]] = {}
         loose: list[int] = []
-        while True:
-            if pos + 9 > end:
+        found: set[int] = set()
+        last_chunk: int | None = None
+
+        def flush():
+            if loose:
+                last = self._header(loose[-1])
+                self.items.append(_Loose(loose[0], last[1] if last else end,
+                                         np.array(loose, np.int64)))
+                loose.clear()
+        while pos + 9 <= end:
+            rec = self._header(pos)
+            if rec is not None and rec[1] > end and not self.complete and rec[0] == _OP_CHUNK:
+                flush()
+                self.items.append(_Chunk(pos, end, self._start_ns(pos), None))
+                found.add(pos)
                 break
-            op = mm[pos]
-            body_end = pos + 9 + struct.unpack_from('<Q', mm, pos + 1)[0]
-            if body_end > end:
-                if pending is not None:
-                    # Cut among the chunk's message indexes: they may be incomplete.
-                    yield pending._replace(indexes=None)
-                    pending = None
-                if op == _OP_CHUNK:
-                    yield _ChunkInfo(pos, end, False, None)
-                break
-            if op == _OP_MESSAGE_INDEX and pending is not None:
-                channel_id, size = struct.unpack_from('<HI', mm, pos + 9)
-                size = min(size, body_end - pos - 15) // 16 * 16
-                index = np.frombuffer(mm, '<u8', count=size // 8, offset=pos + 15)
-                indexes = pending.indexes if pending.indexes is not None else {}
-                indexes[channel_id] = index.reshape(-1, 2)
-                pending = pending._replace(indexes=indexes)
-                pos = body_end
+            if rec is None or rec[1] > end:
+                if not self.complete and rec is not None:
+                    break   # the last record, cut short
+                flush()
+                nxt = self._resync(pos, end)
+                self.damage.append(f'damaged record at byte {pos}'
+                                   + ('' if nxt is None else f', resumed at byte {nxt}'))
+                if nxt is None:
+                    break
+                pos = nxt
                 continue
-            if pending is not None:
-                yield pending
-                pending = None
+            op, rec_end = rec
+            if op != _OP_MESSAGE_INDEX:
+                last_chunk = None
             if op == _OP_MESSAGE:
                 loose.append(pos)
                 if len(loose) >= _FETCH_ROWS:
-                    yield np.array(loose, np.int64)
-                    loose = []
-                pos = body_end
-                continue
-            if loose:
-                yield np.array(loose, np.int64)
-                loose = []
-            if op == _OP_CHUNK:
-                pending = _ChunkInfo(pos, body_end, True, None)
-            elif op in (_OP_SCHEMA, _OP_CHANNEL):
-                self._add_record(op, mm, pos + 9)
-            elif op in (_OP_DATA_END, _OP_FOOTER):
-                break
-            pos = body_end
-        if pending is not None:
-            yield pending
-        if loose:
-            yield np.array(loose, np.int64)
-
-    def _chunk_data(self, chunk: _ChunkInfo) -> bytes | None:
-        """Return a chunk's records decompressed (what is readable, if cut short)."""
-        mm, body = self.mm, chunk.record_pos + 9
-        try:
-            size = struct.unpack_from('<Q', mm, body + 16)[0]
-            name_len = struct.unpack_from('<I', mm, body + 28)[0]
-            compression = bytes(mm[body + 32:body + 32 + name_len]).decode()
-            data_len = struct.unpack_from('<Q', mm, body + 32 + name_len)[0]
-        except (struct.error, UnicodeDecodeError):
-            return None
-        data_pos = body + 40 + name_len
-        # A view of the map: zstd reads it in place (a slice of the map is a copy).
-        data = memoryview(self.u8[data_pos:min(data_pos + data_len, chunk.body_end)])
-        try:
-            if compression == '':
-                raw = data.tobytes()
-            elif compression == 'zstd' and chunk.complete:
-                raw = self.zstd.decompress(data, max_output_size=size)
-            elif compression == 'zstd':
-                # A chunk cut short: keep what its complete zstd blocks hold.
-                raw = self.zstd.decompressobj().decompress(data)
-            elif compression == 'lz4' and chunk.complete:
-                raw = lz4.frame.decompress(data.tobytes())
-            elif compression == 'lz4':
-                raw = lz4.frame.LZ4FrameDecompressor().decompress(data.tobytes())
+                    flush()
+            elif op == _OP_MESSAGE_INDEX and last_chunk is not None:
+                body = self._peek(pos + 9, 6)
+                if len(body) == 6:
+                    channel_id, size = struct.unpack_from('<HI', body)
+                    per = counts.setdefault(last_chunk, {})
+                    per[channel_id] = per.get(channel_id, 0) + size // 16
             else:
-                self.warnings.append(f'{self.path}: chunk compression {compression!r} is not '
-                                     'supported; chunk skipped')
-                return None
-        except (zstandard.ZstdError, RuntimeError, ValueError) as err:
-            if chunk.complete:
-                self.warnings.append(f'{self.path}: damaged chunk at byte {chunk.record_pos} '
-                                     f'skipped ({err})')
+                flush()
+                if op == _OP_CHUNK:
+                    if self._chunk_ok(pos, end):
+                        self.items.append(_Chunk(pos, rec_end, self._start_ns(pos), None))
+                        found.add(pos)
+                        last_chunk = pos
+                    else:
+                        self.damage.append(f'damaged chunk header at byte {pos}')
+                elif op in (_OP_SCHEMA, _OP_CHANNEL):
+                    self._add_record(op, self._peek(pos + 9, rec_end - pos - 9), 0)
+                elif op == _OP_DATA_END:
+                    body = self._peek(pos + 9, 4)
+                    self.data_crc = (pos, struct.unpack('<I', body)[0] if len(body) == 4 else 0)
+                    break
+                elif op == _OP_FOOTER:
+                    break
+            pos = rec_end
+        flush()
+        for start, stop in self.indexed:
+            if start not in found and stop <= end and self._chunk_ok(start, end):
+                self.items.append(_Chunk(start, stop, self._start_ns(start), None))
+        self.items = self._without_overlap(
+            [it._replace(counts=counts.get(it.pos)) if isinstance(it, _Chunk) else it
+             for it in self.items])
+        if not any(isinstance(it, _Loose) for it in self.items):
+            # Chunks may overlap in time (valid MCAP): read them in start-time order.
+            self.items.sort(key=lambda c: (c.start_ns, c.pos))
+        if self.counts is None:
+            self.counts = self._index_counts()
+        if not self.channels or self.counts is None:
+            self._discover()
+
+    @staticmethod
+    def _without_overlap(items: list) -> list:
+        """Drop loose messages inside a chunk (found by a resync into its records)."""
+        spans = sorted((it.pos, it.end) for it in items if isinstance(it, _Chunk))
+        if not spans:
+            return items
+        starts = np.array([a for a, _ in spans], np.int64)
+        ends = np.array([b for _, b in spans], np.int64)
+        out = []
+        for it in items:
+            if isinstance(it, _Loose):
+                k = np.searchsorted(starts, it.offsets, 'right') - 1
+                inside = (k >= 0) & (it.offsets < ends[np.maximum(k, 0)])
+                if inside.all():
+                    continue
+                it = it._replace(offsets=it.offsets[~inside])
+            out.append(it)
+        return out
+
+    def _start_ns(self, pos: int) -> int:
+        head = self._peek(pos + 9, 8)
+        return struct.unpack('<Q', head)[0] if len(head) == 8 else 0
+
+    def _index_counts(self) -> dict[int, int] | None:
+        """Message counts per channel from the message indexes, when every chunk has them."""
+        chunks = [it for it in self.items if isinstance(it, _Chunk)]
+        if not chunks or any(c.counts is None for c in chunks) or not self.complete:
             return None
-        if chunk.complete and len(raw) != size:
-            self.warnings.append(f'{self.path}: damaged chunk at byte {chunk.record_pos} '
-                                 f'({len(raw)} of {size} bytes); its complete records are read')
+        total: dict[int, int] = {}
+        for chunk in chunks:
+            for channel_id, k in (chunk.counts or {}).items():
+                total[channel_id] = total.get(channel_id, 0) + k
+        return total
+
+    def _discover(self) -> None:
+        """Count messages per channel by reading the data (no usable summary or index)."""
+        counts: dict[int, int] = {}
+        for item in self.items:
+            if isinstance(item, _Chunk):
+                raw = self._chunk_data(item, lambda text: None)
+                if raw is None:
+                    for channel_id, k in (item.counts or {}).items():
+                        counts[channel_id] = counts.get(channel_id, 0) + k
+                    continue
+                u8 = np.frombuffer(raw, np.uint8)
+                offsets = self._walk(raw)
+                ids = _records(u8, offsets[offsets + 31 <= u8.size], _MCAP_MESSAGE)['channel']
+            else:
+                data = np.frombuffer(self._read(item.start, item.end - item.start), np.uint8)
+                offsets = item.offsets - item.start
+                ids = _records(data, offsets[offsets + 31 <= data.size], _MCAP_MESSAGE)['channel']
+            for channel_id, k in zip(*np.unique(ids, return_counts=True)):
+                counts[int(channel_id)] = counts.get(int(channel_id), 0) + int(k)
+        self.counts = counts
+
+    # -- chunks ---------------------------------------------------------------------
+    def _chunk_data(self, chunk: _Chunk, lost: Callable[[str], None]) -> bytes | None:
+        """Return a chunk's records decompressed and CRC-checked, or None (with a reason)."""
+        record = self._read(chunk.pos, chunk.end - chunk.pos)
+        complete = len(record) == chunk.end - chunk.pos and chunk.end <= self.data_end
+        if len(record) < 41:
+            return None
+        size, crc, name_len = struct.unpack_from('<QII', record, 25)
+        compression = record[41:41 + name_len]
+        data_len = struct.unpack_from('<Q', record, 41 + name_len)[0]
+        data_pos = 49 + name_len
+        data = memoryview(record)[data_pos:data_pos + data_len]
+        complete = complete and len(data) == data_len
+        try:
+            if compression == b'':
+                raw = bytes(data)
+            elif compression == b'zstd' and complete:
+                raw = self.zstd.decompress(data, max_output_size=max(size, 1))
+            elif compression == b'zstd':
+                raw = self.zstd.decompressobj().decompress(data)   # a cut chunk's whole blocks
+            elif compression == b'lz4' and complete:
+                raw = lz4.frame.decompress(bytes(data))
+            elif compression == b'lz4':
+                raw = lz4.frame.LZ4FrameDecompressor().decompress(bytes(data))
+            else:
+                lost(f'chunk compression {compression!r} is not supported')
+                return None
+        except (zstandard.ZstdError, RuntimeError, ValueError, MemoryError) as err:
+            if complete:
+                lost(f'undecompressable chunk at byte {chunk.pos} ({err})')
+                return None
+            raw = b''
+        if complete and (len(raw) != size or (crc and zlib.crc32(raw) != crc)):
+            lost(f'chunk at byte {chunk.pos} fails its CRC check')
+            return None
         return raw
+
+    def _data_crc_ok(self) -> bool:
+        """Check the DataEnd record's CRC of the data section (no chunk CRC covers it)."""
+        end, want = self.data_crc
+        crc, pos = 0, 0
+        while want and pos < end:
+            block = self._read(pos, min(1 << 24, end - pos))
+            if not block:
+                return False
+            crc = zlib.crc32(block, crc)
+            pos += len(block)
+        return not want or crc == want
 
     def _walk(self, raw: bytes) -> np.ndarray:
         """
@@ -261,27 +419,20 @@ class _McapBackend(_Backend):
                     self._add_record(op, raw, pos + 9)
                 pos += stride
                 continue
-            run = 1
-            nxt = pos + stride
-            if (length >= 22 and nxt + 9 <= end and raw[nxt] == _OP_MESSAGE
-                    and unpack(raw, nxt + 1)[0] == length):
-                # Check growing windows of candidates: long runs cost a few numpy calls,
-                # short ones (interleaved topics) only a small window.
-                k = (end - pos) // stride
-                window = 32
-                while run < k:
-                    cand = pos + stride * np.arange(run, min(k, run + window), dtype=np.int64)
-                    if cand[-1] + 31 > end:
-                        cand = cand[:-1]
-                    heads = _records(u8, cand, _MCAP_MESSAGE)
-                    same = (heads['op'] == _OP_MESSAGE) & (heads['length'] == length)
-                    if not same.size:
-                        break
-                    if not same.all():
-                        run += int(np.argmin(same))
-                        break
-                    run += cand.size
-                    window *= 8
+            # Check growing windows of the records that would follow at this stride (a
+            # strided view, no copy): long runs cost a few numpy calls, short ones
+            # (interleaved topics) only a small window.
+            run, k, window = 1, (end - pos) // stride, 64
+            while length >= 22 and run < k:
+                n = min(k, run + window) - run
+                heads = np.ndarray((n,), _MCAP_MESSAGE, buffer=u8, offset=pos + stride * run,
+                                   strides=(stride,))
+                same = (heads['op'] == _OP_MESSAGE) & (heads['length'] == length)
+                if not same.all():
+                    run += int(np.argmin(same))
+                    break
+                run += n
+                window *= 16
             runs.append(pos + stride * np.arange(run, dtype=np.int64))
             pos += stride * run
         return np.concatenate(runs) if runs else np.zeros(0, np.int64)
@@ -291,23 +442,26 @@ class _McapBackend(_Backend):
         """Return one entry per topic (channels with the same topic are merged)."""
         found: dict[str, _Topic] = {}
         for channel_id, (name, schema_id, encoding) in sorted(self.channels.items()):
-            count = (self.counts or {}).get(channel_id, 0)
+            count = None if self.counts is None else self.counts.get(channel_id, 0)
             msgtype = self.schemas.get(schema_id, '')
             if name in found:
                 old = found[name]
-                found[name] = old._replace(n_messages=(old.n_messages or 0) + count)
+                both = None if count is None or old.n_messages is None else old.n_messages + count
+                found[name] = old._replace(n_messages=both)
             else:
                 found[name] = _Topic(name, msgtype, count, encoding)
         return list(found.values())
 
+    def count(self, topic: _Topic) -> int | None:
+        """The topic's count, None for a truncated file (whose summary is lost with it)."""
+        return topic.n_messages if self.complete else None
+
     def _message_piece(self, buf: np.ndarray, offsets: np.ndarray, wanted: set,
                        encoding: str) -> _Piece | None:
         """Decode the Message records at (k,) offsets of buf that belong to wanted."""
+        offsets = offsets[offsets + 31 <= buf.size]
         if offsets.size == 0:
             return None
-        inside = offsets + 31 <= buf.size
-        if not inside.all():
-            offsets = offsets[inside]
         heads = _records(buf, offsets, _MCAP_MESSAGE)
         channels = heads['channel']
         if len(wanted) == 1:
@@ -320,92 +474,32 @@ class _McapBackend(_Backend):
             offsets, heads, lengths = offsets[mine], heads[mine], lengths[mine]
         if offsets.size == 0:
             return None
-        recv_ns = heads['log_time'].astype(np.int64)
-        if recv_ns.size > 1 and (np.diff(recv_ns) < 0).any():
-            order = np.argsort(recv_ns, kind='stable')
-            offsets, lengths, recv_ns = offsets[order], lengths[order], recv_ns[order]
-        return _make_piece(buf, offsets + 31, lengths, recv_ns, encoding, self.decompress)
-
-    def _plain_piece(self, buf: np.ndarray, channel: int, offsets: np.ndarray,
-                     encoding: str) -> _Piece | None:
-        """
-        Read one channel's indexed messages of a chunk in one compiled call, or None.
-
-        The common case (every indexed record a Message of the channel, in log-time
-        order, with plain Imu payloads, no per-message compression); anything else
-        returns None and the chunk takes the general path, with the same result.
-        """
-        if native.LIB is None or self.decompress is not None or offsets.size == 0:
-            return None
-        got = native.mcap_imu(buf, offsets, channel, encoding == 'ros1')
-        if got is None:
-            return None
-        first = int(offsets[0])
-        size = int.from_bytes(buf[first + 1:first + 9].tobytes(), 'little') - 22
-        frame_id = payload_frame_id(buf[first + 31:first + 31 + size].tobytes(), encoding)
-        return _Piece(*got, 0, frame_id)
+        return _make_piece(buf, offsets + 31, lengths, heads['log_time'].astype(np.int64),
+                           encoding, self.decompress)
 
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
-        """Yield the topic's messages chunk by chunk (stop with a warning at damage)."""
-        try:
-            yield from self._pieces(topic)
-        except (struct.error, ValueError, IndexError) as err:
-            self.warnings.append(f'{self.path}: damaged MCAP data ({err}); read stopped')
-
-    def _pieces(self, topic: _Topic) -> Iterator[_Piece]:
+        """Yield the topic's messages chunk by chunk; damage is skipped with a warning."""
         wanted = {cid for cid, (name, _, _) in self.channels.items() if name == topic.name}
-        for item in self._scan():
-            if isinstance(item, _ChunkInfo):
-                if item.indexes is not None and not wanted & item.indexes.keys():
-                    continue   # the index says: nothing of this topic inside
-                raw = self._chunk_data(item)
+        for text in self.damage:
+            self.warnings.append(f'{self.path}: {text}')
+        if any(isinstance(it, _Loose) for it in self.items) and not self._data_crc_ok():
+            self.warnings.append(f'{self.path}: the data section fails its CRC check: values '
+                                 'of messages outside chunks may be damaged')
+        for item in self.items:
+            if isinstance(item, _Chunk):
+                raw = self._chunk_data(item, lambda text: self.warnings.append(
+                    f'{self.path}: {text}; chunk skipped'))
                 if raw is None:
                     continue
-                buf = np.frombuffer(raw, np.uint8)
-                offsets = None
-                piece = None
-                if item.indexes is not None:
-                    parts = [(c, item.indexes[c][:, 1]) for c in wanted if c in item.indexes]
-                    if len(parts) == 1:
-                        piece = self._plain_piece(buf, *parts[0], topic.encoding)
-                    if piece is None:
-                        offsets = np.concatenate([o for _, o in parts]).astype(np.int64)
-                        if not ((offsets + 31 <= buf.size).all()
-                                and (buf[offsets] == _OP_MESSAGE).all()):
-                            offsets = None   # an index that does not match the chunk: walk it
-                if piece is None:
-                    piece = self._message_piece(
-                        buf, self._walk(raw) if offsets is None else offsets, wanted,
-                        topic.encoding)
-                self._release(item.body_end)
+                piece = self._message_piece(np.frombuffer(raw, np.uint8), self._walk(raw),
+                                            wanted, topic.encoding)
             else:
-                piece = self._message_piece(self.u8, item, wanted, topic.encoding)
-                self._release(int(item.max()) if item.size else 0)
+                data = self._read(item.start, item.end - item.start)
+                piece = self._message_piece(np.frombuffer(data, np.uint8),
+                                            item.offsets - item.start, wanted, topic.encoding)
             if piece is not None:
                 yield piece
 
-    def _release(self, pos: int) -> None:
-        """
-        Drop the pages before ``pos`` from this process's memory (not from the page cache).
-
-        The map is read in file order and a decoded piece holds copies, so pages behind
-        the reader are not needed again; without this the whole bag counts in the
-        process's resident size (a night's bag: 0.9 GB), which is what a Dask worker's
-        memory limit watches.
-        """
-        end = pos - pos % mmap.PAGESIZE
-        if end > self._released and hasattr(mmap, 'MADV_DONTNEED'):
-            try:
-                self.mm.madvise(mmap.MADV_DONTNEED, self._released, end - self._released)
-            except (OSError, ValueError):
-                return
-            self._released = end
-
     def close(self) -> None:
-        """Release the memory map and the file."""
-        self.u8 = np.empty(0, np.uint8)
-        try:
-            self.mm.close()
-        except BufferError:
-            pass   # a block still views the map; it closes when collected
+        """Close the file."""
         self.file.close()

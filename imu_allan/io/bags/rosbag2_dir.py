@@ -90,7 +90,8 @@ class _Rosbag2DirBackend(_Backend):
             if not isinstance(info, dict):
                 raise TypeError('not a mapping')
             return info
-        except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as err:
+        except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError,
+                ValueError) as err:
             reason = str(err).splitlines()[0] if str(err) else type(err).__name__
             self.warnings.append(f'{meta}: unparsable ({reason}); reading the storage files '
                                  'directly')
@@ -106,7 +107,12 @@ class _Rosbag2DirBackend(_Backend):
             if mode not in ('', 'none') and fmt != 'zstd':
                 raise InputError(f'{self.path}: compression format {fmt!r} is not supported '
                                  '(only zstd)')
-            for name in info.get('relative_file_paths') or []:
+            names = info.get('relative_file_paths') or []
+            for name in names if isinstance(names, list) else [names]:
+                if not isinstance(name, str) or not name:
+                    self.warnings.append(f'{self.path}: metadata.yaml names a storage file '
+                                         f'{name!r} that is not a file name; ignored')
+                    continue
                 # Old bags store 'bagname/bagname_0.db3'; the file sits in the directory.
                 candidates = [self.path / PurePath(name).name, self.path / name]
                 found = next((c for c in candidates if c.is_file()), None)
@@ -154,11 +160,11 @@ class _Rosbag2DirBackend(_Backend):
         try:
             entries = (info or {}).get('topics_with_message_count') or []
             counts = {x['topic_metadata']['name']: int(x['message_count']) for x in entries}
-        except (KeyError, TypeError, ValueError):
+        except (KeyError, TypeError, ValueError, AttributeError):
             counts = {}
         for name, count in counts.items():
-            # metadata.yaml counts the whole bag: it wins over what the files say.
-            if name in merged:
+            # metadata.yaml's counts are hints (they go stale): the files' own counts win.
+            if name in merged and merged[name].n_messages is None:
                 merged[name] = merged[name]._replace(n_messages=count)
         return merged
 
@@ -166,15 +172,15 @@ class _Rosbag2DirBackend(_Backend):
         """Return the topics of all storage files."""
         return list(self._topics.values())
 
-    def count(self, topic: _Topic) -> int:
-        """Count a topic's messages over all files."""
-        if topic.n_messages is not None:
-            return topic.n_messages
-        total = 0
+    def count(self, topic: _Topic) -> int | None:
+        """Count a topic's messages over all files (metadata.yaml's count if they cannot)."""
+        counts = []
         for part in self.parts:
             own = next((t for t in part.topics() if t.name == topic.name), None)
-            total += part.count(own) if own is not None else 0
-        return total
+            counts.append(part.count(own) if own is not None else 0)
+        if all(c is not None for c in counts):
+            return sum(counts)
+        return topic.n_messages
 
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield the topic's messages file after file (split bags)."""

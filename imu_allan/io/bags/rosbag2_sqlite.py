@@ -4,10 +4,12 @@ rosbag2 sqlite3 storage: the messages table read from its B-tree pages, or by SQ
 Part of :mod:`imu_allan.io.bag_reader`.
 """
 
-import mmap
+import os
 from pathlib import Path
+import shutil
 import sqlite3
 import struct
+import tempfile
 from typing import Callable, Iterator
 from urllib.parse import quote
 
@@ -20,16 +22,53 @@ from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _Piece, _
 from imu_allan.io.imu_cdr import _gather, _join
 
 
-def _connect_sqlite(path: Path) -> sqlite3.Connection:
-    """Open a sqlite3 file read-only; a read-only directory needs 'immutable'."""
+def _connect_sqlite(path: Path, warnings: list[str]) -> tuple[sqlite3.Connection, Path,
+                                                            tempfile.TemporaryDirectory | None]:
+    """
+    Open a sqlite3 file read-only: (connection, file opened, temporary copy or None).
+
+    A file in a read-only directory cannot get the shared-memory file that read-only
+    mode needs: without a write-ahead log it is opened 'immutable'; with one (rosbag2's
+    resilient profile writes WAL) the file and its log are copied to a temporary
+    directory first, since 'immutable' would ignore the rows that live in the log.
+    """
     uri = 'file:' + quote(str(path.resolve()))
     # One thread at a time, but not always the opening one (readers may prefetch).
     try:
         conn = sqlite3.connect(uri + '?mode=ro', uri=True, check_same_thread=False)
         conn.execute('SELECT name FROM sqlite_master LIMIT 1').fetchall()
-        return conn
+        return conn, path, None
     except sqlite3.OperationalError:
-        return sqlite3.connect(uri + '?immutable=1', uri=True, check_same_thread=False)
+        pass
+    except sqlite3.DatabaseError as err:
+        raise InputError(f'{path}: damaged or not a sqlite3 database ({_line(err)})') from None
+    wal = path.with_name(path.name + '-wal')
+    if not (wal.exists() and wal.stat().st_size > 0):
+        conn = sqlite3.connect(uri + '?immutable=1', uri=True, check_same_thread=False)
+        return conn, path, None
+    tmp = tempfile.TemporaryDirectory(prefix='imu_allan_wal_')
+    copy = Path(tmp.name) / path.name
+    try:
+        shutil.copyfile(path, copy)
+        shutil.copyfile(wal, copy.with_name(copy.name + '-wal'))
+    except OSError as err:
+        tmp.cleanup()
+        raise InputError(f'{path}: a write-ahead-log bag in a read-only place, and no room to '
+                         f'copy it aside ({err.strerror}); copy the bag somewhere writable') from None
+    warnings.append(f'{path}: write-ahead log in a read-only directory: bag and log copied to '
+                    'a temporary directory to read every committed message')
+    uri = 'file:' + quote(str(copy))
+    return sqlite3.connect(uri + '?mode=ro', uri=True, check_same_thread=False), copy, tmp
+
+
+#: Rowids read one by one around a damaged page at most.
+_MAX_POINT_READS = 1 << 16
+
+
+def _line(err: BaseException) -> str:
+    """The first line of an error's text (sqlite quotes whole schemas in some)."""
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__
 
 
 class _SqliteBackend(_Backend):
@@ -40,12 +79,12 @@ class _SqliteBackend(_Backend):
     def __init__(self, path: Path, warnings: list[str],
                  decompress: Callable[[bytes], bytes] | None = None) -> None:
         super().__init__(path, warnings, decompress)
+        self.conn, self.db_path, self.tmp = _connect_sqlite(path, warnings)
         try:
-            self.conn = _connect_sqlite(path)
             tables = {row[0] for row in self.conn.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
             if not {'messages', 'topics'} <= tables:
-                self.conn.close()
+                self.close()
                 raise InputError(f'{path}: sqlite3 file without the rosbag2 tables '
                                  '(messages, topics): not a rosbag2 bag')
             rows = self.conn.execute(
@@ -54,15 +93,23 @@ class _SqliteBackend(_Backend):
             total = None
             if len({row[1] for row in rows}) == 1:
                 # One topic: the total (answered from the timestamp index) is its count.
-                total = self.conn.execute('SELECT count(*) FROM messages').fetchone()[0]
+                total = self._total()
         except sqlite3.DatabaseError as err:
-            raise InputError(f'{path}: damaged or not a sqlite3 database ({err})') from None
+            self.close()
+            raise InputError(f'{path}: damaged or not a sqlite3 database ({_line(err)})') from None
         self.ids: dict[str, list[int]] = {}
         self._topics: dict[str, _Topic] = {}
         for topic_id, name, msgtype, fmt in rows:
             self.ids.setdefault(name, []).append(topic_id)
             count = total if total is not None else metadata_counts.get(name)
             self._topics.setdefault(name, _Topic(name, msgtype, count, fmt))
+
+    def _total(self) -> int | None:
+        """All rows of the messages table (None when a damaged page hides the count)."""
+        try:
+            return self.conn.execute('SELECT count(*) FROM messages').fetchone()[0]
+        except sqlite3.DatabaseError:
+            return None
 
     def _metadata_counts(self) -> dict[str, int]:
         """Return topic counts of the metadata table (schema 3+) of a one-file bag."""
@@ -84,68 +131,121 @@ class _SqliteBackend(_Backend):
         return list(self._topics.values())
 
     def count(self, topic: _Topic) -> int:
-        """Count a topic's messages (a scan of the messages table when not stored)."""
-        if topic.n_messages is not None:
-            return topic.n_messages
+        """Count a topic's messages by SQL (the stored hint where a damaged page hides it)."""
+        if len(self.ids) == 1:
+            total = self._total()
+            return topic.n_messages if total is None else total
         ids = self.ids[topic.name]
         try:
             return self.conn.execute(
                 f'SELECT count(*) FROM messages WHERE topic_id IN ({",".join("?" * len(ids))})',
                 ids).fetchone()[0]
-        except sqlite3.DatabaseError as err:
-            raise InputError(f'{self.path}: damaged sqlite3 database ({err})') from None
+        except sqlite3.DatabaseError:
+            return topic.n_messages
 
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """
-        Yield the topic's messages in receive-time order.
+        Yield the topic's messages in rowid (recording) order.
 
         Fast path: the table's B-tree pages are read straight from the file (see
-        :class:`_SqlitePages`); whatever that path cannot vouch for (a write-ahead log
-        next to the file, overflow pages of the wanted topic, an unusual schema, any
-        inconsistency) is read with SQL instead.
+        :class:`_SqlitePages`); from the first row that path cannot vouch for (a
+        write-ahead log next to the file, overflow pages of the wanted topic, an unusual
+        schema, any inconsistency) on, the rest is read with SQL.
         """
-        located = None
+        after = 0
         if self.decompress is None:
             try:
-                located = _SqlitePages(self.path, self.conn).locate(
-                    self.ids[topic.name], self.count(topic))
+                pages = _SqlitePages(self.db_path, self.conn)
+                for piece, last_rowid in pages.pieces(self.ids[topic.name], topic.encoding):
+                    after = last_rowid
+                    yield piece
+                return
             except (_NotPlain, OSError):
-                located = None
-        if located is None:
-            yield from self._sql_pieces(topic)
-            return
-        u8, starts, lengths, recv_ns = located
-        step = 4 * _FETCH_ROWS
-        for k in range(0, starts.size, step):
-            yield _make_piece(u8, starts[k:k + step], lengths[k:k + step],
-                              recv_ns[k:k + step], topic.encoding, None)
+                pass
+        yield from self._sql_pieces(topic, after)
 
-    def _sql_pieces(self, topic: _Topic) -> Iterator[_Piece]:
-        """Yield the topic's messages in receive-time order, one SQL fetch at a time."""
+    def _sql_pieces(self, topic: _Topic, after: int) -> Iterator[_Piece]:
+        """
+        Yield the topic's messages with rowid > after, one SQL fetch at a time.
+
+        Rows are read in rowid order, the table's own B-tree, so a damaged page costs
+        only its own rows: the read resumes past it (:meth:`_past_damage`).
+        """
         ids = self.ids[topic.name]
-        n_read = 0
-        try:
-            # One ordered SELECT.  Fetching costs about 1.5 us per row in sqlite and the
-            # sqlite3 module; letting sqlite concatenate rows (group_concat) was tried and
-            # saves only about 10 %: its aggregate step is just as slow.
-            cursor = self.conn.execute(
-                'SELECT timestamp, data FROM messages WHERE topic_id IN '
-                f'({",".join("?" * len(ids))}) ORDER BY timestamp, id', ids)
-            while True:
-                rows = cursor.fetchmany(_FETCH_ROWS)
-                if not rows:
-                    return
-                recv, payloads = zip(*rows)
-                n_read += len(rows)
-                yield _make_piece(*_join(payloads), np.array(recv, np.int64), topic.encoding,
-                                  self.decompress)
-        except sqlite3.DatabaseError as err:
-            self.warnings.append(f'{self.path}: damaged sqlite3 database ({err}); read stopped '
-                                 f'after {n_read} messages of {topic.name}')
+        sql = ('SELECT id, timestamp, data FROM messages WHERE id > ? AND topic_id IN '
+               f'({",".join("?" * len(ids))}) ORDER BY id')
+        while after is not None:
+            rows: list = []
+            error = None
+            try:
+                # Row by row (as fetchmany steps anyway): an error keeps the rows before it.
+                for row in self.conn.execute(sql, [after, *ids]):
+                    rows.append(row)
+                    if len(rows) >= _FETCH_ROWS:
+                        after = rows[-1][0]
+                        yield self._piece(rows, topic)
+                        rows = []
+            except sqlite3.DatabaseError as err:
+                error = err
+            if rows:
+                after = rows[-1][0]
+                yield self._piece(rows, topic)
+            if error is None:
+                return
+            nxt = self._past_damage(after)
+            # The rows between, one at a time: all but those on the damaged page come back.
+            rows = self._one_by_one(after, nxt, ids)
+            if rows:
+                yield self._piece(rows, topic)
+            self.warnings.append(f'{self.path}: damaged sqlite3 page after row {after} '
+                                 f'({_line(error)}); ' + ('read stopped' if nxt is None else
+                                                          f'read resumed after row {nxt}'))
+            after = nxt
+
+    def _one_by_one(self, after: int, bound: int | None, ids: list[int]) -> list:
+        """Rows after < id <= bound of the topic that SQL reads one rowid at a time."""
+        rows = []
+        stop = after + _MAX_POINT_READS if bound is None else min(bound, after + _MAX_POINT_READS)
+        for rowid in range(after + 1, stop + 1):
+            try:
+                row = self.conn.execute('SELECT id, topic_id, timestamp, data FROM messages '
+                                        'WHERE id = ?', (rowid,)).fetchone()
+            except sqlite3.DatabaseError:
+                continue
+            if row is not None and row[1] in ids:
+                rows.append((row[0], row[2], row[3]))
+        return rows
+
+    def _piece(self, rows: list, topic: _Topic) -> _Piece:
+        _, recv, payloads = zip(*rows)
+        return _make_piece(*_join(payloads), np.array(recv, np.int64), topic.encoding,
+                           self.decompress)
+
+    def _past_damage(self, after: int) -> int | None:
+        """Return the smallest rowid bound past a damaged page that SQL reads again."""
+        def readable(bound: int) -> bool:
+            try:
+                self.conn.execute('SELECT id, timestamp, data FROM messages WHERE id > ? '
+                                  'ORDER BY id LIMIT 64', (bound,)).fetchall()
+                return True
+            except sqlite3.DatabaseError:
+                return False
+        step = 1
+        while not readable(after + step):
+            step *= 2
+            if after + step >= 1 << 63:
+                return None
+        low, high = after + step // 2, after + step     # unreadable, readable
+        while high - low > 1:
+            mid = (low + high) // 2
+            low, high = (low, mid) if readable(mid) else (mid, high)
+        return high
 
     def close(self) -> None:
-        """Close the database."""
+        """Close the database (and remove a temporary copy)."""
         self.conn.close()
+        if self.tmp is not None:
+            self.tmp.cleanup()
 
 
 class _NotPlain(Exception):
@@ -212,19 +312,20 @@ def _serial_int(u8: np.ndarray, pos: np.ndarray, serial: np.ndarray) -> np.ndarr
 # pages) whose steps share the open file; each is a short method.
 class _SqlitePages:
     """
-    Locate the rows of rosbag2's messages table by reading the file's pages directly.
+    Read the rows of rosbag2's messages table from the file's pages directly.
 
     The sqlite3 module costs about 1.5 us per fetched row, most of the reading time of
     a large bag.  rosbag2's table is ``messages(id INTEGER PRIMARY KEY, topic_id,
     timestamp, data)``: a rowid B-tree whose leaf cells hold the record (header of
     serial types, then topic_id, timestamp and the data blob) inline unless it is
-    larger than the page.  The interior pages are walked in key order, then every
-    leaf cell is parsed at once with numpy (varints, serial types), giving the offset
-    of each payload in the memory-mapped file (sqlite file format, sections 1.3, 1.6
-    and 2.1 of https://www.sqlite.org/fileformat2.html).  Safety: refused (raise
-    _NotPlain, the caller uses SQL) for a file with a write-ahead log or hot journal,
-    another table layout, wanted rows that spill to overflow pages, or any page or
-    cell that does not check out; and the row count must equal the one sqlite gives.
+    larger than the page.  The interior pages are walked level by level, then the leaf
+    pages are read in batches (plain reads: a file that shrinks is a short read, never
+    a SIGBUS) and every leaf cell is parsed at once with numpy (varints, serial types)
+    (sqlite file format, sections 1.3, 1.6 and 2.1 of
+    https://www.sqlite.org/fileformat2.html).  Safety: refused (raise _NotPlain, the
+    caller reads the rest with SQL) for a file with a write-ahead log or hot journal,
+    another table layout, wanted rows that spill to overflow pages, rowids that do not
+    increase, or any page or cell that does not check out.
     """
 
     def __init__(self, path: Path, conn: sqlite3.Connection) -> None:
@@ -246,100 +347,94 @@ class _SqlitePages:
             raise _NotPlain('not the rosbag2 messages layout')
         self.root = int(row[0])
 
-    def locate(self, topic_ids: list[int], expected: int):
-        """
-        Return (u8, starts, lengths, recv_ns) of the topic's payloads, time-ordered.
-
-        ``u8`` views the memory-mapped file; the map lives as long as the arrays.
-        """
+    def pieces(self, topic_ids: list[int], encoding: str) -> Iterator[tuple[_Piece, int]]:
+        """Yield (decoded piece, its last rowid) per batch of leaf pages, in rowid order."""
         with open(self.path, 'rb') as f:
+            self.fd = f.fileno()
+            size = os.fstat(self.fd).st_size
+            head = os.pread(self.fd, 100, 0)
+            if size < 512 or len(head) < 100:
+                raise _NotPlain('shorter than one page')
+            page_size = struct.unpack_from('>H', head, 16)[0]
+            page_size = 65536 if page_size == 1 else page_size
+            if page_size < 512 or page_size & (page_size - 1):
+                raise _NotPlain('bad page size')
+            self.page_size, self.usable = page_size, page_size - head[20]
+            self.n_pages = size // page_size
+            last = 0
             try:
-                mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-            except ValueError:
-                raise _NotPlain('empty file') from None
-        u8 = np.frombuffer(mm, np.uint8)
-        if u8.size < 512:
-            raise _NotPlain('shorter than one page')
-        head = bytes(u8[:100])
-        page_size = struct.unpack_from('>H', head, 16)[0]
-        page_size = 65536 if page_size == 1 else page_size
-        if page_size < 512 or page_size & (page_size - 1):
-            raise _NotPlain('bad page size')
-        usable = page_size - head[20]
-        n_pages = u8.size // page_size
-        try:
-            leaves = self._leaves(u8, page_size, n_pages)
-            return self._cells(u8, leaves, page_size, usable, topic_ids, expected)
-        except (IndexError, ValueError) as err:
-            raise _NotPlain(str(err)) from None
+                leaves = self._leaves()
+                for k in range(0, leaves.size, 2048):
+                    u8, base = self._read_pages(leaves[k:k + 2048])
+                    data, length, recv_ns, rowid = self._leaf_cells(
+                        u8, base, self.usable, topic_ids)
+                    if rowid.size and (rowid[0] <= last or (np.diff(rowid) <= 0).any()):
+                        raise _NotPlain('rowids out of order')
+                    if rowid.size:
+                        last = int(rowid[-1])
+                        yield _make_piece(u8, data, length, recv_ns, encoding, None), last
+            except (IndexError, ValueError) as err:
+                raise _NotPlain(str(err)) from None
 
-    def _leaves(self, u8: np.ndarray, page_size: int, n_pages: int) -> np.ndarray:
-        """Page numbers of the table's leaf pages in key order."""
-        leaves: list[np.ndarray] = []
-        stack = [np.array([self.root], np.int64)]
-        visited = 0
-        while stack:
-            level = stack.pop()
-            if level.size == 0:
-                continue
-            page = int(level[0])
-            stack.append(level[1:])
-            visited += 1
-            if not 2 <= page <= n_pages or visited > n_pages:
-                raise _NotPlain('page number out of range')
-            base = (page - 1) * page_size
-            kind = u8[base]
-            if kind == 0x0D:
-                # Runs of leaves named by one interior page: take them all at once.
-                rest = stack.pop()
-                run = np.concatenate(([page], rest))
-                kinds = u8[(run - 1) * page_size] if run.max() <= n_pages else None
-                if kinds is None or run.min() < 2:
-                    raise _NotPlain('page number out of range')
-                k = int(np.argmin(kinds == 0x0D)) if not (kinds == 0x0D).all() else run.size
-                leaves.append(run[:k])
-                visited += k - 1
-                stack.append(run[k:])
-                continue
-            if kind != 0x05:
-                raise _NotPlain(f'page {page} is not a table B-tree page')
-            n_cells = int(u8[base + 3]) << 8 | int(u8[base + 4])
-            ptr = base + 12 + 2 * np.arange(n_cells)
-            cells = base + ((u8[ptr].astype(np.int64) << 8) | u8[ptr + 1])
-            if n_cells and (cells.max() + 4 > base + page_size or cells.min() < base + 12):
-                raise _NotPlain('cell pointer outside its page')
-            children = np.zeros(n_cells + 1, np.int64)
-            for i in range(4):
-                children[:n_cells] = (children[:n_cells] << 8) | u8[cells + i]
-            right = base + 8
-            children[n_cells] = int.from_bytes(bytes(u8[right:right + 4]), 'big')
-            stack.append(children)
-        return np.concatenate(leaves) if leaves else np.zeros(0, np.int64)
+    def _page(self, page: int) -> np.ndarray:
+        if not 2 <= page <= self.n_pages:
+            raise _NotPlain('page number out of range')
+        raw = os.pread(self.fd, self.page_size, (page - 1) * self.page_size)
+        if len(raw) < self.page_size:
+            raise _NotPlain('file shorter than its pages')
+        return np.frombuffer(raw, np.uint8)
 
-    def _cells(self, u8: np.ndarray, leaves: np.ndarray, page_size: int, usable: int,
-               topic_ids: list[int], expected: int):
+    def _read_pages(self, pages: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Read pages (runs of consecutive numbers at once): (bytes, offset of each page)."""
+        if pages.min() < 2 or pages.max() > self.n_pages:
+            raise _NotPlain('page number out of range')
+        breaks = np.flatnonzero(np.diff(pages) != 1) + 1
         parts = []
-        # Batches of leaves keep the numpy temporaries in the CPU caches.
-        for k in range(0, leaves.size, 2048):
-            parts.append(self._leaf_cells(u8, leaves[k:k + 2048], page_size, usable,
-                                          topic_ids))
-        if parts:
-            data, length, recv_ns = (np.concatenate(x) for x in zip(*parts))
-        else:
-            data = length = recv_ns = np.zeros(0, np.int64)
-        if data.size != expected:
-            raise _NotPlain(f'{data.size} rows found, sqlite counts {expected}')
-        if data.size > 1 and (np.diff(recv_ns) < 0).any():
-            # SQL orders by (timestamp, id); rows in key order sort stably the same way.
-            order = np.argsort(recv_ns, kind='stable')
-            data, length, recv_ns = data[order], length[order], recv_ns[order]
-        return u8, data, length, recv_ns
+        for run in np.split(pages, breaks):
+            n = run.size * self.page_size
+            raw = os.pread(self.fd, n, (int(run[0]) - 1) * self.page_size)
+            if len(raw) < n:
+                raise _NotPlain('file shorter than its pages')
+            parts.append(raw)
+        u8 = np.frombuffer(b''.join(parts), np.uint8)
+        base = np.arange(pages.size, dtype=np.int64) * self.page_size
+        if (u8[base] != 0x0D).any():
+            raise _NotPlain('a leaf is not a table leaf page')
+        return u8, base
+
+    def _leaves(self) -> np.ndarray:
+        """Page numbers of the table's leaf pages in key order (all at one depth)."""
+        level = np.array([self.root], np.int64)
+        for _ in range(20):
+            kind = self._page(int(level[0]))[0]
+            if kind == 0x0D:
+                return level
+            if kind != 0x05 or level.size > self.n_pages:
+                raise _NotPlain('not a table B-tree')
+            children = [self._children(int(page)) for page in level.tolist()]
+            level = np.concatenate(children)
+        raise _NotPlain('B-tree deeper than any real file')
+
+    def _children(self, page: int) -> np.ndarray:
+        """Child page numbers of one interior table page, in key order."""
+        u8 = self._page(page)
+        if u8[0] != 0x05:
+            raise _NotPlain(f'page {page} is not an interior table page')
+        n_cells = int(u8[3]) << 8 | int(u8[4])
+        ptr = 12 + 2 * np.arange(n_cells)
+        cells = (u8[ptr].astype(np.int64) << 8) | u8[ptr + 1]
+        if n_cells and (cells.max() + 4 > self.page_size or cells.min() < 12):
+            raise _NotPlain('cell pointer outside its page')
+        children = np.zeros(n_cells + 1, np.int64)
+        for i in range(4):
+            children[:n_cells] = (children[:n_cells] << 8) | u8[cells + i]
+        children[n_cells] = int.from_bytes(bytes(u8[8:12]), 'big')
+        return children
 
     @staticmethod
-    def _leaf_cells(u8: np.ndarray, leaves: np.ndarray, page_size: int, usable: int,
-                    topic_ids: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return (data offset, data length, timestamp) of the topic's rows in leaves."""
-        base = (leaves - 1) * page_size
+    def _leaf_cells(u8: np.ndarray, base: np.ndarray, usable: int,
+                    topic_ids: list[int]) -> tuple[np.ndarray, ...]:
+        """Return (data offset, data length, timestamp, rowid) of the topic's rows."""
         n_cells = (u8[base + 3].astype(np.int64) << 8) | u8[base + 4]
         total = int(n_cells.sum())
         page_of = np.repeat(base, n_cells)
@@ -350,7 +445,7 @@ class _SqlitePages:
         if total and ((cell < page_of + 8).any() or (cell + 4 > page_of + usable).any()):
             raise _NotPlain('cell outside its page')
         size, len1 = _varint(u8, cell)
-        _, len2 = _varint(u8, cell + len1)
+        rowid, len2 = _varint(u8, cell + len1)
         start = cell + len1 + len2                    # the record (payload) starts here
         header_len, len3 = _varint(u8, start)
         pos = start + len3
@@ -374,10 +469,10 @@ class _SqlitePages:
             raise _NotPlain('messages of the topic spill to overflow pages')
         if not mine.all():
             size, start, time_pos = size[mine], start[mine], time_pos[mine]
-            st_time, st_data = st_time[mine], st_data[mine]
+            st_time, st_data, rowid = st_time[mine], st_data[mine], rowid[mine]
         recv_ns = _serial_int(u8, time_pos, st_time)
         data = time_pos + _SERIAL_SIZE[st_time]
         length = (st_data - 12) // 2
         if (data + length != start + size).any():
             raise _NotPlain('record sizes do not add up')
-        return data, length, recv_ns
+        return data, length, recv_ns, rowid

@@ -1,0 +1,215 @@
+"""
+Unit mistakes named from physics, and the units a user declares for an input.
+
+A still IMU on Earth measures gravity: the magnitude of its mean acceleration is 9.81
+m/s^2 whatever its attitude.  Near 1 it was written in g, near 1000 in mg.  A gyro in
+deg/s reads 57.3 times its rad/s values, so its white noise and bias come out 57.3
+times too large.  A sample rate outside 1 Hz-10 kHz is rarely an IMU: stamps in ms read
+as s give a rate 1000 times too low, stamps one nanosecond apart a gigahertz.
+
+:func:`unit_warnings` turns these into one-line warnings that name the likely mistake;
+:class:`DeclaredUnits` (``--units gyro=deg/s,accel=g,time=ms``) converts an input to SI
+before the analysis.
+
+The plausibility limits
+-----------------------
+- Accelerometer: ``ACCEL_NORM_M_S2`` = 8.0-11.6 m/s^2, gravity (9.78-9.83 m/s^2 over the
+  Earth's surface) plus 1.8 m/s^2 (about 180 mg) for the zero-g offsets of uncalibrated
+  MEMS accelerometers (tens of mg on datasheets, e.g. MPU-6050 +-50 mg per axis).
+- Gyro white noise: ``GYRO_WHITE_MAX`` = 3e-3 rad/s/sqrt(Hz) (0.17 deg/s/sqrt(Hz), 10
+  deg/sqrt(h)).  MEMS gyro datasheets give 0.004-0.05 deg/s/sqrt(Hz) (7e-5 to 9e-4
+  rad/s/sqrt(Hz): MPU-6050 0.005, BMI088 0.014, ADXRS620 0.05), so a rad/s gyro stays
+  3x below the limit even at the noisiest, while the same gyros in deg/s read 4e-3 to
+  5e-2: above it.  A gyro quieter than 5e-5 rad/s/sqrt(Hz) (tactical and navigation
+  grade) read in deg/s stays below the limit: this check cannot see it.
+- Gyro bias: ``GYRO_BIAS_MAX`` = 0.5 rad/s (29 deg/s), beyond the zero-rate offsets of
+  MEMS gyros (+-20 deg/s for the MPU-6050, the widest on common datasheets) plus the
+  Earth's rotation (7.3e-5 rad/s): a still gyro that reads more is in deg/s or moving.
+- Rate: ``RATE_HZ`` = 1 Hz-10 kHz, what IMUs deliver (tens of Hz to a few kHz).
+"""
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from imu_allan.errors import InputError
+
+#: Standard gravity [m/s^2] (the g of accelerometers in g or mg).
+G0_M_S2 = 9.80665
+#: Plausible magnitude of a still accelerometer's mean [m/s^2].
+ACCEL_NORM_M_S2 = (8.0, 11.6)
+#: Largest plausible gyro white noise [rad/s/sqrt(Hz)] and still bias [rad/s].
+GYRO_WHITE_MAX = 3e-3
+GYRO_BIAS_MAX = 0.5
+#: Plausible IMU sample rates [Hz].
+RATE_HZ = (1.0, 10_000.0)
+
+GYRO_UNITS = {'rad/s': 1.0, 'deg/s': math.pi / 180.0}
+ACCEL_UNITS = {'m/s^2': 1.0, 'm/s2': 1.0, 'g': G0_M_S2, 'mg': G0_M_S2 * 1e-3}
+#: Time units [s per unit].
+TIME_UNITS = {'s': 1.0, 'ms': 1e-3, 'us': 1e-6, 'ns': 1e-9}
+_DEG = 180.0 / math.pi
+
+
+class DeclaredUnits(NamedTuple):
+    """
+    The units an input is written in, as declared with ``--units``.
+
+    Attributes
+    ----------
+    gyro : str
+        'rad/s' or 'deg/s'.
+    accel : str
+        'm/s^2', 'g' or 'mg'.
+    time : str or None
+        Unit of the stored times: a CSV's t column, or a bag's header stamps read as
+        one integer count; None keeps the format's own (seconds for CSV, ns for bags).
+
+    """
+
+    gyro: str = 'rad/s'
+    accel: str = 'm/s^2'
+    time: str | None = None
+
+    def sample_scale(self) -> np.ndarray:
+        """Return the (6,) factors that turn samples into rad/s and m/s^2 (AXES order)."""
+        return np.repeat([GYRO_UNITS[self.gyro], ACCEL_UNITS[self.accel]], 3)
+
+    def time_scale(self, format_unit_s: float) -> float:
+        """Return the factor from the stored times to the format's unit (1 when undeclared)."""
+        return 1.0 if self.time is None else TIME_UNITS[self.time] / format_unit_s
+
+    @property
+    def is_si(self) -> bool:
+        """Return True when nothing is converted."""
+        return self.time is None and not (self.sample_scale() != 1.0).any()
+
+
+def parse_units(text: str | None) -> DeclaredUnits:
+    """
+    Parse ``--units``: comma-separated ``gyro=deg/s``, ``accel=g``, ``time=ms``.
+
+    A bare unit names its quantity (``deg/s,mg,ms``).
+
+    Raises
+    ------
+    InputError
+        An unknown quantity or unit, or a quantity given twice.
+
+    """
+    given: dict[str, str] = {}
+    tables = {'gyro': GYRO_UNITS, 'accel': ACCEL_UNITS, 'time': TIME_UNITS}
+    for token in (text or '').split(','):
+        token = token.strip().replace(' ', '')
+        if not token:
+            continue
+        key, _, unit = token.rpartition('=')
+        if not key:
+            key = next((k for k, t in tables.items() if unit in t), '')
+        if key not in tables or unit not in tables[key]:
+            known = '; '.join(f'{k}={"|".join(t)}' for k, t in tables.items())
+            raise InputError(f'--units: cannot read {token!r} (known: {known})')
+        if key in given:
+            raise InputError(f'--units: {key} given twice')
+        given[key] = unit
+    return DeclaredUnits(**given)
+
+
+def unit_warnings(rate_hz: float, means: np.ndarray | None,
+                  gyro_white: np.ndarray | None) -> list[str]:
+    """
+    Name the unit mistakes that physics shows in a still IMU's record.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Sample rate from the stamps [Hz].
+    means : numpy.ndarray or None
+        (6,) mean of each axis in AXES order [rad/s, m/s^2]; None skips the gravity and
+        bias checks.
+    gyro_white : numpy.ndarray or None
+        (3,) white noise density N of the gyro axes [rad/s/sqrt(Hz)] (NaN where
+        unknown); None skips the noise check.
+
+    Returns
+    -------
+    list of str
+        One line per likely mistake (empty when everything is plausible).
+
+    """
+    out = []
+    rate = _rate_warning(rate_hz)
+    if rate:
+        out.append(rate)
+    if means is not None and np.isfinite(means[3:]).all():
+        accel = _accel_warning(float(np.linalg.norm(means[3:])))
+        if accel:
+            out.append(accel)
+    gyro = _gyro_warning(None if means is None else means[:3], gyro_white)
+    if gyro:
+        out.append(gyro)
+    return out
+
+
+def _rate_warning(rate_hz: float) -> str | None:
+    lo, hi = RATE_HZ
+    if not (math.isfinite(rate_hz) and rate_hz > 0) or lo <= rate_hz <= hi:
+        return None
+    head = f'sample rate {rate_hz:.4g} Hz is outside {lo:g} Hz-{hi / 1e3:g} kHz'
+    if rate_hz < lo:
+        # Times k times too far apart: a unit k times smaller read as seconds.
+        unit, k = _likeliest(rate_hz, (('ms', 1e3), ('us', 1e6), ('ns', 1e9)))
+        if unit:
+            return (f'{head}: the times look like {unit} read as seconds (the rate '
+                    f'would be {rate_hz * k:.4g} Hz; declare --units time={unit})')
+        return f'{head}: are the times in seconds?'
+    if 1e9 / rate_hz <= 1.5:
+        return (f'{head}: the stamps are 1 ns apart, a sample counter or a time unit far '
+                'too large stored as nanoseconds (declare it with --units time=...)')
+    # Stamps k times too close: a unit k times larger stored as nanoseconds.
+    unit, k = _likeliest(rate_hz, (('us', 1e-3), ('ms', 1e-6)))
+    if unit:
+        return (f'{head}: the stamps look {1 / k:g}x too close together, {unit} stored as '
+                f'ns? (the rate would be {rate_hz * k:.4g} Hz; declare --units time={unit})')
+    return f'{head}: the stamps look too close together for an IMU'
+
+
+def _likeliest(rate_hz: float, fixes: tuple) -> tuple:
+    """Return the (unit, factor) whose rate is plausible and nearest 100 Hz, or ('', 0)."""
+    lo, hi = RATE_HZ
+    ok = [(abs(math.log10(rate_hz * k / 100.0)), unit, k) for unit, k in fixes
+          if lo <= rate_hz * k <= hi]
+    return min(ok)[1:] if ok else ('', 0.0)
+
+
+def _accel_warning(norm: float) -> str | None:
+    lo, hi = ACCEL_NORM_M_S2
+    if lo <= norm <= hi:
+        return None
+    head = (f'the still accelerometer reads {norm:.4g} "m/s^2" in magnitude, not gravity '
+            f'({G0_M_S2:.2f} m/s^2)')
+    for unit, scale in (('g', G0_M_S2), ('mg', G0_M_S2 * 1e-3)):
+        if lo <= norm * scale <= hi:
+            return f'{head}: the accelerometer looks like {unit} (declare --units accel={unit})'
+    if norm < 0.1 * lo:
+        return f'{head}: gravity was removed from this output, or it is not in m/s^2'
+    return f'{head}: a unit or scale mistake?'
+
+
+def _gyro_warning(bias: np.ndarray | None, white: np.ndarray | None) -> str | None:
+    reasons = []
+    if white is not None and np.isfinite(white).any():
+        n = float(np.nanmedian(white))
+        if n > GYRO_WHITE_MAX:
+            reasons.append(f'its white noise {n:.3g} rad/s/sqrt(Hz) is above '
+                           f'{GYRO_WHITE_MAX:g} (noisier than any MEMS gyro; {n / _DEG:.3g} '
+                           'if the values are deg/s)')
+    if bias is not None and np.isfinite(bias).all():
+        b = float(np.max(np.abs(bias)))
+        if b > GYRO_BIAS_MAX:
+            reasons.append(f'its still bias {b:.3g} rad/s is above {GYRO_BIAS_MAX:g} rad/s')
+    if not reasons:
+        return None
+    return ('the gyro does not look like rad/s: ' + '; '.join(reasons)
+            + ': deg/s? (declare --units gyro=deg/s), or the IMU moved')

@@ -1,0 +1,160 @@
+"""
+Bad arguments and bad output places: one line on stderr, exit 2, before the work.
+
+``--out`` is checked before any input is read (a file, under a file, read-only, too
+little space); a write that fails after the analysis (disk full, file too large) is one
+line too.  Read-only and size-limited file systems are real tmpfs mounts in a user and
+mount namespace (``unshare -rm``); the tests that need one skip where it is refused.
+"""
+
+import os
+from pathlib import Path
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from imu_allan import AXES
+from imu_allan.cli import main
+from imu_allan.cli.outdir import OUT_BYTES_PER_INPUT, prepare_out_dir
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.errors import InputError
+from imu_allan.io.csv_io import write_csv
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope='module')
+def csv_rec(tmp_path_factory) -> Path:
+    """Return a CSV of a still Xsens MTi-7, 60 s at 100 Hz."""
+    spec = load_params(REPO / 'config' / 'xsens_mti7.yaml')
+    t_s, samples = simulate_imu(spec, 100.0, 60.0, seed=7)
+    path = tmp_path_factory.mktemp('rec') / 'rec.csv'
+    write_csv(path, t_s, samples, AXES)
+    return path
+
+
+def _run(argv: list, prefix: list | None = None, **kwargs) -> tuple:
+    """Run ``imu-allan`` in a fresh process; return (exit code, stdout, stderr lines, s)."""
+    cmd = (prefix or []) + [sys.executable, '-m', 'imu_allan'] + [str(a) for a in argv]
+    start = time.monotonic()
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
+                         env=dict(os.environ, PYTHONPATH=str(REPO)), **kwargs)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    return res.returncode, res.stdout, lines, time.monotonic() - start
+
+
+def _one_line(code: int, out: str, err: list, words: str) -> None:
+    assert code == 2 and out == '', (code, out, err)
+    assert len(err) == 1 and err[0].startswith('imu-allan: error: '), err
+    assert words in err[0], err[0]
+    assert 'Traceback' not in err[0]
+
+
+def _namespace_mount(options: str) -> list | None:
+    """Return a command prefix that runs in a fresh tmpfs mounted at /mnt, or None."""
+    if shutil.which('unshare') is None:
+        return None
+    probe = subprocess.run(['unshare', '-rm', 'sh', '-c', f'mount -t tmpfs -o {options} '
+                            'tmpfs /mnt && exec "$0" "$@"', 'true'],
+                           capture_output=True, timeout=30)
+    if probe.returncode != 0:
+        return None
+    return ['unshare', '-rm', 'sh', '-c', f'mount -t tmpfs -o {options} tmpfs /mnt && '
+            'exec "$0" "$@"']
+
+
+def test_out_that_is_a_file_or_under_one_is_refused_before_the_work(tmp_path, csv_rec):
+    (tmp_path / 'afile').write_text('x')
+    for out, words in ((tmp_path / 'afile', 'exists and is not a directory'),
+                       (tmp_path / 'afile' / 'sub', 'is a file, not a directory')):
+        code, stdout, err, seconds = _run(['analyze', csv_rec, '--out', out,
+                                           '--format', 'json'])
+        _one_line(code, stdout, err, words)
+        # Before the analysis: no reading, no fit (the full run takes seconds).
+        assert not any('reading' in ln or 'fitting' in ln for ln in err)
+    assert (tmp_path / 'afile').read_text() == 'x'
+
+
+def test_out_on_a_read_only_file_system_is_refused_before_the_work(csv_rec):
+    prefix = _namespace_mount('ro')
+    if prefix is None:
+        pytest.skip('no user and mount namespaces here (unshare -rm)')
+    code, stdout, err, _ = _run(['analyze', csv_rec, '--out', '/mnt/out'], prefix)
+    _one_line(code, stdout, err, '--out /mnt/out: cannot write there (Read-only file system)')
+
+
+def test_out_without_space_for_the_outputs_is_refused_before_the_work(csv_rec):
+    prefix = _namespace_mount('size=1m')
+    if prefix is None:
+        pytest.skip('no user and mount namespaces here (unshare -rm)')
+    code, stdout, err, _ = _run(['analyze', csv_rec, '--out', '/mnt/out'], prefix)
+    _one_line(code, stdout, err, 'MiB free, the outputs need about 2 MiB')
+
+
+def test_free_space_needed_scales_with_the_inputs(tmp_path):
+    free = shutil.disk_usage(tmp_path).free
+    too_many = free // OUT_BYTES_PER_INPUT + 1
+    with pytest.raises(InputError, match='MiB free, the outputs need about'):
+        prepare_out_dir(tmp_path / 'new', n_inputs=too_many)
+    assert not (tmp_path / 'new').exists()            # created for the check, removed
+    assert prepare_out_dir(tmp_path / 'new' / 'deeper') is True
+
+
+def _small_files_only():
+    # Files larger than 16 kB fail to grow with EFBIG, as on a full disk (ENOSPC): the
+    # write fails in the middle of the outputs, after the analysis.
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (16384, 16384))
+
+
+def test_a_write_that_fails_after_the_analysis_is_one_line(tmp_path, csv_rec):
+    code, stdout, err, _ = _run(['analyze', csv_rec, '--out', tmp_path / 'o', '--no-plot',
+                                 '--jobs', '1', '--format', 'json'],
+                                preexec_fn=_small_files_only)
+    _one_line(code, stdout, err[-1:], f'cannot write the outputs to {tmp_path / "o"}: '
+                                      'File too large')
+    assert not any('Traceback' in ln for ln in err)
+
+
+def test_a_full_disk_while_writing_a_simulated_bag_is_one_line(tmp_path):
+    code, stdout, err, _ = _run(['simulate', '--params', REPO / 'config' / 'xsens_mti7.yaml',
+                                 '--rate', '100', '--duration', '60', '--seed', '1',
+                                 '--out', tmp_path / 's.mcap'], preexec_fn=_small_files_only)
+    _one_line(code, stdout, err, 'cannot write (File too large)')
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['analyze', '{csv}', '--rate', 'nan'], '--rate must be a finite number'),
+    (['analyze', '{csv}', '--rate', '-5'], '--rate must be a finite number'),
+    (['analyze', '{csv}', '--jobs', '-1'], '--jobs must be >= 0'),
+    (['diagnose', '{csv}', '--out', '{tmp}/afile'], 'exists and is not a directory'),
+    (['diagnose', '{csv}', '--rate', 'inf'], '--rate must be a finite number'),
+    (['simulate', '--params', '{repo}/config/xsens_mti7.yaml', '--rate', '100',
+      '--duration', '1', '--seed', '-1', '--out', '{tmp}/s.csv'], '--seed must be >= 0'),
+    (['simulate', '--params', '{repo}/config/xsens_mti7.yaml', '--rate', '1e12',
+      '--duration', '1e9', '--out', '{tmp}/s.csv'], 'fit in memory'),
+    (['simulate', '--params', '{repo}/config/xsens_mti7.yaml', '--rate', '100',
+      '--duration', '1', '--out', '{tmp}/afile/s.mcap'], 'cannot write'),
+    (['csv-to-bag', '{csv}', '{tmp}/afile/x.mcap'], 'cannot write'),
+    (['demo', '--speed', '0'], '--speed must be a positive number'),
+    (['demo', '--out', '{tmp}/afile'], 'exists and is not a directory'),
+])
+def test_bad_arguments_of_every_command_are_one_line(tmp_path, csv_rec, capsys, argv, words):
+    (tmp_path / 'afile').write_text('x')
+    argv = [a.format(csv=csv_rec, tmp=tmp_path, repo=REPO) for a in argv]
+    code = main(argv)
+    out, err = capsys.readouterr()
+    _one_line(code, out, [ln for ln in err.splitlines() if ln.strip()], words)
+
+
+def test_the_outputs_check_leaves_no_empty_directory_after_a_failed_input(tmp_path):
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('t,x\n0,1\n')
+    code = main(['analyze', str(bad), '--out', str(tmp_path / 'o')])
+    assert code == 2 and not (tmp_path / 'o').exists()
