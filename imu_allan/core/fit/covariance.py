@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 
 from imu_allan.core import native
-from imu_allan.core.noise.model import _gcov_gauss_markov, Term
+from imu_allan.core.noise.model import gcov_gauss_markov, Term
 
 # Lag-sum quadrature: lags within _EXACT of a kink are summed exactly, the rest is
 # integrated with Gauss-Legendre on pieces that grow _GROWTH-fold away from the kinks.
@@ -110,7 +110,7 @@ class _LagQuadrature:
             # Direct sums only between the kinks (beyond them the term has no
             # covariance, or its tail formula): one call over all nine stencil lags.
             inside, lags = self._stencil_lags(dt)
-            if gcov is _gcov_gauss_markov and native.LIB is not None:
+            if gcov is gcov_gauss_markov and native.LIB is not None:
                 g[inside] = native.gm_stencil(lags, _STENCIL_WEIGHTS, *nonlinear)
             else:
                 g[inside] = _STENCIL_WEIGHTS @ gcov(lags, *nonlinear)

@@ -263,7 +263,7 @@ def _gcov_flicker(u_s: np.ndarray, T: float = 0.0) -> np.ndarray:
             2.0 * math.pi)
 
 
-def _gcov_gauss_markov(u_s: np.ndarray, T: float) -> np.ndarray:
+def gcov_gauss_markov(u_s: np.ndarray, T: float) -> np.ndarray:
     # Integrated Ornstein-Uhlenbeck rate (autocovariance S_B T / 2 e^(-|u|/T)):
     # -(T^2/2) (|u| + T e^(-|u|/T)), written as -(T^3/2) (e^-x - 1 + x), x = |u|/T, since
     # constants vanish under the stencils; the series avoids cancellation for x << 1.

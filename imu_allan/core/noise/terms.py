@@ -30,11 +30,11 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from imu_allan.core.noise import generators as gen
-from imu_allan.core.noise.shapes import (_as_tau, _gcov_flicker, _gcov_gauss_markov,
-                                         _gcov_quantization, _gcov_random_walk, _gcov_white,
-                                         _gm_shape, _PSD_PHASE, _reach_flicker,
-                                         _reach_gauss_markov, _tail_gauss_markov,
-                                         FLICKER_AVAR, GM_PSD_FACTOR)
+from imu_allan.core.noise.shapes import (_as_tau, _gcov_flicker, _gcov_quantization,
+                                         _gcov_random_walk, _gcov_white, _gm_shape,
+                                         _PSD_PHASE, _reach_flicker, _reach_gauss_markov,
+                                         _tail_gauss_markov, FLICKER_AVAR, gcov_gauss_markov,
+                                         GM_PSD_FACTOR)
 from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid, TermValue
 from imu_allan.errors import InputError
 
@@ -299,7 +299,7 @@ TERMS: dict[str, Term] = {
     'filtered_white': Term(
         'filtered_white', ('N', 'T_f'), ('T_f',),
         lambda tau, T: _gm_shape(_as_tau(tau) / T) / T,
-        lambda u, T: _gcov_gauss_markov(u, T) / (T * T),
+        lambda u, T: gcov_gauss_markov(u, T) / (T * T),
         lambda c, T: {'N': _sqrt(c), 'T_f': T}, lambda v, T: v * v, ('u*s^0.5', 's'),
         keys=(_key('N'), Key('')),
         simulate=lambda p, f, n, rng: gen.filtered_white_noise(p['N'], p['T_f'], f, n, rng),
@@ -319,7 +319,7 @@ TERMS: dict[str, Term] = {
     # The paper's Gauss-Markov floor (Maia et al. eq. 8): level B, correlation time T_B.
     'bias_instability': Term(
         'bias_instability', ('B', 'T_B'), ('T_B',),
-        lambda tau, T: T * _gm_shape(_as_tau(tau) / T), _gcov_gauss_markov,
+        lambda tau, T: T * _gm_shape(_as_tau(tau) / T), gcov_gauss_markov,
         lambda c, T: {'B': _gm_b(c, T), 'T_B': T}, lambda v, T: GM_PSD_FACTOR * v * v / T,
         ('u', 's'), keys=(_key('B'), Key('T_B')),
         simulate=lambda p, f, n, rng: gen.gauss_markov_noise(
@@ -329,7 +329,7 @@ TERMS: dict[str, Term] = {
         tail=_tail_gauss_markov, psd_phase=_PSD_PHASE['gauss_markov']),
     'gauss_markov': Term(
         'gauss_markov', ('B', 'T'), ('T',), lambda tau, T: T * _gm_shape(_as_tau(tau) / T),
-        _gcov_gauss_markov, lambda c, T: {'B': _gm_b(c, T), 'T': T},
+        gcov_gauss_markov, lambda c, T: {'B': _gm_b(c, T), 'T': T},
         lambda v, T: GM_PSD_FACTOR * v * v / T, ('u', 's'), keys=(_key('B'), Key('T')),
         simulate=lambda p, f, n, rng: gen.gauss_markov_noise(
             GaussMarkov(p['B'], p['T']), f, n, rng),
