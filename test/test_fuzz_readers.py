@@ -358,11 +358,11 @@ def campaign(kinds, cases_per_kind: int, seed: int, folder: Path) -> dict:
     """Run the campaign; return {kind: Counter of classes} and the failures' notes."""
     table: dict = {}
     notes: list = []
-    for k, kind in enumerate(kinds):
+    for kind in kinds:
         base = write_intact(kind, folder / f'intact_{kind}')
         data = base.read_bytes()
         intact = _rows(*_recording(0, 0 if kind == 'csv' else T0_NS))
-        rng = np.random.default_rng([seed, k])
+        rng = np.random.default_rng([seed, KINDS.index(kind)])
         counts: Counter = Counter()
         for case in range(cases_per_kind):
             mutation = MUTATIONS[case % len(MUTATIONS)]
