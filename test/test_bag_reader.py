@@ -7,8 +7,8 @@ float64 values and integer nanoseconds must come back bit for bit).
 """
 
 import os
-import re
 from pathlib import Path
+import re
 
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer as McapWriter

@@ -8,18 +8,24 @@ Time comes from ``header.stamp`` (DESIGN.md); the bag's receive time is kept too
 Speed: decoding one message at a time in Python reaches about 27,000 msg/s, so a
 3-hour 400 Hz recording would take minutes.  Here raw serialised payloads are
 located in bulk (sqlite: the messages table's B-tree pages parsed straight from the
-memory-mapped file, with one ordered SELECT as the fallback; MCAP: whole chunks,
-located through the message indexes or a record walk, decompressed at once) and
-decoded with numpy structured dtypes, one ``frombuffer``/strided view per group of
-equally laid-out messages.  The layout of a ROS 2 CDR sensor_msgs/msg/Imu:
-4-byte encapsulation header, ``stamp.sec`` int32, ``stamp.nanosec`` uint32,
-``frame_id`` (uint32 length including the NUL, bytes), padding to 8 bytes (counted
-after the encapsulation header), then 37 doubles: orientation 4,
+file, with SQL in rowid order from the first row that path cannot vouch for; MCAP:
+whole chunks, CRC-checked, walked record by record) and decoded with numpy structured
+dtypes (or the compiled twin), one call per group of messages.  Files are read with
+plain reads, never mapped, so a file that shrinks while it is read cannot crash the
+process.  Whatever is lost (damaged chunks or pages, undecodable payloads) is counted
+against the bag's own count and warned about (``ImuSource.n_lost``); messages come in
+header-stamp order even where chunks overlap in time.
+
+The layout of a ROS 2 CDR sensor_msgs/msg/Imu: 4-byte encapsulation header,
+``stamp.sec`` int32, ``stamp.nanosec`` uint32, ``frame_id`` (uint32 length including
+the NUL, bytes), padding to 8 bytes (counted after the encapsulation header), then 37
+doubles: orientation 4,
 orientation_covariance 9, angular_velocity 3, its covariance 9,
 linear_acceleration 3, its covariance 9.  ROS 1 is packed little-endian:
 ``seq``, ``secs``, ``nsecs`` uint32, ``frame_id`` (uint32 length, bytes), doubles.
-Big-endian CDR is decoded too; any payload that fits neither layout goes through
-rosbags' own deserialiser (default Jazzy / Noetic type stores), or is skipped with
+A payload must end with its last double (CDR: up to 3 bytes of padding).  Big-endian
+CDR is decoded too; any payload that fits neither layout goes through rosbags' own
+deserialiser (default Jazzy / Noetic type stores), or is skipped with
 a warning.
 """
 

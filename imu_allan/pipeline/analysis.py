@@ -52,7 +52,8 @@ class AnalysisResult:
     warnings : tuple of str
         One line per kind of input problem.
     hygiene : dict
-        Counters of the input checks (pipeline.HygieneStats as a dict).
+        Counters of the input checks (pipeline.HygieneStats as a dict), plus ``n_read``
+        and ``n_lost``: messages the input delivered and lost (None: unknown).
     curve : AllanCurve
         Measured curve of the six axes at 95 % confidence.
     fits : dict of str to AxisFit or None
@@ -305,7 +306,9 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     return AnalysisResult(
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
         n_samples=int(session.stats.n_used), warnings=tuple(session.warnings) + tuple(units),
-        hygiene=asdict(session.stats), curve=curve, fits=fits,
+        # n_read / n_lost: what the input delivered and lost (a reader overrides them).
+        hygiene={**asdict(session.stats), 'n_read': int(session.stats.n_received),
+                 'n_lost': 0}, curve=curve, fits=fits,
         kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic)
 
 

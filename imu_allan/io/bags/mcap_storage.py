@@ -72,6 +72,7 @@ class _McapBackend(_Backend):
         self.items: list[_Chunk | _Loose] = []
         self.damage: list[str] = []
         self.data_crc = (0, 0)                        # (DataEnd position, its CRC)
+        self.stated = False                           # counts from the summary's statistics
         self._window = (0, b'')
         try:
             self._open()
@@ -134,6 +135,7 @@ class _McapBackend(_Backend):
                                          channel.message_encoding)
         if summary.statistics is not None:
             self.counts = dict(summary.statistics.channel_message_counts)
+            self.stated = True
         self.indexed = sorted((c.chunk_start_offset, c.chunk_start_offset + c.chunk_length)
                               for c in summary.chunk_indexes)
 
@@ -453,8 +455,15 @@ class _McapBackend(_Backend):
         return list(found.values())
 
     def count(self, topic: _Topic) -> int | None:
-        """The topic's count, None for a truncated file (whose summary is lost with it)."""
-        return topic.n_messages if self.complete else None
+        """
+        The topic's count as the file states it, or None when it cannot be known.
+
+        A truncated file lost its summary; counts gathered from indexes or a scan of a
+        damaged file miss what the damage hid.
+        """
+        if not self.complete or (self.damage and not self.stated):
+            return None
+        return topic.n_messages
 
     def _message_piece(self, buf: np.ndarray, offsets: np.ndarray, wanted: set,
                        encoding: str) -> _Piece | None:

@@ -22,8 +22,10 @@ from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _Piece, _
 from imu_allan.io.imu_cdr import _gather, _join
 
 
-def _connect_sqlite(path: Path, warnings: list[str]) -> tuple[sqlite3.Connection, Path,
-                                                            tempfile.TemporaryDirectory | None]:
+_Opened = tuple[sqlite3.Connection, Path, tempfile.TemporaryDirectory | None]
+
+
+def _connect_sqlite(path: Path, warnings: list[str]) -> _Opened:
     """
     Open a sqlite3 file read-only: (connection, file opened, temporary copy or None).
 
@@ -53,8 +55,9 @@ def _connect_sqlite(path: Path, warnings: list[str]) -> tuple[sqlite3.Connection
         shutil.copyfile(wal, copy.with_name(copy.name + '-wal'))
     except OSError as err:
         tmp.cleanup()
-        raise InputError(f'{path}: a write-ahead-log bag in a read-only place, and no room to '
-                         f'copy it aside ({err.strerror}); copy the bag somewhere writable') from None
+        raise InputError(f'{path}: a write-ahead-log bag in a read-only place, and no room '
+                         f'to copy it aside ({err.strerror}); copy the bag somewhere '
+                         'writable') from None
     warnings.append(f'{path}: write-ahead log in a read-only directory: bag and log copied to '
                     'a temporary directory to read every committed message')
     uri = 'file:' + quote(str(copy))
