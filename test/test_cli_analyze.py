@@ -268,7 +268,7 @@ def test_kalibr_yaml_names_the_analysed_topic(tmp_path, rec, capsys):
     assert kalibr['rostopic'] == '/robot/imu_front'
     assert all(v > 0 for k, v in kalibr.items() if k.endswith(('density', 'walk')))
     # The consumers' files: robot_localization fuses the analysed topic, the driver
-    # scalars are N sqrt(rate), the VINS keys are Kalibr's densities.
+    # scalars are N sqrt(rate), the VINS keys are per-step values of the covering pair.
     ekf = yaml.safe_load((out_dir / 'ekf_imu.yaml').read_text())
     assert ekf['ekf_filter_node']['ros__parameters']['imu0'] == '/robot/imu_front'
     driver = yaml.safe_load((out_dir / 'imu_driver_noise.yaml').read_text())
@@ -276,8 +276,13 @@ def test_kalibr_yaml_names_the_analysed_topic(tmp_path, rec, capsys):
     n_gyro = [result['axes'][a]['params']['N']['value'] for a in ('gyro_x', 'gyro_y', 'gyro_z')]
     assert driver['worst']['angular_velocity_stdev'] == pytest.approx(
         max(n_gyro) * RATE ** 0.5, rel=1e-5)
-    vins = yaml.safe_load((out_dir / 'vins_imu.yaml').read_text())
-    assert vins['gyr_n'] == pytest.approx(kalibr['gyroscope_noise_density'], rel=1e-5)
+    head, _, body = (out_dir / 'vins_imu.yaml').read_text().partition('\n')
+    assert head == '%YAML:1.0'
+    vins = yaml.safe_load(body)
+    n_cover = [result['axes'][a]['covering']['covering']['N']
+               for a in ('gyro_x', 'gyro_y', 'gyro_z')]
+    assert vins['gyr_n'] == pytest.approx(max(n_cover) * (2 * RATE) ** 0.5, rel=1e-5)
+    assert result['covering_horizon_s'] == pytest.approx([1 / RATE, 100.0])
 
 
 def test_text_mode_two_different_runs_comparison_plot_and_table(tmp_path, rec, capsys):

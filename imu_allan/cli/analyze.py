@@ -62,17 +62,22 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--jobs', type=int, default=0,
                    help='parallel inputs, or for one input the processes searching its '
                         'axes (default: the number of cores, at most 2 for one input)')
+    p.add_argument('--cover-tau-max', type=float, default=100.0, metavar='SECONDS',
+                   help='longest averaging time the covering white + random-walk pair of '
+                        'the VINS and OpenVINS files must bound (default 100 s; a VIO '
+                        'window is seconds, a GNSS outage minutes)')
     p.set_defaults(run=run)
     return p
 
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, config, out, plot = args
+    path, topic, config, out, plot, tau_max_s = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True)
+        result = replace(result, covering_tau_max_s=tau_max_s)
         files = write_outputs(result, out, plot=plot)
     except InputError as exc:
         return None, str(exc), [], 0.0
@@ -190,7 +195,10 @@ def run(args) -> int:
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]
-    jobs = [(p, args.topic, config, o, plot) for p, o in zip(paths, outs)]
+    if not (math.isfinite(args.cover_tau_max) and args.cover_tau_max > 0):
+        raise InputError(f'--cover-tau-max must be a positive number of seconds, got '
+                         f'{args.cover_tau_max}')
+    jobs = [(p, args.topic, config, o, plot, args.cover_tau_max) for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
@@ -199,6 +207,7 @@ def run(args) -> int:
         if workers > 1:   # and the accumulator sums on a thread of its own
             config = replace(config, background_accumulator=True)
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers)
+        result = replace(result, covering_tau_max_s=args.cover_tau_max)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, \
                 (worker_pool(min(workers, 2) if plot else 1) or nullcontext()) as pool:

@@ -1,9 +1,10 @@
 """
 Write an analysis to disk.
 
-The result JSON, Kalibr file, Q/R, the Imu covariance fields, a robot_localization
-ekf.yaml fragment, driver parameters, the VINS keys, the fitted model as a params YAML,
-a human summary and the ADEV plot (docs/outputs.md).
+The result JSON, Kalibr file, Q/R, the Imu covariance fields, robot_localization
+ekf.yaml fragments (IMUs with and without orientation), driver parameters, the VINS keys,
+the OpenVINS kalibr_imu_chain.yaml, the fitted model as a params YAML, a human summary
+and the ADEV plot (docs/outputs.md).
 
 Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
 """
@@ -29,6 +30,8 @@ FILES = {
     'ekf': 'ekf_imu.yaml',
     'driver': 'imu_driver_noise.yaml',
     'vins': 'vins_imu.yaml',
+    'openvins': 'kalibr_imu_chain.yaml',
+    'ekf_no_orientation': 'ekf_imu_no_orientation.yaml',
 }
 #: The ADEV figure's files, adev.<format> (drawn by :mod:`imu_allan.io.plot`).
 FIGURE_FORMATS = ('png', 'svg')
@@ -45,6 +48,7 @@ def summary_text(result: AnalysisResult) -> str:
              f'{result.duration_s / 3600:.3f} h at {result.rate_hz:.3f} Hz',
              f'B convention: {B_CONVENTION}', '']
     lines += result.summary_lines()
+    lines += [''] + result.covering_lines()
     for axis, fit in result.fits.items():
         if fit is not None and fit.notes:
             lines += [f'  {axis} note: {n}' for n in fit.notes]
@@ -119,6 +123,9 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
         _atomic_write(out / FILES['ekf'], result.robot_localization_yaml(imu_topic)),
         _atomic_write(out / FILES['driver'], result.driver_yaml()),
         _atomic_write(out / FILES['vins'], result.vins_yaml()),
+        _atomic_write(out / FILES['openvins'], result.openvins_yaml()),
+        _atomic_write(out / FILES['ekf_no_orientation'],
+                      result.robot_localization_yaml(imu_topic, orientation=False)),
     ]
     if plot and pool is None:
         from imu_allan.io.plot import plot_result
