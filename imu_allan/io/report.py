@@ -48,10 +48,10 @@ def summary_text(result: AnalysisResult) -> str:
              f'{result.duration_s / 3600:.3f} h at {result.rate_hz:.3f} Hz',
              f'B convention: {B_CONVENTION}', '']
     lines += result.summary_lines()
-    lines += [''] + result.covering_lines()
     for axis, fit in result.fits.items():
         if fit is not None and fit.notes:
             lines += [f'  {axis} note: {n}' for n in fit.notes]
+    lines += [''] + result.covering_lines()
     if result.warnings:
         lines += ['', 'input warnings:'] + [f'  - {w}' for w in result.warnings]
     return '\n'.join(lines) + '\n'

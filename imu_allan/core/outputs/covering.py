@@ -16,7 +16,9 @@ tau in [tau_min, tau_max] (default: the sample period to 100 s), it finds the pa
 
 lies on or above the fitted model's Allan variance at every tau of the horizon, and
 among those pairs the one that over-states the model least in the worst case
-(minimises max_tau AVAR_c / AVAR_model, a linear programme in N_c^2 and K_c^2).  The
+(minimises max_tau AVAR_c / envelope, a linear programme in N_c^2 and K_c^2; the
+envelope is the model's running maximum over +-0.15 decade, which ignores the nulls of a
+sinusoid's AVAR).  The
 model covered is every fitted term; a core term reported only as a 95 % upper bound
 (N or K on a record too short to see it) enters at that bound.  The factors N_c / N and
 K_c / K are the inflation, per axis, with the horizon that justifies them.
@@ -40,7 +42,11 @@ from imu_allan.errors import InputError
 #: Default upper end of the horizon [s]: a GNSS/INS outage or a long VIO drift.
 DEFAULT_HORIZON_S = 100.0
 #: Taus per decade on which the cover is enforced (log-spaced).
-TAUS_PER_DECADE = 40
+TAUS_PER_DECADE = 100
+#: Half-width of the envelope the over-statement is measured against [decades]: a
+#: sinusoid's AVAR has nulls (tau = k / f0) where any smooth pair over-states it without
+#: bound, so the ratio is taken against the model's running maximum over +-0.15 decade.
+ENVELOPE_DECADES = 0.15
 
 
 class AxisCover(NamedTuple):
@@ -59,8 +65,8 @@ class AxisCover(NamedTuple):
     horizon_s : tuple of float
         (tau_min, tau_max) [s] over which AVAR_c >= AVAR_model holds.
     worst_ratio : float
-        max over the horizon of AVAR_c / AVAR_model (>= 1): how conservative the pair is
-        at its most conservative tau.
+        max over the horizon of AVAR_c / the model's envelope (>= 1): how conservative
+        the pair is at its most conservative tau.
 
     """
 
@@ -147,12 +153,21 @@ def model_avar(source, tau_s: np.ndarray) -> np.ndarray:
     return avar + max(0.0, k_fit ** 2 - k_model ** 2) * tau_s / 3.0
 
 
+def _envelope(values: np.ndarray) -> np.ndarray:
+    """Running maximum over +-ENVELOPE_DECADES of a curve on the :func:`horizon_taus` grid."""
+    half = int(round(ENVELOPE_DECADES * TAUS_PER_DECADE))
+    padded = np.pad(values, half, mode='edge')
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
+    return windows.max(axis=1)
+
+
 def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
     """
     The white + random-walk pair covering one axis' model over a horizon.
 
-    Solves min t subject to 1 <= (N_c^2 / tau + K_c^2 tau / 3) / AVAR_model(tau) <= t
-    at every tau of :func:`horizon_taus` (a linear programme in N_c^2, K_c^2, t).
+    Solves min t subject to AVAR_c(tau) >= AVAR_model(tau) and AVAR_c(tau) <= t E(tau)
+    at every tau of :func:`horizon_taus`, with AVAR_c = N_c^2 / tau + K_c^2 tau / 3 and E
+    the model's envelope (a linear programme in N_c^2, K_c^2, t).
 
     Parameters
     ----------
@@ -171,12 +186,14 @@ def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
     m = model_avar(source, tau)
     if not np.all(np.isfinite(m)) or not np.all(m > 0):
         return None
+    env = _envelope(m)
     # Scale the unknowns so both are O(1): x = N_c^2 / x0, y = K_c^2 / y0.
     x0, y0 = float(np.max(m * tau)), float(np.max(3.0 * m / tau))
     a, b = x0 / (tau * m), y0 * tau / (3.0 * m)
+    ea, eb = a * m / env, b * m / env
     ones = np.ones_like(tau)
-    # Rows: -(a x + b y) <= -1 (covers) and a x + b y - t <= 0 (ratio at most t).
-    a_ub = np.vstack([np.column_stack([-a, -b, 0 * ones]), np.column_stack([a, b, -ones])])
+    # Rows: -(a x + b y) <= -1 (covers) and (a x + b y) m / env - t <= 0 (at most t E).
+    a_ub = np.vstack([np.column_stack([-a, -b, 0 * ones]), np.column_stack([ea, eb, -ones])])
     b_ub = np.concatenate([-ones, 0 * ones])
     res = linprog([0.0, 0.0, 1.0], A_ub=a_ub, b_ub=b_ub,
                   bounds=[(0, None), (0, None), (1, None)], method='highs')
@@ -188,7 +205,7 @@ def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
     x, y = x * max(short, 1.0), y * max(short, 1.0)
     n_c, k_c = math.sqrt(x * x0), math.sqrt(y * y0)
     n_fit, k_fit = _fitted(source)
-    ratio = float(np.max((n_c ** 2 / tau + k_c ** 2 * tau / 3.0) / m))
+    ratio = float(np.max((n_c ** 2 / tau + k_c ** 2 * tau / 3.0) / env))
     return AxisCover(N_fit=n_fit, K_fit=k_fit, N_cover=n_c, K_cover=k_c,
                      factor_N=(n_c / n_fit if n_fit > 0 else None),
                      factor_K=(k_c / k_fit if k_fit > 0 else None),
