@@ -1,5 +1,5 @@
 """
-Is a random-walk bias filter consistent with the fitted, the covering or the 10x pair?
+Consistency of a random-walk bias filter with the fitted, the covering and the 10x pair.
 
 Usage: ``.venv/bin/python bench/bench_consistency.py [--hours 3] [--figure PATH]``.
 
@@ -22,7 +22,6 @@ the mean NEES of the bias at h = 1 s.
 """
 
 import argparse
-import math
 from pathlib import Path
 import sys
 import tempfile
@@ -31,7 +30,7 @@ import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
 from imu_allan.core.noise.params import AxisNoise, NoiseSpec
-from imu_allan.core.noise.simulate import simulate_axis, white_noise
+from imu_allan.core.noise.simulate import simulate_axis, simulate_imu, white_noise
 from imu_allan.core.outputs.consistency import random_walk_filter
 from imu_allan.io.csv_io import read_csv
 from imu_allan.io.inputs import analyze_input
@@ -67,7 +66,7 @@ def _fit(t_s: np.ndarray, y: np.ndarray):
 
 
 def _simulated(hours: float, seed: int) -> tuple:
-    """A held-out record: samples (n, 6) and the true bias (n, 6)."""
+    """Simulate a held-out record: samples (n, 6) and the true bias (n, 6)."""
     n = int(round(hours * 3600 * RATE_HZ))
     rng = np.random.default_rng(seed)
     bias = np.empty((n, 6))
@@ -152,9 +151,8 @@ def main(argv=None) -> int:
     print(head)
     print('|' + ' --- |' * (5 + len(HORIZONS_S)))
     results = []
-    spec = NoiseSpec(name='ADIS-like', axes={a: (GYRO if a in GYRO_AXES else ACCEL)
-                                              for a in AXES})
-    from imu_allan.core.noise.simulate import simulate_imu
+    models = {a: (GYRO if a in GYRO_AXES else ACCEL) for a in AXES}
+    spec = NoiseSpec(name='ADIS-like', axes=models)
     t_s, train = simulate_imu(spec, RATE_HZ, args.hours * 3600, seed=1)
     pairs = _pairs(_fit(t_s, train))
     y, truth = _simulated(args.hours, seed=2)

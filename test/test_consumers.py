@@ -143,7 +143,7 @@ def test_openvins_file_loads_in_opencv_with_the_imu0_node(tmp_path):
 
 
 def _rl_params(tmp_path, text: str) -> dict:
-    """The fragment as rclpy's parameter-file loader gives it to /ekf_filter_node."""
+    """Load the fragment as rclpy's parameter-file loader gives it to ekf_filter_node."""
     from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_python
     path = tmp_path / 'ekf_imu.yaml'
     path.write_text(text)

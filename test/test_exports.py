@@ -73,7 +73,7 @@ def test_an_axis_without_white_noise_is_unknown_not_trusted():
 
 
 def _vins(text: str) -> dict:
-    """The VINS fragment's keys (OpenCV YAML: PyYAML reads it after the header line)."""
+    """Return the VINS keys (OpenCV YAML: PyYAML reads it after the header line)."""
     head, _, body = text.partition('\n')
     assert head == '%YAML:1.0'
     return yaml.safe_load(body)

@@ -20,7 +20,7 @@ from imu_allan.core.allan.raw import raw_evidence
 from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.noise.params import AxisNoise
 from imu_allan.core.noise.units import format_quoted, sensor_of
-from imu_allan.core.outputs.covering import cover_axes, DEFAULT_HORIZON_S, default_horizon
+from imu_allan.core.outputs.covering import cover_axes, default_horizon, DEFAULT_HORIZON_S
 from imu_allan.core.outputs.exports import driver_yaml, kalibr_yaml, robot_localization_yaml
 from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
 from imu_allan.core.outputs.vio import openvins_yaml, pair_comments, vins_yaml
@@ -130,7 +130,7 @@ class AnalysisResult:
         return vins_yaml(self._sources(), self.rate_hz, self.covers, self.covering_horizon_s)
 
     def openvins_yaml(self, rostopic: str | None = None) -> str:
-        """OpenVINS kalibr_imu_chain.yaml (covering pair, densities)."""
+        """Return the OpenVINS kalibr_imu_chain.yaml (covering pair, densities)."""
         return openvins_yaml(self._sources(), self.rate_hz,
                              rostopic or self.topic or '/imu/data', self.covers,
                              self.covering_horizon_s)

@@ -18,7 +18,8 @@ lies on or above the fitted model's Allan variance at every tau of the horizon, 
 among those pairs the one that over-states the model least in the worst case
 (minimises max_tau AVAR_c / envelope, a linear programme in N_c^2 and K_c^2; the
 envelope is the model's running maximum over +-0.15 decade, which ignores the nulls of a
-sinusoid's AVAR).  The
+sinusoid's AVAR; solved by a search on N_c^2, numpy only, so the process that writes the
+reports needs no scipy).  The
 model covered is every fitted term; a core term reported only as a 95 % upper bound
 (N or K on a record too short to see it) enters at that bound.  The factors N_c / N and
 K_c / K are the inflation, per axis, with the horizon that justifies them.
@@ -32,7 +33,6 @@ import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
-from scipy.optimize import linprog
 
 from imu_allan import AXES
 from imu_allan.core.noise.model import avar_model
@@ -47,6 +47,10 @@ TAUS_PER_DECADE = 100
 #: sinusoid's AVAR has nulls (tau = k / f0) where any smooth pair over-states it without
 #: bound, so the ratio is taken against the model's running maximum over +-0.15 decade.
 ENVELOPE_DECADES = 0.15
+#: Steps of the ternary search on N_c^2 (each keeps 2/3 of the interval).
+SEARCH_STEPS = 120
+#: Weight of the mean over-statement beside the worst one in the search (a tie-break).
+TIE_BREAK = 1e-3
 
 
 class AxisCover(NamedTuple):
@@ -117,8 +121,8 @@ def _fitted(source) -> tuple[float, float]:
     values = []
     for sym in ('N', 'K'):
         p = source.optimised.get(sym)
-        ok = p is not None and math.isfinite(p.value) and p.kind in ('estimate',
-                                                                      'upper_bound')
+        ok = (p is not None and math.isfinite(p.value)
+              and p.kind in ('estimate', 'upper_bound'))
         values.append(float(p.value) if ok else 0.0)
     return values[0], values[1]
 
@@ -154,7 +158,7 @@ def model_avar(source, tau_s: np.ndarray) -> np.ndarray:
 
 
 def _envelope(values: np.ndarray) -> np.ndarray:
-    """Running maximum over +-ENVELOPE_DECADES of a curve on the :func:`horizon_taus` grid."""
+    """Return the running maximum over +-ENVELOPE_DECADES of a curve on the taus grid."""
     half = int(round(ENVELOPE_DECADES * TAUS_PER_DECADE))
     padded = np.pad(values, half, mode='edge')
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
@@ -163,11 +167,15 @@ def _envelope(values: np.ndarray) -> np.ndarray:
 
 def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
     """
-    The white + random-walk pair covering one axis' model over a horizon.
+    Find the white + random-walk pair covering one axis' model over a horizon.
 
     Solves min t subject to AVAR_c(tau) >= AVAR_model(tau) and AVAR_c(tau) <= t E(tau)
     at every tau of :func:`horizon_taus`, with AVAR_c = N_c^2 / tau + K_c^2 tau / 3 and E
-    the model's envelope (a linear programme in N_c^2, K_c^2, t).
+    the model's envelope.  This is a linear programme in x = N_c^2, y = K_c^2, t: for a
+    given x the smallest covering y(x) is the largest (AVAR_model - x / tau) 3 / tau
+    (convex in x, a maximum of lines), and t(x) = max (x / tau + y(x) tau / 3) / E is
+    convex too, so a ternary search on x finds the optimum.  Among pairs with the same
+    t, the one with the least mean over-statement of the model is taken.
 
     Parameters
     ----------
@@ -191,16 +199,27 @@ def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
     x0, y0 = float(np.max(m * tau)), float(np.max(3.0 * m / tau))
     a, b = x0 / (tau * m), y0 * tau / (3.0 * m)
     ea, eb = a * m / env, b * m / env
-    ones = np.ones_like(tau)
-    # Rows: -(a x + b y) <= -1 (covers) and (a x + b y) m / env - t <= 0 (at most t E).
-    a_ub = np.vstack([np.column_stack([-a, -b, 0 * ones]), np.column_stack([ea, eb, -ones])])
-    b_ub = np.concatenate([-ones, 0 * ones])
-    res = linprog([0.0, 0.0, 1.0], A_ub=a_ub, b_ub=b_ub,
-                  bounds=[(0, None), (0, None), (1, None)], method='highs')
-    if not res.success:
-        raise InputError(f'covering pair: the linear programme failed ({res.message})')
-    x, y = res.x[0], res.x[1]
-    # Round-off of the solver: restore the cover exactly (scale up by the worst shortfall).
+
+    def y_of(x: float) -> float:
+        return max(0.0, float(np.max((1.0 - a * x) / b)))
+
+    def t_of(x: float) -> float:
+        # The worst over-statement, and a thousandth of the mean one to choose among
+        # pairs of the same worst case (the envelope lets several reach it).
+        y = y_of(x)
+        return float(np.max(ea * x + eb * y) + TIE_BREAK * np.mean(a * x + b * y))
+
+    # x = 1 covers every tau with y = 0 (x0 is the largest AVAR tau), so x is in [0, 1].
+    lo, hi = 0.0, 1.0
+    for _ in range(SEARCH_STEPS):
+        m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
+        if t_of(m1) <= t_of(m2):
+            hi = m2
+        else:
+            lo = m1
+    x = 0.5 * (lo + hi)
+    y = y_of(x)
+    # Round-off of the search: restore the cover exactly (scale up by the worst shortfall).
     short = float(np.max(1.0 / np.maximum(a * x + b * y, 1e-300)))
     x, y = x * max(short, 1.0), y * max(short, 1.0)
     n_c, k_c = math.sqrt(x * x0), math.sqrt(y * y0)

@@ -401,7 +401,7 @@ def robot_localization_yaml(sources, rate_hz: float, imu_topic: str,
         assumes = [
             '# Assumes the messages carry an orientation (orientation_covariance[0] != -1):',
             '# robot_localization removes gravity with that roll/pitch.  Without one (raw',
-            '# IMUs, RealSense: covariance -1) it would use the filter\'s roll/pitch, which',
+            "# IMUs, RealSense: covariance -1) it would use the filter's roll/pitch, which",
             '# nothing here fuses: use the no-orientation variant (ekf_imu_no_orientation',
             '# .yaml) or fuse roll/pitch from another source.']
     else:

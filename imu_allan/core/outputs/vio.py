@@ -212,7 +212,7 @@ def openvins_yaml(sources, rate_hz: float, rostopic: str = '/imu/data', covers=N
              f'# them itself at each IMU interval).  Written: the {pair} pair, worst axis.']
     lines += pair_comments(srcs, covers, horizon_s)
     lines += ['# Intrinsics are identity (an Allan analysis does not calibrate them): keep',
-              '# your Kalibr calibration\'s Tw, R_IMUtoGYRO, Ta, Tg when you have one.',
+              "# your Kalibr calibration's Tw, R_IMUtoGYRO, Ta, Tg when you have one.",
               '', 'imu0:', '  T_i_b:', *_T_I_B]
     for sensor, _, axes, u, uw in _SENSORS:
         p = _pairs(srcs, covers, axes)
