@@ -549,3 +549,22 @@ def test_the_workers_server_ends_by_signal_with_the_command(tmp_path):
     pid, status = map(int, res.stdout.split())
     assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == 15, status
     assert res.stderr == ''
+
+
+def test_cover_tau_max_sets_the_covering_horizon(tmp_path, rec, capsys):
+    stamps, samples = rec
+    _csv(tmp_path / 'rec.csv', stamps, samples)
+    out_dir = tmp_path / 'out'
+    code, _, err = _cli(['analyze', tmp_path / 'rec.csv', '--out', out_dir, '--no-plot',
+                         '--jobs', '1', '--cover-tau-max', '10'], capsys)
+    assert code == 0, err
+    result = json.loads((out_dir / 'result.json').read_text())
+    assert result['covering_horizon_s'] == pytest.approx([1 / RATE, 10.0])
+    cover = result['axes']['gyro_x']['covering']
+    assert cover['horizon_s'] == pytest.approx([1 / RATE, 10.0])
+    assert cover['factor']['N'] == pytest.approx(cover['covering']['N'] / cover['fitted']['N'])
+    assert 'tau in [0.01, 10] s' in (out_dir / 'summary.txt').read_text()
+    assert 'for tau in [0.01, 10] s.' in (out_dir / 'vins_imu.yaml').read_text()
+    code, _, err = _cli(['analyze', tmp_path / 'rec.csv', '--out', out_dir, '--no-plot',
+                         '--cover-tau-max', '0'], capsys)
+    assert code == 2 and len(err) == 1 and '--cover-tau-max' in err[0], err

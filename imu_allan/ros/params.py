@@ -116,7 +116,7 @@ PARAMS: tuple[NodeParam, ...] = (
               'warn keeps the samples, pause drops them until still, restart starts over'),
     NodeParam('settle_s', float, _S.settle_s, 's', (0.0, 3600.0),
               'Stillness needed after motion before samples count again'),
-    NodeParam('covering_tau_max_s', float, 100.0, 's', (0.01, 1.0e6),
+    NodeParam('covering_tau_max_s', float, 100.0, 's', (1.0, 1.0e6),
               'Longest averaging time the covering white + random-walk pair of the VINS and'
               ' OpenVINS files bounds (from the sample period; a VIO window is seconds)'),
     NodeParam('hardware_id', str, '', '', (),

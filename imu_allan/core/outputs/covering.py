@@ -250,6 +250,9 @@ def default_horizon(rate_hz: float, tau_max_s: float = DEFAULT_HORIZON_S) -> tup
     """
     if not (math.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+    if not tau_max_s > 1.0 / rate_hz:
+        raise InputError(f'the covering horizon must end after one sample period '
+                         f'({1.0 / rate_hz:g} s), got {tau_max_s!r} s')
     return (1.0 / float(rate_hz), float(tau_max_s))
 
 
