@@ -268,7 +268,7 @@ def test_kalibr_yaml_names_the_analysed_topic(tmp_path, rec, capsys):
     assert kalibr['rostopic'] == '/robot/imu_front'
     assert all(v > 0 for k, v in kalibr.items() if k.endswith(('density', 'walk')))
     # The consumers' files: robot_localization fuses the analysed topic, the driver
-    # scalars are N sqrt(rate), the VINS keys are Kalibr's densities.
+    # scalars are N sqrt(rate), the VINS keys are per-step values of the covering pair.
     ekf = yaml.safe_load((out_dir / 'ekf_imu.yaml').read_text())
     assert ekf['ekf_filter_node']['ros__parameters']['imu0'] == '/robot/imu_front'
     driver = yaml.safe_load((out_dir / 'imu_driver_noise.yaml').read_text())
@@ -276,8 +276,13 @@ def test_kalibr_yaml_names_the_analysed_topic(tmp_path, rec, capsys):
     n_gyro = [result['axes'][a]['params']['N']['value'] for a in ('gyro_x', 'gyro_y', 'gyro_z')]
     assert driver['worst']['angular_velocity_stdev'] == pytest.approx(
         max(n_gyro) * RATE ** 0.5, rel=1e-5)
-    vins = yaml.safe_load((out_dir / 'vins_imu.yaml').read_text())
-    assert vins['gyr_n'] == pytest.approx(kalibr['gyroscope_noise_density'], rel=1e-5)
+    head, _, body = (out_dir / 'vins_imu.yaml').read_text().partition('\n')
+    assert head == '%YAML:1.0'
+    vins = yaml.safe_load(body)
+    n_cover = [result['axes'][a]['covering']['covering']['N']
+               for a in ('gyro_x', 'gyro_y', 'gyro_z')]
+    assert vins['gyr_n'] == pytest.approx(max(n_cover) * (2 * RATE) ** 0.5, rel=1e-5)
+    assert result['covering_horizon_s'] == pytest.approx([1 / RATE, 100.0])
 
 
 def test_text_mode_two_different_runs_comparison_plot_and_table(tmp_path, rec, capsys):
@@ -526,3 +531,22 @@ def test_main_process_of_a_two_worker_analysis_imports_no_fitting(tmp_path, rec)
     res = _python(code)
     assert res.stderr.strip().splitlines()[-1] == '[]', res.stderr
     assert (tmp_path / 'o' / 'adev.png').exists() and (tmp_path / 'o' / 'adev.svg').exists()
+
+
+def test_cover_tau_max_sets_the_covering_horizon(tmp_path, rec, capsys):
+    stamps, samples = rec
+    _csv(tmp_path / 'rec.csv', stamps, samples)
+    out_dir = tmp_path / 'out'
+    code, _, err = _cli(['analyze', tmp_path / 'rec.csv', '--out', out_dir, '--no-plot',
+                         '--jobs', '1', '--cover-tau-max', '10'], capsys)
+    assert code == 0, err
+    result = json.loads((out_dir / 'result.json').read_text())
+    assert result['covering_horizon_s'] == pytest.approx([1 / RATE, 10.0])
+    cover = result['axes']['gyro_x']['covering']
+    assert cover['horizon_s'] == pytest.approx([1 / RATE, 10.0])
+    assert cover['factor']['N'] == pytest.approx(cover['covering']['N'] / cover['fitted']['N'])
+    assert 'tau in [0.01, 10] s' in (out_dir / 'summary.txt').read_text()
+    assert 'for tau in [0.01, 10] s.' in (out_dir / 'vins_imu.yaml').read_text()
+    code, _, err = _cli(['analyze', tmp_path / 'rec.csv', '--out', out_dir, '--no-plot',
+                         '--cover-tau-max', '0'], capsys)
+    assert code == 2 and len(err) == 1 and '--cover-tau-max' in err[0], err

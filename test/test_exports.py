@@ -9,7 +9,8 @@ import yaml
 from imu_allan import AXES
 from imu_allan.core.noise.params import AxisNoise
 from imu_allan.core.outputs.exports import (driver_noise, driver_yaml, IMU0_CONFIG,
-                                            robot_localization_yaml, vins_yaml)
+                                            robot_localization_yaml)
+from imu_allan.core.outputs.vio import vins_yaml
 from imu_allan.errors import InputError
 
 RATE_HZ = 200.0
@@ -37,9 +38,10 @@ def test_ekf_fragment_has_the_keys_robot_localization_reads():
     assert params['imu0_remove_gravitational_acceleration'] is True
     assert params['imu0_differential'] is False
     assert params['imu0_queue_size'] >= 10
-    for key in ('imu0_angular_velocity_rejection_threshold',
+    for key in ('imu0_twist_rejection_threshold',
                 'imu0_linear_acceleration_rejection_threshold'):
         assert params[key] > 0
+    assert 'imu0_angular_velocity_rejection_threshold' not in params   # ROS 1 name
     # The comment states what the Allan values set, with the worst-axis stdev.
     assert f'{1.5e-4 * math.sqrt(RATE_HZ):.3e} rad/s' in text
     assert 'process_noise_covariance' in text
@@ -70,15 +72,22 @@ def test_an_axis_without_white_noise_is_unknown_not_trusted():
     assert doc['per_axis']['gyro_y']['stdev'] is None
 
 
-def test_vins_block_holds_the_worst_densities():
-    doc = yaml.safe_load(vins_yaml(_sources(), RATE_HZ))
-    assert_allclose(doc['acc_n'], 8e-4, rtol=1e-6)
-    assert_allclose(doc['gyr_n'], 1.5e-4, rtol=1e-6)
-    assert_allclose(doc['acc_w'], 1.2e-5, rtol=1e-6)
-    assert_allclose(doc['gyr_w'], 3e-6, rtol=1e-6)
+def _vins(text: str) -> dict:
+    """Return the VINS keys (OpenCV YAML: PyYAML reads it after the header line)."""
+    head, _, body = text.partition('\n')
+    assert head == '%YAML:1.0'
+    return yaml.safe_load(body)
+
+
+def test_vins_block_holds_the_worst_values_per_step():
+    doc = _vins(vins_yaml(_sources(), RATE_HZ))
+    assert_allclose(doc['acc_n'], 8e-4 * math.sqrt(2 * RATE_HZ), rtol=1e-6)
+    assert_allclose(doc['gyr_n'], 1.5e-4 * math.sqrt(2 * RATE_HZ), rtol=1e-6)
+    assert_allclose(doc['acc_w'], 1.2e-5 * math.sqrt(RATE_HZ), rtol=1e-6)
+    assert_allclose(doc['gyr_w'], 3e-6 * math.sqrt(RATE_HZ), rtol=1e-6)
     # A model without a random walk on any gyro axis: gyr_w is left out, never 0.
     no_k = {a: AxisNoise(N=N[a]) for a in ('gyro_x', 'gyro_y', 'gyro_z')}
     text = vins_yaml(_sources(**no_k), RATE_HZ)
-    doc = yaml.safe_load(text)
+    doc = _vins(text)
     assert 'gyr_w' not in doc and '# gyr_w: not available' in text
     assert all(v > 0 for v in doc.values())

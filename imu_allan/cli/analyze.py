@@ -78,17 +78,22 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--jobs', type=int, default=0,
                    help='parallel inputs, or for one input the processes searching its '
                         'axes (default: the number of cores, at most 2 for one input)')
+    p.add_argument('--cover-tau-max', type=float, default=100.0, metavar='SECONDS',
+                   help='longest averaging time the covering white + random-walk pair of '
+                        'the VINS and OpenVINS files must bound (default 100 s; a VIO '
+                        'window is seconds, a GNSS outage minutes)')
     p.set_defaults(run=run)
     return p
 
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, config, out, plot, units = args
+    path, topic, config, out, plot, units, tau_max_s = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True, units=units)
+        result = replace(result, covering_tau_max_s=tau_max_s)
         with writing(out):
             files = write_outputs(result, out, plot=plot)
     except InputError as exc:
@@ -224,7 +229,11 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]
-    jobs = [(p, args.topic, config, o, plot, units) for p, o in zip(paths, outs)]
+    if not (math.isfinite(args.cover_tau_max) and args.cover_tau_max > 0):
+        raise InputError(f'--cover-tau-max must be a positive number of seconds, got '
+                         f'{args.cover_tau_max}')
+    jobs = [(p, args.topic, config, o, plot, units, args.cover_tau_max)
+            for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
@@ -234,6 +243,7 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
             config = replace(config, background_accumulator=True)
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
                                         units=units)
+        result = replace(result, covering_tau_max_s=args.cover_tau_max)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, writing(outs[0]), \
                 (worker_pool(min(workers, 2) if plot else 1) or nullcontext()) as pool:

@@ -1,9 +1,10 @@
 """
 Write an analysis to disk.
 
-The result JSON, Kalibr file, Q/R, the Imu covariance fields, a robot_localization
-ekf.yaml fragment, driver parameters, the VINS keys, the fitted model as a params YAML,
-a human summary and the ADEV plot (docs/outputs.md).
+The result JSON, Kalibr file, Q/R, the Imu covariance fields, robot_localization
+ekf.yaml fragments (IMUs with and without orientation), driver parameters, the VINS keys,
+the OpenVINS kalibr_imu_chain.yaml, the fitted model as a params YAML, a human summary
+and the ADEV plot (docs/outputs.md).
 
 Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
 """
@@ -30,6 +31,8 @@ FILES = {
     'ekf': 'ekf_imu.yaml',
     'driver': 'imu_driver_noise.yaml',
     'vins': 'vins_imu.yaml',
+    'openvins': 'kalibr_imu_chain.yaml',
+    'ekf_no_orientation': 'ekf_imu_no_orientation.yaml',
 }
 
 
@@ -47,6 +50,7 @@ def summary_text(result: AnalysisResult) -> str:
     for axis, fit in result.fits.items():
         if fit is not None and fit.notes:
             lines += [f'  {axis} note: {n}' for n in fit.notes]
+    lines += [''] + result.covering_lines()
     if result.warnings:
         lines += ['', 'input warnings:'] + [f'  - {w}' for w in result.warnings]
     return '\n'.join(lines) + '\n'
@@ -118,6 +122,9 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
         _atomic_write(out / FILES['ekf'], result.robot_localization_yaml(imu_topic)),
         _atomic_write(out / FILES['driver'], result.driver_yaml()),
         _atomic_write(out / FILES['vins'], result.vins_yaml()),
+        _atomic_write(out / FILES['openvins'], result.openvins_yaml()),
+        _atomic_write(out / FILES['ekf_no_orientation'],
+                      result.robot_localization_yaml(imu_topic, orientation=False)),
     ]
     if plot and pool is None:
         from imu_allan.io.plot import plot_result

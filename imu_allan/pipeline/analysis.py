@@ -8,6 +8,7 @@ DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_param
 """
 
 from dataclasses import asdict, dataclass
+from functools import cached_property
 import math
 from typing import Any, Callable
 
@@ -20,9 +21,10 @@ from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.noise.params import AxisNoise
 from imu_allan.core.noise.unit_check import unit_warnings
 from imu_allan.core.noise.units import format_quoted, sensor_of
-from imu_allan.core.outputs.exports import (driver_yaml, kalibr_yaml, robot_localization_yaml,
-                                            vins_yaml)
+from imu_allan.core.outputs.covering import cover_axes, default_horizon, DEFAULT_HORIZON_S
+from imu_allan.core.outputs.exports import driver_yaml, kalibr_yaml, robot_localization_yaml
 from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
+from imu_allan.core.outputs.vio import openvins_yaml, pair_comments, vins_yaml
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import worker_pool
 
@@ -68,6 +70,9 @@ class AnalysisResult:
         First header stamp of the recording [ns since the epoch] (offline inputs).
     frame_id : str
         header.frame_id of the messages ('' for CSV and the node).
+    covering_tau_max_s : float
+        Upper end of the covering pair's horizon [s] (the lower end is the sample period),
+        :mod:`imu_allan.core.outputs.covering`.
 
     """
 
@@ -83,6 +88,7 @@ class AnalysisResult:
     topic: str = ''
     start_ns: int | None = None
     frame_id: str = ''
+    covering_tau_max_s: float = DEFAULT_HORIZON_S
 
     def models(self) -> dict:
         """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""
@@ -91,23 +97,61 @@ class AnalysisResult:
     def _sources(self) -> dict:
         return {a: (f if f is not None else AxisNoise()) for a, f in self.fits.items()}
 
-    def kalibr_yaml(self, rostopic: str | None = None) -> str:
-        """Kalibr imu.yaml text; ``rostopic`` is the analysed topic unless given."""
-        return kalibr_yaml(self._sources(), self.rate_hz,
-                           rostopic=rostopic or self.topic or '/imu/data')
+    @property
+    def covering_horizon_s(self) -> tuple:
+        """(sample period, covering_tau_max_s) [s]: the covering pair's horizon."""
+        return default_horizon(self.rate_hz, self.covering_tau_max_s)
 
-    def robot_localization_yaml(self, imu_topic: str | None = None) -> str:
+    @cached_property
+    def covers(self) -> dict:
+        """Covering white + random-walk pair per axis (AxisCover or None)."""
+        return cover_axes(self._sources(), self.covering_horizon_s)
+
+    def kalibr_yaml(self, rostopic: str | None = None) -> str:
+        """Kalibr imu.yaml text (fitted pair); ``rostopic`` is the analysed topic unless given."""
+        text = kalibr_yaml(self._sources(), self.rate_hz,
+                           rostopic=rostopic or self.topic or '/imu/data')
+        note = ['# Written: the fitted pair (what the sensor showed).  A random-walk '
+                'estimator wants the covering pair:']
+        note += pair_comments(self._sources(), self.covers, self.covering_horizon_s)
+        return '\n'.join(note) + '\n' + text
+
+    def robot_localization_yaml(self, imu_topic: str | None = None,
+                                orientation: bool = True) -> str:
         """robot_localization ekf.yaml fragment fusing ``imu_topic`` (default: analysed)."""
         return robot_localization_yaml(self._sources(), self.rate_hz,
-                                       imu_topic or self.topic or '/imu/data')
+                                       imu_topic or self.topic or '/imu/data',
+                                       orientation=orientation)
 
     def driver_yaml(self) -> str:
         """Per-sample stdev and variance per axis and worst axis, for driver parameters."""
         return driver_yaml(self._sources(), self.rate_hz)
 
     def vins_yaml(self) -> str:
-        """VINS-Mono / VINS-Fusion acc_n, gyr_n, acc_w, gyr_w."""
-        return vins_yaml(self._sources(), self.rate_hz)
+        """VINS-Mono / VINS-Fusion acc_n, gyr_n, acc_w, gyr_w (covering pair, per step)."""
+        return vins_yaml(self._sources(), self.rate_hz, self.covers, self.covering_horizon_s)
+
+    def openvins_yaml(self, rostopic: str | None = None) -> str:
+        """Return the OpenVINS kalibr_imu_chain.yaml (covering pair, densities)."""
+        return openvins_yaml(self._sources(), self.rate_hz,
+                             rostopic or self.topic or '/imu/data', self.covers,
+                             self.covering_horizon_s)
+
+    def covering_lines(self) -> list:
+        """Summary lines: fitted and covering N, K per axis with the factors."""
+        lo, hi = self.covering_horizon_s
+        lines = [f'covering white + random-walk pair (bounds the whole model for tau in '
+                 f'[{lo:.3g}, {hi:.3g}] s; written to the VINS and OpenVINS files):']
+        for axis in AXES:
+            c = self.covers.get(axis)
+            if c is None:
+                lines.append(f'  {axis}: n/a')
+                continue
+            fn = 'n/a' if c.factor_N is None else f'{c.factor_N:.3g}'
+            fk = 'n/a' if c.factor_K is None else f'{c.factor_K:.3g}'
+            lines.append(f'  {axis}: N {c.N_fit:.3e} -> {c.N_cover:.3e} (x{fn}), '
+                         f'K {c.K_fit:.3e} -> {c.K_cover:.3e} (x{fk})')
+        return lines
 
     def process_noise(self) -> tuple[np.ndarray, list]:
         """Discrete process noise Qd (12, 12) [unit^2] and its state order."""
@@ -207,6 +251,8 @@ class AnalysisResult:
                     sym: format_quoted(sym, sensor_of(axis), p.value, digits=4)
                     for sym, p in fit.optimised.items()
                     if sym in _CORE and p.kind in ('estimate', 'upper_bound')}
+            cover = self.covers.get(axis)
+            entry['covering'] = None if cover is None else cover.to_json()
             axes[axis] = entry
         return {
             'source': self.source,
@@ -217,6 +263,7 @@ class AnalysisResult:
             'warnings': list(self.warnings),
             'hygiene': self.hygiene,
             'b_convention': B_CONVENTION,
+            'covering_horizon_s': list(self.covering_horizon_s),
             'axes': axes,
             'kalman': self.kalman.to_json(),
             'imu_covariance': self.imu_covariances(),
@@ -253,7 +300,8 @@ def _map_axes(jobs: list, workers: int, meanwhile: Callable[[], Any]) -> tuple[l
 
 
 def analyze(session, source: str = '', raw=None, topic: str = '',
-            workers: int = 1) -> AnalysisResult | None:
+            workers: int = 1,
+            covering_tau_max_s: float = DEFAULT_HORIZON_S) -> AnalysisResult | None:
     """
     Fit every axis of a session's current Allan curve, effect search included.
 
@@ -276,6 +324,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     workers : int
         Processes that search the axes (1: in this process, as the node does; the
         results are the same either way).
+    covering_tau_max_s : float
+        Upper end of the covering pair's horizon [s] (:attr:`AnalysisResult.covers`).
 
     Returns
     -------
@@ -309,7 +359,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         # n_read / n_lost: what the input delivered and lost (a reader overrides them).
         hygiene={**asdict(session.stats), 'n_read': int(session.stats.n_received),
                  'n_lost': 0}, curve=curve, fits=fits,
-        kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic)
+        kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic,
+        covering_tau_max_s=float(covering_tau_max_s))
 
 
 def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:

@@ -29,6 +29,7 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import deserialize_message
@@ -42,7 +43,7 @@ from imu_allan.io.report import write_outputs
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.live import LiveInput, SessionView
-from imu_allan.ros.params import BY_NAME, PARAMS
+from imu_allan.ros.params import as_declared_type, BY_NAME, default_output_dir, PARAMS
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 from imu_allan.ros.reports import matrix_msg, NodeReports
 from imu_allan.ros.services import NodeServices
@@ -98,6 +99,12 @@ class ImuAllanNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('imu_allan', **kwargs)
+        # Overrides from -p name:=value and parameter files: 600 for a double becomes 600.0
+        # (rclpy keeps them in _parameter_overrides and refuses an int for a double).
+        for name, override in list(self._parameter_overrides.items()):
+            value = as_declared_type(name, override.value)
+            if value is not override.value:
+                self._parameter_overrides[name] = Parameter(name, value=value)
         for p in PARAMS:
             try:
                 self.declare_parameter(p.name, p.default, _descriptor(p))
@@ -114,8 +121,9 @@ class ImuAllanNode(Node):
         # Statuses, files and checkpoints are named after the node, so two nodes (two
         # IMUs, two namespaces) never collide.
         self.diag_prefix = self.get_fully_qualified_name().lstrip('/')
-        self.output_dir = Path(os.path.expanduser(
-            self.values['output_dir'] or os.path.join('~/.ros/imu_allan', self.diag_prefix)))
+        self.output_dir = (Path(os.path.expanduser(self.values['output_dir']))
+                           if self.values['output_dir']
+                           else default_output_dir(self.diag_prefix))
         try:
             initial = (load_covariance_file(self.values['initial_covariance_file'])
                        if self.values['initial_covariance_file'] else None)
@@ -292,7 +300,8 @@ class ImuAllanNode(Node):
         # The raw copy feeds the effect search's periodogram and ramp evidence, so the
         # node publishes the model analyze and diagnose give for the same data.
         result = analyze(view, source=self.subscription.topic_name, raw=raw,
-                         topic=self.subscription.topic_name)
+                         topic=self.subscription.topic_name,
+                         covering_tau_max_s=self.values['covering_tau_max_s'])
         if result is None:
             return None
         self._last_result = result
@@ -331,7 +340,8 @@ class ImuAllanNode(Node):
         view, raw = self.live.snapshot()
         # The same model as the periodic fit: raw copy and topic included.
         result = analyze(view, source=self.subscription.topic_name, raw=raw,
-                         topic=self.subscription.topic_name) \
+                         topic=self.subscription.topic_name,
+                         covering_tau_max_s=self.values['covering_tau_max_s']) \
             if view.curve(bounds=False) is not None else None
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')

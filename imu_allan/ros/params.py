@@ -7,6 +7,8 @@ config file and the table of docs/node.md from the same rows (a test keeps them 
 """
 
 from dataclasses import dataclass
+import os
+from pathlib import Path
 import sys
 
 from imu_allan.pipeline.session import MOTION_POLICIES, SessionConfig
@@ -78,7 +80,8 @@ PARAMS: tuple[NodeParam, ...] = (
               'Messages held between timer ticks; beyond it the oldest are dropped and counted'),
     NodeParam('output_dir', str, '', '', (),
               "Where ~/save, shutdown and checkpoints write their files; '' is"
-              ' ~/.ros/imu_allan/<namespace>/<node name>, one per node'),
+              ' $ROS_HOME/imu_allan/<namespace>/<node name> (ROS_HOME defaults to ~/.ros),'
+              ' one per node'),
     NodeParam('checkpoint_period_s', float, 60.0, 's', (0.0, 86400.0),
               'Period of the atomic accumulator checkpoint; 0 disables it'),
     NodeParam('resume', bool, False, '', (),
@@ -113,11 +116,66 @@ PARAMS: tuple[NodeParam, ...] = (
               'warn keeps the samples, pause drops them until still, restart starts over'),
     NodeParam('settle_s', float, _S.settle_s, 's', (0.0, 3600.0),
               'Stillness needed after motion before samples count again'),
+    NodeParam('covering_tau_max_s', float, 100.0, 's', (1.0, 1.0e6),
+              'Longest averaging time the covering white + random-walk pair of the VINS and'
+              ' OpenVINS files bounds (from the sample period; a VIO window is seconds)'),
     NodeParam('hardware_id', str, '', '', (),
               "hardware_id of the diagnostic statuses; '' takes the frame_id of the messages"),
 )
 
 BY_NAME = {p.name: p for p in PARAMS}
+
+
+def as_declared_type(name: str, value):
+    """
+    Return a parameter override in its declared type: an integer for a double is a float.
+
+    ``-p min_duration_s:=600`` and ``min_duration_s: 600`` in a parameter file reach the
+    node as integers; rclpy refuses an integer for a parameter declared with a float
+    default, so the node converts such overrides before it declares (every other value
+    is returned unchanged, for rclpy and :meth:`NodeParam.check` to judge).
+
+    Parameters
+    ----------
+    name : str
+        Parameter name.
+    value : object
+        The override's value.
+
+    Returns
+    -------
+    object
+        ``float(value)`` for an int (not bool) given to a float parameter, else ``value``.
+
+    """
+    spec = BY_NAME.get(name)
+    if (spec is not None and spec.value_type is float and isinstance(value, int)
+            and not isinstance(value, bool)):
+        return float(value)
+    return value
+
+
+def default_output_dir(node_name: str, environ=None) -> Path:
+    """
+    Return the output directory used when output_dir is '': under ROS_HOME.
+
+    Parameters
+    ----------
+    node_name : str
+        The node's fully qualified name without the leading '/' (namespace/name).
+    environ : mapping, optional
+        The environment (default os.environ).
+
+    Returns
+    -------
+    Path
+        ``$ROS_HOME/imu_allan/<node_name>``, with ROS_HOME defaulting to ~/.ros as for
+        the ROS logs.
+
+    """
+    env = os.environ if environ is None else environ
+    home = env.get('ROS_HOME') or os.path.join('~', '.ros')
+    return Path(os.path.expanduser(home)) / 'imu_allan' / node_name
 
 
 def session_config(values: dict) -> SessionConfig:

@@ -44,7 +44,10 @@ bias as a pure random walk, so B and T_B only enter through how you inflate K.
   model does not contain.  People therefore inflate the Allan numbers before use
   (factors of a few up to 10 or more on N, more on K), tune them on recorded runs, and
   use upper bounds where a term was not identified.  imu_allan reports the measured
-  values; any inflation is the integrator's decision.
+  values and, for estimators whose bias is a random walk, the covering pair
+  (:mod:`imu_allan.core.outputs.covering`): the white + random-walk densities whose Allan
+  variance bounds the whole fitted model over a stated horizon, so the inflation of N
+  and K is derived; motion effects still come on top.
 * robot_localization has no bias states and takes no noise parameters: it reads each
   sensor_msgs/Imu message's covariance fields (variance N^2 f for white noise per
   axis) and clamps variances below 1e-9.

@@ -5,7 +5,7 @@ Each function takes the six per-axis sources of :func:`imu_allan.core.outputs.ka
 (AxisNoise or AxisFit) and returns YAML text whose keys are the consumer's own:
 
 * :func:`kalibr_yaml`: Kalibr's imu.yaml (one noise density and random walk per sensor,
-  :func:`sensor_value`; OpenVINS reads the same keys);
+  :func:`sensor_value`);
 * :func:`robot_localization_yaml`: an ``ekf.yaml`` fragment (robot_localization reads
   IMU noise from each message's covariance fields; the Allan result does not enter its
   ``process_noise_covariance``, which is a motion model without bias states);
@@ -14,9 +14,7 @@ Each function takes the six per-axis sources of :func:`imu_allan.core.outputs.ka
   ``angular_velocity_stdev`` / ``linear_acceleration_stdev``, microstrain
   ``imu_angular_cov`` / ``imu_linear_cov``, realsense2_camera ``angular_velocity_cov``
   / ``linear_accel_cov``);
-* :func:`vins_yaml`: the VINS-Mono / VINS-Fusion keys acc_n, gyr_n, acc_w, gyr_w
-  (continuous densities, worst axis; OpenVINS reads Kalibr's keys, see
-  :func:`kalibr_yaml`).
+* the VINS-Mono / VINS-Fusion and OpenVINS files are in :mod:`imu_allan.core.outputs.vio`.
 
 Only numpy and the package core are imported: the node and the CLI write these files.
 """
@@ -348,17 +346,26 @@ def driver_yaml(sources, rate_hz: float) -> str:
 
 
 def robot_localization_yaml(sources, rate_hz: float, imu_topic: str,
-                            node_name: str = 'ekf_filter_node') -> str:
+                            node_name: str = 'ekf_filter_node',
+                            orientation: bool = True) -> str:
     """
-    Return an ekf.yaml fragment for robot_localization that fuses this IMU.
+    Return an ekf.yaml fragment for ROS 2 robot_localization that fuses this IMU.
 
     robot_localization takes IMU noise from each message's covariance fields, not from
     its parameters, so ``imu_topic`` should be a topic that carries the Allan
     variances (the node's ``~/imu_with_covariance``, or the driver once its covariance
-    parameters are set from :func:`driver_yaml`).  The fragment fuses angular velocity
-    and linear acceleration (:data:`IMU0_CONFIG`), removes gravity from the
-    acceleration (a static IMU reads +g), and suggests Mahalanobis rejection thresholds
-    (:data:`REJECTION_SIGMAS`).
+    parameters are set from :func:`driver_yaml`).  The parameter names are the ones ROS 2
+    robot_localization declares for an IMU (src/ros_filter.cpp, branch ros2:
+    ``imu0_twist_rejection_threshold`` gates the angular velocity, not the ROS 1
+    ``imu0_angular_velocity_rejection_threshold``).
+
+    Gravity removal needs roll and pitch.  robot_localization takes them from the
+    message's orientation, or, when the message says it has none (orientation_covariance
+    [0] = -1), from the filter state.  With ``orientation`` True (a driver that publishes
+    an attitude) the fragment fuses angular velocity and linear acceleration
+    (:data:`IMU0_CONFIG`) with gravity removal.  With ``orientation`` False (raw IMUs,
+    RealSense) nothing in the fragment fuses roll and pitch, so gravity could not be
+    removed correctly on a slope: that variant fuses angular velocity only.
 
     Parameters
     ----------
@@ -370,13 +377,15 @@ def robot_localization_yaml(sources, rate_hz: float, imu_topic: str,
         The Imu topic to fuse (a name, not empty).
     node_name : str
         The EKF node's name (the YAML's top-level key).
+    orientation : bool
+        Whether the messages carry an orientation (see above).
 
     Returns
     -------
     str
         YAML text: ``<node_name>: ros__parameters:`` with imu0, imu0_config (15
-        booleans), imu0_differential, imu0_relative, imu0_queue_size,
-        imu0_remove_gravitational_acceleration and the two rejection thresholds.
+        booleans), imu0_differential, imu0_relative, imu0_queue_size (int),
+        imu0_remove_gravitational_acceleration and the rejection thresholds (doubles).
 
     Raises
     ------
@@ -392,17 +401,33 @@ def robot_localization_yaml(sources, rate_hz: float, imu_topic: str,
         v = d.worst[key]
         return 'unknown' if v is None else f'{v:.3e}'
 
-    flags = ', '.join('true' if f else 'false' for f in IMU0_CONFIG)
+    config = IMU0_CONFIG if orientation else IMU0_CONFIG[:12] + (False,) * 3
+    flags = ', '.join('true' if f else 'false' for f in config)
     # At least two messages per filter step of a 50 Hz filter, and never fewer than 10.
     queue = max(10, int(math.ceil(2.0 * rate_hz / 50.0)))
+    if orientation:
+        assumes = [
+            '# Assumes the messages carry an orientation (orientation_covariance[0] != -1):',
+            '# robot_localization removes gravity with that roll/pitch.  Without one (raw',
+            "# IMUs, RealSense: covariance -1) it would use the filter's roll/pitch, which",
+            '# nothing here fuses: use the no-orientation variant (ekf_imu_no_orientation',
+            '# .yaml) or fuse roll/pitch from another source.']
+    else:
+        assumes = [
+            '# Variant for IMUs without orientation (orientation_covariance[0] = -1): fuses',
+            '# angular velocity only.  Gravity removal would need roll/pitch that nothing',
+            '# here provides, so accelerations are off; turn ax, ay, az and gravity removal',
+            '# back on only when another input fuses roll and pitch (or two_d_mode on level',
+            '# ground).']
     lines = [
-        '# robot_localization fragment (imu_allan): merge into your ekf.yaml.',
+        '# robot_localization (ROS 2) fragment (imu_allan): merge into your ekf.yaml.',
         '# What the Allan analysis sets: the IMU noise robot_localization uses comes from',
         "# each message's covariance fields; fuse a topic that carries them (the node's",
         '# ~/imu_with_covariance, or the driver once its covariance parameters are set).',
-        f'# Worst-axis stdev per sample at {rate_hz:g} Hz: angular velocity '
-        f'{sd("angular_velocity_stdev")} rad/s,',
+        f'# Worst-axis stdev per sample at {rate_hz:g} Hz (fitted white noise): angular '
+        f'velocity {sd("angular_velocity_stdev")} rad/s,',
         f'# linear acceleration {sd("linear_acceleration_stdev")} m/s^2.',
+        *assumes,
         '# What it does not set: process_noise_covariance (a motion model of the robot',
         '# without IMU bias states: tune it for your vehicle), the biases themselves',
         '# (robot_localization has no bias states: B, T_B and K have no slot), and the',
@@ -417,57 +442,11 @@ def robot_localization_yaml(sources, rate_hz: float, imu_topic: str,
         '    imu0_differential: false',
         '    imu0_relative: false',
         f'    imu0_queue_size: {queue}',
-        '    imu0_remove_gravitational_acceleration: true',
+        f'    imu0_remove_gravitational_acceleration: {"true" if orientation else "false"}',
         '    # Mahalanobis distance [standard deviations]: a 3-D innovation exceeds it with',
-        '    # probability ~1e-6 when the covariances are right.',
-        f'    imu0_angular_velocity_rejection_threshold: {REJECTION_SIGMAS}',
-        f'    imu0_linear_acceleration_rejection_threshold: {REJECTION_SIGMAS}',
+        '    # probability ~1e-6 when the covariances are right.  twist = angular velocity.',
+        f'    imu0_twist_rejection_threshold: {REJECTION_SIGMAS!r}',
     ]
-    return '\n'.join(lines) + '\n'
-
-
-def vins_yaml(sources, rate_hz: float, reduce: str = 'max') -> str:
-    """
-    Return the VINS-Mono / VINS-Fusion IMU noise keys (acc_n, gyr_n, acc_w, gyr_w).
-
-    The values are the continuous-time densities Kalibr uses (N and K, one per sensor,
-    :func:`sensor_value`), which is how they are usually filled
-    in.  VINS' pre-integration uses them as per-sample values (see
-    :data:`imu_allan.core.outputs.consumers.NOTES`), and its shipped examples are larger than the
-    Allan densities by factors of 10-50: start from these and inflate.  A value no axis
-    gives is left out with a comment.
-
-    Parameters
-    ----------
-    sources : mapping or sequence
-        Six AxisNoise / AxisFit.
-    rate_hz : float
-        Sample rate [Hz] (a comment: VINS takes no rate key).
-    reduce : str
-        'max' (worst axis) or 'mean'.
-
-    Returns
-    -------
-    str
-        YAML text with acc_n [m/s^2/sqrt(Hz)], gyr_n [rad/s/sqrt(Hz)], acc_w
-        [m/s^3/sqrt(Hz)] and gyr_w [rad/s^2/sqrt(Hz)].
-
-    """
-    srcs = dict(zip(AXES, _six(sources)))
-    lines = ['# VINS-Mono / VINS-Fusion IMU noise (imu_allan): continuous densities of the',
-             f'# {"worst axis" if reduce == "max" else "mean of the axes"} '
-             f'at {rate_hz:g} Hz.  VINS uses them as per-sample values and its examples',
-             '# are 10-50x larger: start here and inflate until the estimator is consistent.',
-             '# OpenVINS reads the Kalibr keys instead (imu.yaml).']
-    for key, axes, sym, unit in (('acc_n', ACCEL_AXES, 'N', 'm/s^2/sqrt(Hz)'),
-                                 ('gyr_n', GYRO_AXES, 'N', 'rad/s/sqrt(Hz)'),
-                                 ('acc_w', ACCEL_AXES, 'K', 'm/s^3/sqrt(Hz)'),
-                                 ('gyr_w', GYRO_AXES, 'K', 'rad/s^2/sqrt(Hz)')):
-        sv = sensor_value(srcs, axes, sym, reduce)
-        if sv.value is None:
-            lines.append(f'# {key}: not available on any axis (left out)')
-            continue
-        note = {'estimate': '', 'upper_bound': ', 95 % upper bound',
-                'curve_bound': ", the measured curve's bound"}[sv.kind]
-        lines.append(f'{key}: {sv.value:.6e}  # [{unit}{note}]')
+    if orientation:
+        lines.append(f'    imu0_linear_acceleration_rejection_threshold: {REJECTION_SIGMAS!r}')
     return '\n'.join(lines) + '\n'
