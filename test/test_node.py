@@ -450,7 +450,7 @@ def test_two_nodes_in_two_namespaces_keep_apart(context, tmp_path, monkeypatch):
         assert dirs == [tmp_path / '.ros' / 'imu_allan' / ns / 'imu_allan'
                         for ns in ('left', 'right')]
         assert [n.subscription.topic_name for n in nodes] == ['/left/imu', '/right/imu']
-        names = [n._data_status().name for n in nodes]
+        names = [n.reports.data_status().name for n in nodes]
         assert names == ['left/imu_allan: data', 'right/imu_allan: data']
         for n, seconds in zip(nodes, (10.0, 15.0)):
             pub = peer.create_publisher(Imu, n.subscription.topic_name, QoSProfile(
@@ -702,7 +702,7 @@ def test_a_damaged_checkpoint_is_set_aside_and_the_node_starts_fresh(
     finally:
         r.close()
     err = capfd.readouterr().err
-    assert 'not resuming: the checkpoint is damaged' in err and 'starting fresh' in err, err
+    assert 'not resuming: the checkpoint cannot be used (' in err and 'starting fresh' in err, err
     assert 'Traceback' not in err
 
 

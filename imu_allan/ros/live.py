@@ -192,7 +192,7 @@ class LiveInput:
             # Whatever reading a damaged file raises (BadZipFile, EOFError, KeyError,
             # ZeroDivisionError, InputError ...): the node starts fresh, it never dies.
             except Exception as exc:  # noqa: B902
-                self._set_aside(f'the checkpoint is damaged ({_one_line(exc)})', 'bad')
+                self._set_aside(f'the checkpoint cannot be used ({_one_line(exc)})', 'bad')
             else:
                 # Samples after the last checkpoint are lost: no Allan term may span them,
                 # and the step to the first new stamp is not a step of the sensor clock.
@@ -316,8 +316,10 @@ class LiveInput:
 
 
 def _one_line(exc: BaseException) -> str:
-    """Return an exception as one short line: its type and the first line of its text."""
+    """Return an exception as one short line: its type (unless InputError) and first line."""
     text = str(exc).strip().splitlines()
+    if isinstance(exc, InputError) and text:
+        return text[0][:200]
     return f'{type(exc).__name__}: {text[0][:200]}' if text else type(exc).__name__
 
 
