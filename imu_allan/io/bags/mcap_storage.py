@@ -456,7 +456,7 @@ class _McapBackend(_Backend):
 
     def count(self, topic: _Topic) -> int | None:
         """
-        The topic's count as the file states it, or None when it cannot be known.
+        Return the topic's count as the file states it, or None when it cannot be known.
 
         A truncated file lost its summary; counts gathered from indexes or a scan of a
         damaged file miss what the damage hid.

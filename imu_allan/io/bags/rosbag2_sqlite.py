@@ -69,7 +69,7 @@ _MAX_POINT_READS = 1 << 16
 
 
 def _line(err: BaseException) -> str:
-    """The first line of an error's text (sqlite quotes whole schemas in some)."""
+    """Return the first line of an error's text (sqlite quotes whole schemas in some)."""
     text = str(err).strip()
     return text.splitlines()[0] if text else type(err).__name__
 
