@@ -177,12 +177,17 @@ class _SqliteBackend(_Backend):
         ids = self.ids[topic.name]
         sql = ('SELECT id, timestamp, data FROM messages WHERE id > ? AND topic_id IN '
                f'({",".join("?" * len(ids))}) ORDER BY id')
+        repeated = 0
         while after is not None:
             rows: list = []
             error = None
             try:
                 # Row by row (as fetchmany steps anyway): an error keeps the rows before it.
                 for row in self.conn.execute(sql, [after, *ids]):
+                    if row[0] <= (rows[-1][0] if rows else after):
+                        # A damaged cell pointer shows a row twice: once is enough.
+                        repeated += 1
+                        continue
                     rows.append(row)
                     if len(rows) >= _FETCH_ROWS:
                         after = rows[-1][0]
@@ -194,7 +199,7 @@ class _SqliteBackend(_Backend):
                 after = rows[-1][0]
                 yield self._piece(rows, topic)
             if error is None:
-                return
+                break
             nxt = self._past_damage(after)
             # The rows between, one at a time: all but those on the damaged page come back.
             rows = self._one_by_one(after, nxt, ids)
@@ -204,6 +209,9 @@ class _SqliteBackend(_Backend):
                                  f'({_line(error)}); ' + ('read stopped' if nxt is None else
                                                           f'read resumed after row {nxt}'))
             after = nxt
+        if repeated:
+            self.warnings.append(f'{self.path}: {repeated} rows out of rowid order (a damaged '
+                                 'page) skipped')
 
     def _one_by_one(self, after: int, bound: int | None, ids: list[int]) -> list:
         """Rows after < id <= bound of the topic that SQL reads one rowid at a time."""
