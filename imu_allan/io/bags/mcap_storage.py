@@ -286,9 +286,11 @@ class _McapBackend(_Backend):
         self.items = self._without_overlap(
             [it._replace(counts=counts.get(it.pos)) if isinstance(it, _Chunk) else it
              for it in self.items])
-        if not any(isinstance(it, _Loose) for it in self.items):
+        chunks = [it for it in self.items if isinstance(it, _Chunk)]
+        if len(chunks) == len(self.items):
             # Chunks may overlap in time (valid MCAP): read them in start-time order.
-            self.items.sort(key=lambda c: (c.start_ns, c.pos))
+            chunks.sort(key=lambda c: (c.start_ns, c.pos))
+            self.items = list(chunks)
         if self.counts is None:
             self.counts = self._index_counts()
         if not self.channels or self.counts is None:

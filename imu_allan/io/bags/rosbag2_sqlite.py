@@ -133,7 +133,7 @@ class _SqliteBackend(_Backend):
         """Return every topic of the database."""
         return list(self._topics.values())
 
-    def count(self, topic: _Topic) -> int:
+    def count(self, topic: _Topic) -> int | None:
         """Count a topic's messages by SQL (the stored hint where a damaged page hides it)."""
         if len(self.ids) == 1:
             total = self._total()
@@ -167,7 +167,7 @@ class _SqliteBackend(_Backend):
                 pass
         yield from self._sql_pieces(topic, after)
 
-    def _sql_pieces(self, topic: _Topic, after: int) -> Iterator[_Piece]:
+    def _sql_pieces(self, topic: _Topic, start: int) -> Iterator[_Piece]:
         """
         Yield the topic's messages with rowid > after, one SQL fetch at a time.
 
@@ -178,6 +178,7 @@ class _SqliteBackend(_Backend):
         sql = ('SELECT id, timestamp, data FROM messages WHERE id > ? AND topic_id IN '
                f'({",".join("?" * len(ids))}) ORDER BY id')
         repeated = 0
+        after: int | None = start
         while after is not None:
             rows: list = []
             error = None
@@ -195,6 +196,7 @@ class _SqliteBackend(_Backend):
                         rows = []
             except sqlite3.DatabaseError as err:
                 error = err
+            assert after is not None
             if rows:
                 after = rows[-1][0]
                 yield self._piece(rows, topic)
