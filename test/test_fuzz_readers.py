@@ -278,7 +278,7 @@ def reference(kind: str, path: Path) -> Counter | None:
 
 
 def _mcap_reference(path: Path) -> list:
-    """The mcap library's reading: indexed, or record by record when that fails at once."""
+    """Read with the mcap library: indexed, or record by record when that fails at once."""
     got: list = []
     try:
         with open(path, 'rb') as stream:

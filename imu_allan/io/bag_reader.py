@@ -203,7 +203,7 @@ class ImuSource:
         self._account()
 
     def _guarded(self) -> Iterator[_Piece]:
-        """The backend's pieces, counted; a library failure ends the read with a warning."""
+        """Yield the backend's pieces, counted; a library failure ends the read with a warning."""
         try:
             for piece in self._backend.pieces(self._topic):
                 self._counts[1] += piece.n_bad

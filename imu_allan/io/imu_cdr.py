@@ -111,7 +111,7 @@ def _fields_dtype(doubles_offset: int, big: bool, ros1: bool, itemsize: int,
 
 @functools.lru_cache(maxsize=2)
 def _typestore(ros1: bool) -> Any:
-    """rosbags' type store, built once (building it costs milliseconds)."""
+    """Return rosbags' type store, built once (building it is slow)."""
     from rosbags.typesys import get_typestore, Stores
 
     return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)

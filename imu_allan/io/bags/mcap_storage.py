@@ -23,13 +23,11 @@ import zstandard
 
 from imu_allan.errors import InputError
 from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _MCAP_MAGIC, _Piece, _Topic
+from imu_allan.io.bags.mcap_records import (_MCAP_MESSAGE, _OP_CHANNEL, _OP_CHUNK,
+                                            _OP_DATA_END, _OP_FOOTER, _OP_HEADER, _OP_MESSAGE,
+                                            _OP_MESSAGE_INDEX, _OP_SCHEMA, walk)
 from imu_allan.io.imu_cdr import _records
 
-_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
-_OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_DATA_END = 0x05, 0x06, 0x07, 0x0F
-_MCAP_MESSAGE = np.dtype({'names': ['op', 'length', 'channel', 'log_time'],
-                          'formats': ['u1', '<u8', '<u2', '<u8'], 'offsets': [0, 1, 9, 15],
-                          'itemsize': 31})
 #: Bytes read at a time while walking small records.
 _WINDOW = 1 << 16
 _COMPRESSIONS = (b'', b'zstd', b'lz4')
@@ -286,9 +284,11 @@ class _McapBackend(_Backend):
         self.items = self._without_overlap(
             [it._replace(counts=counts.get(it.pos)) if isinstance(it, _Chunk) else it
              for it in self.items])
-        if not any(isinstance(it, _Loose) for it in self.items):
+        chunks = [it for it in self.items if isinstance(it, _Chunk)]
+        if len(chunks) == len(self.items):
             # Chunks may overlap in time (valid MCAP): read them in start-time order.
-            self.items.sort(key=lambda c: (c.start_ns, c.pos))
+            chunks.sort(key=lambda c: (c.start_ns, c.pos))
+            self.items = list(chunks)
         if self.counts is None:
             self.counts = self._index_counts()
         if not self.channels or self.counts is None:
@@ -339,7 +339,7 @@ class _McapBackend(_Backend):
                         counts[channel_id] = counts.get(channel_id, 0) + k
                     continue
                 u8 = np.frombuffer(raw, np.uint8)
-                offsets = self._walk(raw)
+                offsets = walk(raw, self._add_record)
                 ids = _records(u8, offsets[offsets + 31 <= u8.size], _MCAP_MESSAGE)['channel']
             else:
                 data = np.frombuffer(self._read(item.start, item.end - item.start), np.uint8)
@@ -398,47 +398,6 @@ class _McapBackend(_Backend):
             pos += len(block)
         return not want or crc == want
 
-    def _walk(self, raw: bytes) -> np.ndarray:
-        """
-        Return (k,) int64 offsets of the Message records in decompressed chunk data.
-
-        Runs of equally long messages (one topic recorded alone) are stepped over with
-        one vectorised check instead of one Python iteration per record.
-        """
-        u8 = np.frombuffer(raw, np.uint8)
-        end = len(raw)
-        pos = 0
-        runs = []
-        unpack = struct.Struct('<Q').unpack_from
-        while pos + 9 <= end:
-            op = raw[pos]
-            length = unpack(raw, pos + 1)[0]
-            stride = 9 + length
-            if pos + stride > end:
-                break
-            if op != _OP_MESSAGE:
-                if op in (_OP_SCHEMA, _OP_CHANNEL):
-                    self._add_record(op, raw, pos + 9)
-                pos += stride
-                continue
-            # Check growing windows of the records that would follow at this stride (a
-            # strided view, no copy): long runs cost a few numpy calls, short ones
-            # (interleaved topics) only a small window.
-            run, k, window = 1, (end - pos) // stride, 64
-            while length >= 22 and run < k:
-                n = min(k, run + window) - run
-                heads = np.ndarray((n,), _MCAP_MESSAGE, buffer=u8, offset=pos + stride * run,
-                                   strides=(stride,))
-                same = (heads['op'] == _OP_MESSAGE) & (heads['length'] == length)
-                if not same.all():
-                    run += int(np.argmin(same))
-                    break
-                run += n
-                window *= 16
-            runs.append(pos + stride * np.arange(run, dtype=np.int64))
-            pos += stride * run
-        return np.concatenate(runs) if runs else np.zeros(0, np.int64)
-
     # -- reading --------------------------------------------------------------------
     def topics(self) -> list[_Topic]:
         """Return one entry per topic (channels with the same topic are merged)."""
@@ -456,7 +415,7 @@ class _McapBackend(_Backend):
 
     def count(self, topic: _Topic) -> int | None:
         """
-        The topic's count as the file states it, or None when it cannot be known.
+        Return the topic's count as the file states it, or None when it cannot be known.
 
         A truncated file lost its summary; counts gathered from indexes or a scan of a
         damaged file miss what the damage hid.
@@ -500,7 +459,8 @@ class _McapBackend(_Backend):
                     f'{self.path}: {text}; chunk skipped'))
                 if raw is None:
                     continue
-                piece = self._message_piece(np.frombuffer(raw, np.uint8), self._walk(raw),
+                offsets = walk(raw, self._add_record)
+                piece = self._message_piece(np.frombuffer(raw, np.uint8), offsets,
                                             wanted, topic.encoding)
             else:
                 data = self._read(item.start, item.end - item.start)

@@ -174,13 +174,14 @@ class _Rosbag2DirBackend(_Backend):
 
     def count(self, topic: _Topic) -> int | None:
         """Count a topic's messages over all files (metadata.yaml's count if they cannot)."""
-        counts = []
+        total = 0
         for part in self.parts:
             own = next((t for t in part.topics() if t.name == topic.name), None)
-            counts.append(part.count(own) if own is not None else 0)
-        if all(c is not None for c in counts):
-            return sum(counts)
-        return topic.n_messages
+            count = part.count(own) if own is not None else 0
+            if count is None:
+                return topic.n_messages
+            total += count
+        return total
 
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield the topic's messages file after file (split bags)."""

@@ -69,7 +69,7 @@ _MAX_POINT_READS = 1 << 16
 
 
 def _line(err: BaseException) -> str:
-    """The first line of an error's text (sqlite quotes whole schemas in some)."""
+    """Return the first line of an error's text (sqlite quotes whole schemas in some)."""
     text = str(err).strip()
     return text.splitlines()[0] if text else type(err).__name__
 
@@ -133,7 +133,7 @@ class _SqliteBackend(_Backend):
         """Return every topic of the database."""
         return list(self._topics.values())
 
-    def count(self, topic: _Topic) -> int:
+    def count(self, topic: _Topic) -> int | None:
         """Count a topic's messages by SQL (the stored hint where a damaged page hides it)."""
         if len(self.ids) == 1:
             total = self._total()
@@ -167,7 +167,7 @@ class _SqliteBackend(_Backend):
                 pass
         yield from self._sql_pieces(topic, after)
 
-    def _sql_pieces(self, topic: _Topic, after: int) -> Iterator[_Piece]:
+    def _sql_pieces(self, topic: _Topic, start: int) -> Iterator[_Piece]:
         """
         Yield the topic's messages with rowid > after, one SQL fetch at a time.
 
@@ -177,12 +177,18 @@ class _SqliteBackend(_Backend):
         ids = self.ids[topic.name]
         sql = ('SELECT id, timestamp, data FROM messages WHERE id > ? AND topic_id IN '
                f'({",".join("?" * len(ids))}) ORDER BY id')
+        repeated = 0
+        after: int | None = start
         while after is not None:
             rows: list = []
             error = None
             try:
                 # Row by row (as fetchmany steps anyway): an error keeps the rows before it.
                 for row in self.conn.execute(sql, [after, *ids]):
+                    if row[0] <= (rows[-1][0] if rows else after):
+                        # A damaged cell pointer shows a row twice: once is enough.
+                        repeated += 1
+                        continue
                     rows.append(row)
                     if len(rows) >= _FETCH_ROWS:
                         after = rows[-1][0]
@@ -190,11 +196,12 @@ class _SqliteBackend(_Backend):
                         rows = []
             except sqlite3.DatabaseError as err:
                 error = err
+            assert after is not None
             if rows:
                 after = rows[-1][0]
                 yield self._piece(rows, topic)
             if error is None:
-                return
+                break
             nxt = self._past_damage(after)
             # The rows between, one at a time: all but those on the damaged page come back.
             rows = self._one_by_one(after, nxt, ids)
@@ -204,6 +211,9 @@ class _SqliteBackend(_Backend):
                                  f'({_line(error)}); ' + ('read stopped' if nxt is None else
                                                           f'read resumed after row {nxt}'))
             after = nxt
+        if repeated:
+            self.warnings.append(f'{self.path}: {repeated} rows out of rowid order (a damaged '
+                                 'page) skipped')
 
     def _one_by_one(self, after: int, bound: int | None, ids: list[int]) -> list:
         """Rows after < id <= bound of the topic that SQL reads one rowid at a time."""
