@@ -18,8 +18,6 @@ lowers the Allan variance at the shortest tau by at most 1.5 times the spike sha
 longer taus average it away.  ``max_spike_share`` refuses records where that matters.
 """
 
-import warnings
-
 import numpy as np
 
 from imu_allan import AXES
@@ -32,6 +30,10 @@ CONTEXT = 6
 CHUNK = 4096
 #: |value| beyond this is no IMU reading in SI units [rad/s, m/s^2].
 ABSURD = 1e6
+#: Share of the spike limit a step must exceed for its rows to be judged.
+_SCREEN = 0.6
+#: Every this many steps of a chunk give its noise scale.
+_THIN = 8
 #: Median |x| of a standard normal (MAD to sigma).
 _MAD = 0.6744897501960817
 
@@ -67,80 +69,109 @@ class SpikeFilter:
         """Add rows; return the rows judged so far (cleaned), in order."""
         if self.sigma <= 0:
             return t, y
-        if self._held_t.size:
-            t = np.concatenate((self._held_t, t))
-            y = np.concatenate((self._held_y, y))
-        n_chunks = (t.size - CONTEXT) // CHUNK if t.size > CONTEXT else 0
+        held = self._held_t.size
+        n_chunks = (held + t.size - CONTEXT) // CHUNK
         if n_chunks <= 0:
-            self._held_t, self._held_y = t, y
+            self._held_t = np.concatenate((self._held_t, t))
+            self._held_y = np.concatenate((self._held_y, y))
             return t[:0], y[:0]
         k = n_chunks * CHUNK
-        out = self._judge(y[:k + CONTEXT], k)
-        self._held_t, self._held_y = t[k:], y[k:]
+        left = self._left.shape[0]
+        full = np.concatenate((self._left, self._held_y, y))
+        t = np.concatenate((self._held_t, t)) if held else t
+        out = self._judge(full, left, k)
+        self._held_t, self._held_y = t[k:].copy(), full[left + k:].copy()
         return t[:k], out
 
     def flush(self) -> tuple[np.ndarray, np.ndarray]:
         """Judge the held rows with the context there is (end of a segment); return them."""
         t, y = self._held_t, self._held_y
         self._held_t, self._held_y = t[:0], y[:0]
-        out = self._judge(y, y.shape[0]) if y.shape[0] else y
+        if y.shape[0]:
+            left = self._left.shape[0]
+            y = self._judge(np.concatenate((self._left, y)), left, y.shape[0])
         self._left = np.empty((0, N_AXES))
-        return t, out
+        return t, y
 
-    def _judge(self, y: np.ndarray, k: int) -> np.ndarray:
-        """Return rows ``y[:k]`` cleaned; rows from k on are right context only."""
-        left = self._left.shape[0]
-        full = np.concatenate((self._left, y)) if left else y
-        out = y[:k]
-        chunks = [(s, min(s + CHUNK, k)) for s in range(0, k, CHUNK)]
-        spikes = np.zeros((full.shape[0], N_AXES), dtype=bool)
-        with np.errstate(over='ignore', invalid='ignore'), warnings.catch_warnings():
-            warnings.simplefilter('ignore', RuntimeWarning)   # all-NaN medians
-            for s, e in chunks:
-                self._mark(full, left + s, left + e, spikes)
-        found = spikes[left:left + k]
-        if found.any():
+    def _judge(self, full: np.ndarray, left: int, k: int) -> np.ndarray:
+        """
+        Return rows ``full[left:left + k]`` cleaned.
+
+        ``full`` (n, 6): ``left`` cleaned rows before them as context, and rows after
+        them (the next chunk's) as context only.
+        """
+        with np.errstate(over='ignore', invalid='ignore'):
+            spikes = self._mark(full, left, k)
+        out = full[left:left + k]
+        if spikes is not None:
             out = _interpolate(full, spikes)[left:left + k]
-            self._count(found)
+            self._count(spikes[left:left + k])
         self._left = out[-CONTEXT:].copy() if k >= CONTEXT else np.concatenate(
-            (self._left, out))[-CONTEXT:]
+            (full[:left], out))[-CONTEXT:]
         return out
 
-    def _mark(self, full: np.ndarray, s: int, e: int, spikes: np.ndarray) -> None:
-        """Mark the spikes among rows s:e of ``full`` in ``spikes`` (same shape)."""
-        lo, hi = max(s - CONTEXT, 0), min(e + CONTEXT, full.shape[0])
-        part = full[lo:hi]
-        absurd = ~(np.abs(part) <= ABSURD)
-        d = np.abs(np.diff(part, axis=0))
-        if d.shape[0] >= 8:
-            scale = _noise_sigma(d[::max(d.shape[0] // 1024, 1)])
-            ok = np.isfinite(scale) & (scale > 0)
-            self._scale = np.where(ok, scale, self._scale)
-        limit = self.sigma * self._scale          # (6,), NaN while no scale is known
-        # Candidates: a step into or out of the row of half the limit, spread over a
-        # burst's length; each is then judged against its neighbours' median.
-        big = np.zeros(part.shape, dtype=bool)
-        step = d > 0.5 * limit
-        big[1:] |= step
-        big[:-1] |= step
-        big |= absurd
-        rows, cols = np.nonzero(big)
-        if rows.size:
-            cand = np.zeros(part.shape, dtype=bool)
-            for shift in range(-CONTEXT, CONTEXT + 1):
-                r = rows + shift
-                keep = (r >= 0) & (r < part.shape[0])
-                cand[r[keep], cols[keep]] = True
-            cand[:s - lo] = False
-            cand[e - lo:] = False
-            rows, cols = np.nonzero(cand)
-            padded = np.pad(part, ((CONTEXT, CONTEXT), (0, 0)), constant_values=np.nan)
-            near = padded[rows[:, None] + np.arange(2 * CONTEXT + 1), cols[:, None]]
-            near[~(np.abs(near) <= ABSURD)] = np.nan
-            med = np.nanmedian(near, axis=1) if near.size else near[:, 0]
-            dev = np.abs(part[rows, cols] - med)
-            hit = (dev > limit[cols]) | absurd[rows, cols] | np.isnan(med)
-            spikes[rows[hit] + lo, cols[hit]] = True
+    def _limits(self, d: np.ndarray, k: int) -> np.ndarray:
+        """Spike limits (n_chunks, 6) of the judged rows' chunks, from their steps ``d``."""
+        n_chunks = -(-k // CHUNK)
+        limits = np.empty((n_chunks, N_AXES))
+        full = k // CHUNK
+        if full:
+            steps = d[:full * CHUNK].reshape(full, CHUNK, N_AXES)[:, ::_THIN]
+            limits[:full] = _noise_sigma(steps)
+        if full < n_chunks:
+            tail = d[full * CHUNK:k]
+            limits[full] = _noise_sigma(tail[None])[0] if tail.shape[0] >= 8 else np.nan
+        for c in range(n_chunks):   # a short chunk, or no noise at all: the last scale
+            ok = np.isfinite(limits[c]) & (limits[c] > 0)
+            limits[c] = self._scale = np.where(ok, limits[c], self._scale)
+        return self.sigma * limits
+
+    def _mark(self, full: np.ndarray, left: int, k: int) -> np.ndarray | None:
+        """Spikes (n, 6) bool among rows left:left + k of ``full`` (n, 6); None for none."""
+        n = full.shape[0]
+        # Step i is from row left + i to the next; the last judged row may have none.
+        d = np.diff(full[left:], axis=0)
+        np.abs(d, out=d)
+        limits = self._limits(d, k)
+        m = min(d.shape[0], k)
+        n_chunks = -(-m // CHUNK)
+        pad = n_chunks * CHUNK - m
+        steps = np.pad(d[:m], ((0, pad), (0, 0))) if pad else d[:m]
+        # Candidates: a step into or out of a row of 0.6 limits (NaN limits, no scale
+        # yet, flag nothing), spread over a burst's length; each is then judged
+        # against its neighbours' median.  Chunks whose largest step is smaller have
+        # none (most chunks of clean data).
+        screen = _SCREEN * limits[:n_chunks]
+        chunks = steps.reshape(n_chunks, CHUNK, N_AXES)
+        found_r, found_c = [], []
+        for c, j in zip(*np.nonzero(chunks.max(axis=1) > screen)):
+            r = np.flatnonzero(chunks[c, :, j] > screen[c, j]) + c * CHUNK
+            found_r.append(r[r < m])
+            found_c.append(np.full(found_r[-1].size, j))
+        rows = np.concatenate(found_r) if found_r else np.empty(0, np.int64)
+        cols = np.concatenate(found_c) if found_c else np.empty(0, np.int64)
+        if full[left:left + k].max() > ABSURD or full[left:left + k].min() < -ABSURD:
+            r2, c2 = np.nonzero(~(np.abs(full[left:left + k]) <= ABSURD))
+            rows, cols = np.concatenate((rows, r2)), np.concatenate((cols, c2))
+        if rows.size == 0:
+            return None
+        rows = (rows[:, None] + np.arange(-CONTEXT, CONTEXT + 2)).ravel() + left
+        cols = np.repeat(cols, 2 * CONTEXT + 2)
+        keep = (rows >= left) & (rows < left + k)
+        flat = np.unique(rows[keep] * N_AXES + cols[keep])
+        rows, cols = flat // N_AXES, flat % N_AXES
+        # Near the ends of the data the end row stands in for the missing neighbours.
+        near = full[np.clip(rows[:, None] + np.arange(-CONTEXT, CONTEXT + 1), 0, n - 1),
+                    cols[:, None]]
+        value = full[rows, cols]
+        limit = limits[(rows - left) // CHUNK, cols]
+        dev = np.abs(value - np.median(near, axis=1))
+        hit = (~(dev <= limit) & np.isfinite(limit)) | ~(np.abs(value) <= ABSURD)
+        if not hit.any():
+            return None
+        spikes = np.zeros(full.shape, dtype=bool)
+        spikes[rows[hit], cols[hit]] = True
+        return spikes
 
     def _count(self, found: np.ndarray) -> None:
         per_axis = found.sum(axis=0)
@@ -180,12 +211,11 @@ class SpikeFilter:
 
 
 def _noise_sigma(d: np.ndarray) -> np.ndarray:
-    """Noise sigma per axis (n_axes,) from absolute first differences (m, n_axes)."""
-    d = np.where(np.abs(d) <= ABSURD, d, np.nan)
-    sigma = np.nanmedian(d, axis=0) / (_MAD * np.sqrt(2.0))
+    """Noise sigma (n_chunks, n_axes) from absolute first differences (n_chunks, m, n_axes)."""
+    sigma = np.median(d, axis=1) / (_MAD * np.sqrt(2.0))
     # Quantised sensors: most steps may be 0; one quantum is the least noise there is.
-    pos = np.where(d > 0, d, np.inf).min(axis=0) / np.sqrt(2.0)
-    return np.maximum(sigma, np.where(np.isfinite(pos), pos, np.nan))
+    quantum = np.where(d > 0, d, np.inf).min(axis=1) / np.sqrt(2.0)
+    return np.maximum(sigma, np.where(np.isfinite(quantum), quantum, np.nan))
 
 
 def _interpolate(full: np.ndarray, spikes: np.ndarray) -> np.ndarray:
