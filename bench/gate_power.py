@@ -4,15 +4,16 @@ Power and false alarms of the session's sample gate: spikes and motion, against 
 Usage: ``.venv/bin/python bench/gate_power.py [--seeds 2] [--minutes 40] [--adis DIR]``.
 
 Every case is a seeded six-axis record at 100 Hz with ADIS16405-like noise (gyro
-white sigma 4.3e-4 rad/s per sample plus a slow bias random walk, accelerometers
+white sigma 6e-3 rad/s per sample plus a slow bias random walk, accelerometers
 0.04 m/s^2 on gravity) streamed through :class:`imu_allan.pipeline.session.Session`
 in blocks of 777 samples:
 
 - spikes: singles and bursts of 2-5 samples at 10-50 sigma (random sign, random
   axis) in 0.001-1 % of the samples; power is the share of spike values the filter
   replaced, false spikes are the replaced values that were no spike;
-- motion: 30 s to 10 min of driving (vibration 20 sigma, turns of 0.3 rad/s, 0.5 m/s^2
-  of acceleration) or of a slow bump (a raised cosine of 5-50 sigma on gyro_z)
+- motion: 30 s to 10 min of driving (vibration 5 sigma, turns of 0.3 rad/s, 0.5 m/s^2
+  of acceleration) or of a slow bump (a raised cosine on gyro_z whose peak is 5-50
+  sigma of a 1 s mean: 50 sigma is 0.03 rad/s)
   before, between or after still stretches; printed are the share of cases flagged
   and the samples used over the truly still ones (1.0: all still data, no motion);
 - the robot that moved first: 2 min of driving, then 38 min still;
@@ -30,7 +31,9 @@ import numpy as np
 from imu_allan.pipeline.session import Session, SessionConfig
 
 RATE_HZ = 100.0
-SIGMA = np.array([4.3e-4] * 3 + [0.04] * 3)
+SIGMA = np.array([6e-3] * 3 + [0.04] * 3)
+#: Noise of a 1 s mean (100 samples): the sigma of the bump sizes.
+SIGMA_1S = SIGMA / 10
 BLOCK = 777
 
 
@@ -63,12 +66,12 @@ def add_motion(y: np.ndarray, start: int, length: int, kind: str, size: float,
     """Add driving or a slow bump of ``size`` sigma (bumps) to rows start:start+length."""
     k = slice(start, start + length)
     if kind == 'driving':
-        y[k] += rng.standard_normal((length, 6)) * SIGMA * 20
+        y[k] += rng.standard_normal((length, 6)) * SIGMA * 5
         turns = np.repeat(rng.uniform(-0.3, 0.3, length // 500 + 1), 500)[:length]
         y[k, 2] += turns
         y[k, 3] += np.repeat(rng.uniform(-0.5, 0.5, length // 300 + 1), 300)[:length]
     else:
-        y[k, 2] += size * SIGMA[2] * 0.5 * (1 - np.cos(2 * np.pi * np.arange(length) / length))
+        y[k, 2] += size * SIGMA_1S[2] * 0.5 * (1 - np.cos(2 * np.pi * np.arange(length) / length))
 
 
 def run(y: np.ndarray, **config) -> Session:
@@ -82,7 +85,7 @@ def run(y: np.ndarray, **config) -> Session:
 
 
 def cleaned_values(y: np.ndarray) -> np.ndarray:
-    """The spike filter's output alone for a record (n, 6), the same rule."""
+    """Return the spike filter's output alone for a record (n, 6)."""
     from imu_allan.pipeline.hygiene import HygieneStats, SessionConfig as Cfg, WarningLog
     from imu_allan.pipeline.spikes import SpikeFilter
     f = SpikeFilter(Cfg(), HygieneStats(), WarningLog())

@@ -484,3 +484,42 @@ def test_window_statistics_and_raw_means_equal_numpy():
     y = rng.standard_normal((4096, 6)) * 1e-3 + 9.81
     for factor in (1, 2, 8, 32):
         assert_equal(_means(y, factor), y.reshape(-1, factor, 6).mean(axis=1))
+
+
+def test_the_pipeline_modules_import_without_a_cycle():
+    # Every import between pipeline modules, lazy ones inside functions included: the
+    # Session's parts do not import the Session (the old session_state -> session loop).
+    import ast
+    from pathlib import Path
+
+    import imu_allan.pipeline as pipeline
+    folder = Path(pipeline.__file__).parent
+    graph = {}
+    for path in folder.glob('*.py'):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names.add(node.module)
+                names.update(f'{node.module}.{a.name}' for a in node.names)
+            elif isinstance(node, ast.Import):
+                names.update(a.name for a in node.names)
+        graph[path.stem] = {n.split('.')[2] for n in names
+                            if n.startswith('imu_allan.pipeline.') and n.count('.') >= 2}
+        graph[path.stem] &= {p.stem for p in folder.glob('*.py')}
+    assert 'session' not in set().union(*(graph[m] for m in graph if m != 'session'
+                                          and m != 'analysis'))
+    done, visiting = set(), []
+
+    def visit(module):
+        assert module not in visiting, ' -> '.join(visiting + [module])
+        if module in done:
+            return
+        visiting.append(module)
+        for other in sorted(graph[module]):
+            visit(other)
+        visiting.pop()
+        done.add(module)
+
+    for module in sorted(graph):
+        visit(module)
+    assert not (folder / 'parts.py').exists()

@@ -63,7 +63,7 @@ class SampleGate:
             self.motion.take(*self.spikes.take(t_part, y_part), rate_hz)
 
     def end_segment(self) -> None:
-        """The data stop here (a gap, NaN, saturation, a restart): no term spans it."""
+        """End the segment here (a gap, NaN, saturation, a restart): no term spans it."""
         self.flush()
         self.feed.break_segment()
 

@@ -131,7 +131,7 @@ class StampClock:
             self._break_next = True
 
     def _restart_clock(self) -> None:
-        """The stamps jumped back and went on: a new segment, no step across."""
+        """Start a new segment: the stamps jumped back and went on (no step across)."""
         self.stats.n_clock_restarts += 1
         self._warn('clock-restart', 'the stamps jumped back and went on (the device clock '
                    'restarted): a new segment starts there', once=False)

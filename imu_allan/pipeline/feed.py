@@ -97,7 +97,7 @@ class AccumulatorFeed:
         self.start(self.rate_hz)
 
     def close(self) -> None:
-        """The end of the recording: a background thread stops, later calls run inline."""
+        """End the recording: a background thread stops, later calls run inline."""
         self.pass_on()
         if isinstance(self.acc, BackgroundAccumulator):
             self.acc = self.acc.close()

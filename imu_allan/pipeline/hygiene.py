@@ -56,7 +56,8 @@ class SessionConfig:
         Window over which motion statistics are computed [s].
     motion_sigma : float
         A window mean that departs from the still reference by more than this many
-        of the reference's noise sigmas is motion.
+        sigmas of a still window's mean (the reference's per-sample noise over the
+        root of the samples in a window) is motion.
     motion_gyro_rad_s : float
         Cap of the gyro mean-offset threshold [rad/s].
     motion_accel_m_s2 : float
@@ -231,7 +232,7 @@ class WarningLog:
 
     @property
     def lines(self) -> list[str]:
-        """The warnings in the order their kinds first appeared."""
+        """Return the warnings in the order their kinds first appeared."""
         return list(self.text.values())
 
     def state(self) -> dict:

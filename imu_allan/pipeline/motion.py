@@ -3,7 +3,8 @@ The motion gate: still windows go on to the accumulator, windows that moved do n
 
 Samples are judged in windows of ``motion_window_s`` against a still reference: the
 per-axis mean and noise of still data.  A window moved when its mean is off by more
-than ``motion_sigma`` reference noise sigmas (capped by ``motion_gyro_rad_s`` and
+than ``motion_sigma`` times the noise of a window mean (the reference's per-sample
+noise over the root of the window's samples; capped by ``motion_gyro_rad_s`` and
 ``motion_accel_m_s2``), when it is ``motion_std_ratio`` times noisier, or when most
 axes are :data:`QUIETER` times quieter (the reference itself was taken in motion).
 
@@ -27,6 +28,10 @@ from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, NS, SessionConfig, 
 QUIETER = 3.0
 #: A stretch noisier than the reference by more than this never replaces it.
 NOISIER = 1.5
+#: Steps between still window means kept to measure a window mean's noise, and the
+#: fewest that do.
+NOISE_WINDOWS = 300
+MIN_STEPS = 20
 #: Reference noise floor as a share of the threshold caps (quantised sensors).
 _FLOOR = 0.01
 
@@ -58,6 +63,11 @@ class MotionGate:
         self.ref_std: np.ndarray | None = None
         self._win_t: list[np.ndarray] = []
         self._win_y: list[np.ndarray] = []
+        self._win = 2                  # rows per window, set from the rate
+        # Squared steps between the means of consecutive still windows (the last
+        # NOISE_WINDOWS): the noise of a window mean, coloured noise included.
+        self._steps2 = np.empty((0, N_AXES))
+        self._last_mean: np.ndarray | None = None
         self.moving = False            # the gate is closed
         self._in_motion = False        # the last window moved
         self._still_since_ns: int | None = None
@@ -78,7 +88,7 @@ class MotionGate:
         """
         if stamp_ns.size == 0:
             return
-        win = max(int(round(self.config.motion_window_s * rate_hz)), 2)
+        win = self._win = max(int(round(self.config.motion_window_s * rate_hz)), 2)
         t, y = stamp_ns, samples
         held = sum(h.shape[0] for h in self._win_y)
         if held >= win:     # the window shrank (a refined rate): start from the held rows
@@ -111,7 +121,22 @@ class MotionGate:
 
     def thresholds(self) -> np.ndarray:
         """Shape (6,): largest still offset of a window mean, per axis [rad/s, m/s^2]."""
-        return self._caps if self.ref_std is None else self.thresholds_for(self.ref_std)
+        if self.ref_std is None:
+            return self._caps
+        if self._steps2.shape[0] < MIN_STEPS:
+            return self.thresholds_for(self.ref_std)
+        # Median of chi-square(1) = 0.4549; a step holds two window means' noise.
+        noise = np.sqrt(np.median(self._steps2, axis=0) / (2 * 0.4549))
+        floor = _FLOOR * self._caps / np.sqrt(self._win)
+        return np.minimum(self._caps, self.config.motion_sigma * np.maximum(noise, floor))
+
+    def _note_still(self, means: np.ndarray, whole: bool = True) -> None:
+        """Note the means (k, 6) of consecutive still windows; ``whole``: none skipped."""
+        if whole and self._last_mean is not None:
+            means = np.concatenate((self._last_mean[None], means))
+        steps2 = np.diff(means, axis=0) ** 2
+        self._steps2 = np.concatenate((self._steps2, steps2))[-NOISE_WINDOWS:]
+        self._last_mean = means[-1].copy()
 
     # ------------------------------------------------------------ judgement
     def _judge_windows(self, t: np.ndarray, y: np.ndarray, win: int) -> None:
@@ -133,6 +158,9 @@ class MotionGate:
                 if still:
                     self._in_motion = False
                     self.feed.queue(y[i * win:(i + still) * win])
+                    k = min(still, NOISE_WINDOWS + 1)
+                    tail = y[(i + still - k) * win:(i + still) * win]
+                    self._note_still(tail.reshape(k, win, -1).mean(axis=1), k == still)
                     i += still
                     last = y[(i - 1) * win:i * win][None]
                     if self._quieter(_window_stats(last)[1][0], self.ref_std):
@@ -167,6 +195,7 @@ class MotionGate:
             return
         if not moved and not self.moving:
             _follow_drift(self.ref_mean, mean)
+            self._note_still(mean[None])
             self.feed.queue(y)
             return
         if not self.moving:
@@ -210,18 +239,26 @@ class MotionGate:
         return False
 
     def thresholds_for(self, ref_std: np.ndarray) -> np.ndarray:
-        """Mean-offset thresholds (6,) for a reference noise (6,)."""
-        return np.minimum(self._caps, self.config.motion_sigma * ref_std)
+        """
+        Mean-offset thresholds (6,) from a per-sample noise (6,) alone.
+
+        ``motion_sigma`` times twice the white noise of a window's mean,
+        ``ref_std / sqrt(win)``: room for coloured noise until the steps between
+        still windows measure it (:meth:`thresholds`).
+        """
+        return np.minimum(self._caps,
+                          self.config.motion_sigma * 2 * ref_std / np.sqrt(self._win))
 
     def _quieter(self, std: np.ndarray, ref_std: np.ndarray) -> bool:
         std = np.maximum(std, _FLOOR * self._caps)
         return bool(np.median(ref_std / std) > QUIETER)
 
     def _close(self) -> None:
-        """The IMU moved: stop passing samples on (pause) or start again (restart)."""
+        """Close the gate: stop passing samples on (pause) or start again (restart)."""
         self.moving = True
         self._still_since_ns = None
         self._cand_n = 0
+        self._last_mean = None
         self.feed.pass_on()
         self.feed.break_segment()
         if self.config.on_motion == 'restart':
@@ -250,11 +287,12 @@ class MotionGate:
         self._cand_since_ns = start_ns
 
     def _reanchor(self) -> None:
-        """The consistent stretch becomes the still reference; the gate opens."""
+        """Make the consistent stretch the still reference and open the gate."""
         assert self._cand_mean is not None and self._cand_std is not None
         assert self.ref_std is not None
         quieter = self._quieter(self._cand_std, self.ref_std)
         self.ref_mean, self.ref_std = self._cand_mean.copy(), self._cand_std.copy()
+        self._steps2, self._last_mean = self._steps2[:0], None
         self.stats.n_reanchors += 1
         if quieter and self.stats.n_used:
             # What passed for still under the old reference was motion.
@@ -277,16 +315,18 @@ class MotionGate:
                  'moving': self.moving, 'in_motion': self._in_motion,
                  'still_since_ns': self._still_since_ns,
                  'cand_mean': listed(self._cand_mean), 'cand_std': listed(self._cand_std),
-                 'cand_n': self._cand_n, 'cand_since_ns': self._cand_since_ns},
+                 'cand_n': self._cand_n, 'cand_since_ns': self._cand_since_ns,
+                 'last_mean': listed(self._last_mean), 'win': self._win},
                 {'held_stamp_ns': np.concatenate(self._win_t or [np.empty(0, np.int64)]),
-                 'held_samples': np.concatenate(self._win_y or [np.empty((0, N_AXES))])})
+                 'held_samples': np.concatenate(self._win_y or [np.empty((0, N_AXES))]),
+                 'motion_steps2': self._steps2})
 
     def restore(self, meta, arrays: dict) -> None:
         """Take the state of :meth:`state`; InputError when it is invalid."""
         if not isinstance(meta, dict) or set(meta) != set(self.state()[0]):
             raise InputError('the motion gate state is incomplete')
         vectors = {}
-        for key in ('ref_mean', 'ref_std', 'cand_mean', 'cand_std'):
+        for key in ('ref_mean', 'ref_std', 'cand_mean', 'cand_std', 'last_mean'):
             v = meta[key]
             if v is not None:
                 v = np.asarray(v, dtype=np.float64)
@@ -303,6 +343,12 @@ class MotionGate:
         n = meta['cand_n']
         if not isinstance(n, int) or n < 0 or (n and vectors['cand_std'] is None):
             raise InputError('the motion stretch is invalid')
+        steps2 = arrays.get('motion_steps2')
+        if (steps2 is None or steps2.ndim != 2 or steps2.shape[1] != N_AXES
+                or steps2.shape[0] > NOISE_WINDOWS or not np.isfinite(steps2).all()):
+            raise InputError('the steps between still windows are invalid')
+        if not isinstance(meta['win'], int) or meta['win'] < 2:
+            raise InputError('the motion window is invalid')
         t, y = arrays.get('held_stamp_ns'), arrays.get('held_samples')
         if (t is None or y is None or t.ndim != 1 or y.shape != (t.size, N_AXES)
                 or not np.isfinite(y).all()):
@@ -310,6 +356,8 @@ class MotionGate:
         self.ref_mean, self.ref_std = vectors['ref_mean'], vectors['ref_std']
         self._cand_mean, self._cand_std = vectors['cand_mean'], vectors['cand_std']
         self._cand_n, self._cand_since_ns = n, meta['cand_since_ns']
+        self._steps2, self._last_mean = steps2.astype(np.float64), vectors['last_mean']
+        self._win = meta['win']
         self.moving, self._in_motion = bool(meta['moving']), bool(meta['in_motion'])
         self._still_since_ns = meta['still_since_ns']
         self._win_t, self._win_y = (([t.astype(np.int64)], [y.astype(np.float64)])

@@ -126,7 +126,7 @@ class Session:
 
     @property
     def acc(self):
-        """The accumulator (None until the rate is known)."""
+        """Return the accumulator (None until the rate is known)."""
         return self.feed.acc
 
     @property

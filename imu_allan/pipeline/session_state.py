@@ -63,7 +63,7 @@ def load(path) -> tuple[dict, dict]:
 
 def resume_config(path, saved: tuple[dict, dict], config: SessionConfig | None) \
         -> SessionConfig:
-    """The resumed session's settings: the given ones (or the saved) at the saved rate."""
+    """Return the resumed session's settings: the given (or saved) ones, saved rate."""
     meta = saved[0]
     try:
         saved_cfg = SessionConfig(**meta['config'])

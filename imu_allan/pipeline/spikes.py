@@ -27,13 +27,13 @@ from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig, Warn
 #: Neighbours on each side of a sample in its median [samples]; bursts up to this long.
 CONTEXT = 6
 #: Rows judged together: one noise scale per axis and chunk [samples].
-CHUNK = 4096
+CHUNK = 2048
 #: |value| beyond this is no IMU reading in SI units [rad/s, m/s^2].
 ABSURD = 1e6
 #: Share of the spike limit a step must exceed for its rows to be judged.
 _SCREEN = 0.6
 #: Every this many steps of a chunk give its noise scale.
-_THIN = 8
+_THIN = 4
 #: Median |x| of a standard normal (MAD to sigma).
 _MAD = 0.6744897501960817
 
