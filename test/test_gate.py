@@ -165,3 +165,19 @@ def test_a_checkpoint_taken_after_a_glitch_does_not_poison_the_resume(tmp_path, 
     lost = 1 if glitch == 'ahead' else 0
     assert resumed.stats.n_used == 20_000 - lost
     assert resumed.stats.n_out_of_order == 0
+
+
+def test_analyze_refuses_a_moving_record_with_exit_code_3(tmp_path, capsys):
+    from imu_allan import AXES
+    from imu_allan.cli import main
+    from imu_allan.io.csv_io import write_csv
+
+    t, y = _still(30_000, seed=15)
+    _drive(y, slice(2_000, 30_000), seed=16)
+    write_csv(tmp_path / 'moving.csv', (t - t[0]) / 1e9, y, AXES)
+    code = main(['analyze', str(tmp_path / 'moving.csv'), '--out', str(tmp_path / 'out'),
+                 '--no-plot'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3
+    assert err[-1].startswith('imu-allan: error: ') and 'not enough still data' in err[-1]
+    assert not (tmp_path / 'out' / 'imu.yaml').exists()
