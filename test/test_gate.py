@@ -59,6 +59,19 @@ def test_clean_noise_has_no_spikes_whatever_the_blocks():
         assert _feed(Session(), t, y, block).stats.n_spikes == 0
 
 
+def test_spikes_are_judged_the_same_whatever_the_blocks():
+    t, y = _still(30_000, seed=17)
+    rng = np.random.default_rng(18)
+    rows = rng.choice(np.arange(5, t.size - 5), 40, replace=False)
+    y[rows, rng.integers(0, 6, rows.size)] += 30 * SIGMA.max()
+    whole = _feed(Session(), t, y, block=t.size)
+    assert whole.stats.n_spikes >= 38
+    for block in (1, 50, 2_047, 2_053):
+        s = _feed(Session(), t, y, block)
+        assert s.stats == whole.stats, block
+        assert_allclose(s.curve().avar, whole.curve().avar, rtol=1e-12)
+
+
 def test_a_record_of_mostly_spikes_is_refused():
     t, y = _still(20_000, seed=4)
     rng = np.random.default_rng(5)

@@ -32,6 +32,8 @@ NOISIER = 1.5
 #: fewest that do.
 NOISE_WINDOWS = 300
 MIN_STEPS = 20
+#: Steps taken from the end of each run of still windows.
+_RUN_TAIL = 60
 #: Reference noise floor as a share of the threshold caps (quantised sensors).
 _FLOOR = 0.01
 
@@ -68,6 +70,7 @@ class MotionGate:
         # NOISE_WINDOWS): the noise of a window mean, coloured noise included.
         self._steps2 = np.empty((0, N_AXES))
         self._last_mean: np.ndarray | None = None
+        self._ref_windows = 0          # still windows seen under the reference
         self.moving = False            # the gate is closed
         self._in_motion = False        # the last window moved
         self._still_since_ns: int | None = None
@@ -158,9 +161,10 @@ class MotionGate:
                 if still:
                     self._in_motion = False
                     self.feed.queue(y[i * win:(i + still) * win])
-                    k = min(still, NOISE_WINDOWS + 1)
+                    k = min(still, _RUN_TAIL + 1)     # the run's last windows
                     tail = y[(i + still - k) * win:(i + still) * win]
                     self._note_still(tail.reshape(k, win, -1).mean(axis=1), k == still)
+                    self._ref_windows += still
                     i += still
                     last = y[(i - 1) * win:i * win][None]
                     if self._quieter(_window_stats(last)[1][0], self.ref_std):
@@ -184,7 +188,7 @@ class MotionGate:
             self.ref_mean, self.ref_std = np.array(mean, dtype=np.float64), std
             self.feed.queue(y)
             return
-        moved = self._moved(mean, std, self.ref_mean, self.ref_std)
+        moved = self._moved(mean, std)
         if moved and not self._in_motion:
             self.stats.n_motion_events += 1
         self._in_motion = moved
@@ -196,6 +200,7 @@ class MotionGate:
         if not moved and not self.moving:
             _follow_drift(self.ref_mean, mean)
             self._note_still(mean[None])
+            self._ref_windows += 1
             self.feed.queue(y)
             return
         if not self.moving:
@@ -215,28 +220,32 @@ class MotionGate:
             self._still_since_ns = None
         assert self._cand_since_ns is not None and self._cand_std is not None
         if (t[-1] - self._cand_since_ns >= self.config.anchor_s * NS
-                and np.median(self._cand_std / self.ref_std) <= NOISIER):
+                and np.median(self._cand_std / self.ref_std) <= NOISIER
+                and self._may_reanchor()):
             self._reanchor()
             self.feed.queue(y)
             return
         self.stats.n_motion_dropped += t.size
 
-    def _moved(self, mean: np.ndarray, std: np.ndarray, ref_mean: np.ndarray,
-               ref_std: np.ndarray) -> bool:
-        """Whether a window moved against a reference, with the warning if so."""
-        moving_axes, dev, ratio = _moved_axes(mean, std, self.thresholds_for(ref_std),
-                                              self.config.motion_std_ratio, ref_mean, ref_std)
-        if moving_axes.any() or self._quieter(std, ref_std):
-            if ref_mean is self.ref_mean:
-                names = ', '.join(AXES[j] for j in np.flatnonzero(moving_axes)) or 'all axes'
-                action = {'warn': 'samples kept (on_motion=warn)',
-                          'pause': 'accumulation paused until still',
-                          'restart': 'restarting from scratch once still'}[self.config.on_motion]
-                self._warn('motion', f'motion detected on {names} (mean off by up to '
-                           f'{dev.max():.3g}, noise x{ratio.max():.2g}): the IMU is not '
-                           f'stationary; {action}', once=False)
-            return True
-        return False
+    def _moved(self, mean: np.ndarray, std: np.ndarray) -> bool:
+        """Whether a window moved against the reference (the scan's rule), with a warning."""
+        assert self.ref_mean is not None and self.ref_std is not None
+        moving_axes, dev, ratio = _moved_axes(mean, std, self.thresholds(),
+                                              self.config.motion_std_ratio, self.ref_mean,
+                                              self.ref_std)
+        quieter = self._quieter(std, self.ref_std)
+        if not moving_axes.any() and not quieter:
+            return False
+        names = ', '.join(AXES[j] for j in np.flatnonzero(moving_axes))
+        what = (f'on {names} (mean off by up to {dev.max():.3g}, noise x{ratio.max():.2g})'
+                if names else f'(the noise dropped to 1/{np.median(1 / ratio):.2g} of the '
+                'reference: it was taken in motion)')
+        action = {'warn': 'samples kept (on_motion=warn)',
+                  'pause': 'accumulation paused until still',
+                  'restart': 'restarting from scratch once still'}[self.config.on_motion]
+        self._warn('motion', f'motion detected {what}: the IMU is not stationary; {action}',
+                   once=False)
+        return True
 
     def thresholds_for(self, ref_std: np.ndarray) -> np.ndarray:
         """
@@ -286,6 +295,22 @@ class MotionGate:
         self._cand_std = np.array(std, dtype=np.float64)
         self._cand_since_ns = start_ns
 
+    def _may_reanchor(self) -> bool:
+        """
+        Whether the consistent stretch may become the reference.
+
+        Always when it is much quieter (the reference was motion) or the reference is
+        not yet confirmed by ``anchor_s`` of still data; otherwise only at the gyros'
+        old level: an IMU parked at another tilt has other accelerometer means, one
+        that keeps turning slowly other gyro means.
+        """
+        assert self._cand_mean is not None and self._cand_std is not None
+        assert self.ref_mean is not None and self.ref_std is not None
+        confirmed = self._ref_windows * self.config.motion_window_s >= self.config.anchor_s
+        if self._quieter(self._cand_std, self.ref_std) or not confirmed:
+            return True
+        return bool((np.abs(self._cand_mean - self.ref_mean) <= self.thresholds())[:3].all())
+
     def _reanchor(self) -> None:
         """Make the consistent stretch the still reference and open the gate."""
         assert self._cand_mean is not None and self._cand_std is not None
@@ -293,6 +318,7 @@ class MotionGate:
         quieter = self._quieter(self._cand_std, self.ref_std)
         self.ref_mean, self.ref_std = self._cand_mean.copy(), self._cand_std.copy()
         self._steps2, self._last_mean = self._steps2[:0], None
+        self._ref_windows = self._cand_n
         self.stats.n_reanchors += 1
         if quieter and self.stats.n_used:
             # What passed for still under the old reference was motion.
@@ -316,7 +342,8 @@ class MotionGate:
                  'still_since_ns': self._still_since_ns,
                  'cand_mean': listed(self._cand_mean), 'cand_std': listed(self._cand_std),
                  'cand_n': self._cand_n, 'cand_since_ns': self._cand_since_ns,
-                 'last_mean': listed(self._last_mean), 'win': self._win},
+                 'last_mean': listed(self._last_mean), 'win': self._win,
+                 'ref_windows': self._ref_windows},
                 {'held_stamp_ns': np.concatenate(self._win_t or [np.empty(0, np.int64)]),
                  'held_samples': np.concatenate(self._win_y or [np.empty((0, N_AXES))]),
                  'motion_steps2': self._steps2})
@@ -349,6 +376,8 @@ class MotionGate:
             raise InputError('the steps between still windows are invalid')
         if not isinstance(meta['win'], int) or meta['win'] < 2:
             raise InputError('the motion window is invalid')
+        if not isinstance(meta['ref_windows'], int) or meta['ref_windows'] < 0:
+            raise InputError('the count of still windows is invalid')
         t, y = arrays.get('held_stamp_ns'), arrays.get('held_samples')
         if (t is None or y is None or t.ndim != 1 or y.shape != (t.size, N_AXES)
                 or not np.isfinite(y).all()):
@@ -357,7 +386,7 @@ class MotionGate:
         self._cand_mean, self._cand_std = vectors['cand_mean'], vectors['cand_std']
         self._cand_n, self._cand_since_ns = n, meta['cand_since_ns']
         self._steps2, self._last_mean = steps2.astype(np.float64), vectors['last_mean']
-        self._win = meta['win']
+        self._win, self._ref_windows = meta['win'], meta['ref_windows']
         self.moving, self._in_motion = bool(meta['moving']), bool(meta['in_motion'])
         self._still_since_ns = meta['still_since_ns']
         self._win_t, self._win_y = (([t.astype(np.int64)], [y.astype(np.float64)])

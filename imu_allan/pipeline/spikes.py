@@ -111,16 +111,16 @@ class SpikeFilter:
         return out
 
     def _limits(self, d: np.ndarray, k: int) -> np.ndarray:
-        """Spike limits (n_chunks, 6) of the judged rows' chunks, from their steps ``d``."""
+        """Spike limits (n_chunks, 6) of the judged rows' chunks, from steps ``d`` (m, 6)."""
         n_chunks = -(-k // CHUNK)
         limits = np.empty((n_chunks, N_AXES))
         full = k // CHUNK
         if full:
             steps = d[:full * CHUNK].reshape(full, CHUNK, N_AXES)[:, ::_THIN]
-            limits[:full] = _noise_sigma(steps)
+            limits[:full] = _noise_sigma(steps.transpose(2, 0, 1)).T
         if full < n_chunks:
             tail = d[full * CHUNK:k]
-            limits[full] = _noise_sigma(tail[None])[0] if tail.shape[0] >= 8 else np.nan
+            limits[full] = _noise_sigma(tail.T[:, None])[:, 0] if tail.shape[0] >= 8 else np.nan
         for c in range(n_chunks):   # a short chunk, or no noise at all: the last scale
             ok = np.isfinite(limits[c]) & (limits[c] > 0)
             limits[c] = self._scale = np.where(ok, limits[c], self._scale)
@@ -139,19 +139,24 @@ class SpikeFilter:
         steps = np.pad(d[:m], ((0, pad), (0, 0))) if pad else d[:m]
         # Candidates: a step into or out of a row of 0.6 limits (NaN limits, no scale
         # yet, flag nothing), spread over a burst's length; each is then judged
-        # against its neighbours' median.  Chunks whose largest step is smaller have
-        # none (most chunks of clean data).
-        screen = _SCREEN * limits[:n_chunks]
+        # against its neighbours' median.  Steps in units of the screen: a chunk whose
+        # largest is under 1 has none (most chunks of clean data).
         chunks = steps.reshape(n_chunks, CHUNK, N_AXES)
+        screen = _SCREEN * limits[:n_chunks, None, :]
+        np.divide(chunks, np.where(np.isfinite(screen), screen, np.inf), out=chunks)
+        flagged = np.flatnonzero(chunks.reshape(n_chunks, -1).max(axis=1) > 1)
         found_r, found_c = [], []
-        for c, j in zip(*np.nonzero(chunks.max(axis=1) > screen)):
-            r = np.flatnonzero(chunks[c, :, j] > screen[c, j]) + c * CHUNK
-            found_r.append(r[r < m])
-            found_c.append(np.full(found_r[-1].size, j))
+        for c in flagged:
+            r, j = np.nonzero(chunks[c] > 1)
+            found_r.append(r + c * CHUNK)
+            found_c.append(j)
         rows = np.concatenate(found_r) if found_r else np.empty(0, np.int64)
         cols = np.concatenate(found_c) if found_c else np.empty(0, np.int64)
-        if full[left:left + k].max() > ABSURD or full[left:left + k].min() < -ABSURD:
-            r2, c2 = np.nonzero(~(np.abs(full[left:left + k]) <= ABSURD))
+        cols = cols[rows < m]
+        rows = rows[rows < m]
+        judged = full[left:left + k]
+        if judged.max() > ABSURD or judged.min() < -ABSURD:
+            r2, c2 = np.nonzero(~(np.abs(judged) <= ABSURD))
             rows, cols = np.concatenate((rows, r2)), np.concatenate((cols, c2))
         if rows.size == 0:
             return None
@@ -165,7 +170,7 @@ class SpikeFilter:
                     cols[:, None]]
         value = full[rows, cols]
         limit = limits[(rows - left) // CHUNK, cols]
-        dev = np.abs(value - np.median(near, axis=1))
+        dev = np.abs(value - np.partition(near, CONTEXT, axis=1)[:, CONTEXT])
         hit = (~(dev <= limit) & np.isfinite(limit)) | ~(np.abs(value) <= ABSURD)
         if not hit.any():
             return None
@@ -211,10 +216,11 @@ class SpikeFilter:
 
 
 def _noise_sigma(d: np.ndarray) -> np.ndarray:
-    """Noise sigma (n_chunks, n_axes) from absolute first differences (n_chunks, m, n_axes)."""
-    sigma = np.median(d, axis=1) / (_MAD * np.sqrt(2.0))
+    """Noise sigma (n_axes, n_chunks) from absolute first differences (n_axes, n_chunks, m)."""
+    half = d.shape[-1] // 2     # np.partition: a median without np.median's overhead
+    sigma = np.partition(d, half, axis=-1)[..., half] / (_MAD * np.sqrt(2.0))
     # Quantised sensors: most steps may be 0; one quantum is the least noise there is.
-    quantum = np.where(d > 0, d, np.inf).min(axis=1) / np.sqrt(2.0)
+    quantum = np.where(d > 0, d, np.inf).min(axis=-1) / np.sqrt(2.0)
     return np.maximum(sigma, np.where(np.isfinite(quantum), quantum, np.nan))
 
 
