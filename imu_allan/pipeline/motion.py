@@ -299,15 +299,14 @@ class MotionGate:
         """
         Whether the consistent stretch may become the reference.
 
-        Always when it is much quieter (the reference was motion) or the reference is
-        not yet confirmed by ``anchor_s`` of still data; otherwise only at the gyros'
-        old level: an IMU parked at another tilt has other accelerometer means, one
-        that keeps turning slowly other gyro means.
+        When it is much quieter (the reference was motion), when it has lasted as long
+        as the still data under the reference (the dominant level wins), or when the
+        gyros are at their old level (an IMU parked at another tilt has other
+        accelerometer means; one that keeps turning slowly, other gyro means).
         """
         assert self._cand_mean is not None and self._cand_std is not None
         assert self.ref_mean is not None and self.ref_std is not None
-        confirmed = self._ref_windows * self.config.motion_window_s >= self.config.anchor_s
-        if self._quieter(self._cand_std, self.ref_std) or not confirmed:
+        if self._quieter(self._cand_std, self.ref_std) or self._cand_n >= self._ref_windows:
             return True
         return bool((np.abs(self._cand_mean - self.ref_mean) <= self.thresholds())[:3].all())
 

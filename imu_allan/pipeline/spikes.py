@@ -137,6 +137,9 @@ class SpikeFilter:
         n_chunks = -(-m // CHUNK)
         pad = n_chunks * CHUNK - m
         steps = np.pad(d[:m], ((0, pad), (0, 0))) if pad else d[:m]
+        if m == 0:
+            steps = np.zeros((CHUNK, N_AXES))
+            n_chunks = 1
         # Candidates: a step into or out of a row of 0.6 limits (NaN limits, no scale
         # yet, flag nothing), spread over a burst's length; each is then judged
         # against its neighbours' median.  Steps in units of the screen: a chunk whose
