@@ -251,12 +251,12 @@ class MotionGate:
         """
         Mean-offset thresholds (6,) from a per-sample noise (6,) alone.
 
-        ``motion_sigma`` times twice the white noise of a window's mean,
+        ``motion_sigma`` times 1.5 times the white noise of a window's mean,
         ``ref_std / sqrt(win)``: room for coloured noise until the steps between
         still windows measure it (:meth:`thresholds`).
         """
         return np.minimum(self._caps,
-                          self.config.motion_sigma * 2 * ref_std / np.sqrt(self._win))
+                          self.config.motion_sigma * 1.5 * ref_std / np.sqrt(self._win))
 
     def _quieter(self, std: np.ndarray, ref_std: np.ndarray) -> bool:
         std = np.maximum(std, _FLOOR * self._caps)
