@@ -177,6 +177,10 @@ class Session:
             When too little still data remains (see :attr:`still_problem`).
 
         """
+        # Motion first: vibration while driving also looks like spikes.
+        problem = self.still_problem
+        if problem is not None:
+            raise NotEnoughStillData(f'not enough still data: {problem}')
         s = self.stats
         checked = max(s.n_received - s.n_nonfinite, 1)
         worst = max(s.spikes.items(), key=lambda kv: kv[1], default=None)
@@ -184,9 +188,6 @@ class Session:
             raise InputError(f'{worst[0]}: {100 * worst[1] / checked:.1f} % of the samples are '
                              f'spikes (over {100 * self.config.max_spike_share:g} %): the '
                              'record is mostly outliers, not noise')
-        problem = self.still_problem
-        if problem is not None:
-            raise NotEnoughStillData(f'not enough still data: {problem}')
 
     # ------------------------------------------------------------- checkpoint
     def save_state(self, path) -> None:
