@@ -170,7 +170,7 @@ def _motion_case(seed: int, moved_window: int | None) -> tuple:
 
 @pytest.mark.parametrize('moved_window', [None, 0, 1, 377, 499])
 def test_motion_scan_equals_the_numpy_twin(monkeypatch, moved_window):
-    from imu_allan.pipeline.checks import _still_run
+    from imu_allan.pipeline.motion import _still_run
     y, win, thr, ref0, ref_std = _motion_case(11, moved_window)
     ref_fast, ref_slow = ref0.copy(), ref0.copy()
     still, mean, std = native.motion_scan(y, win, thr, 3.0, ref_fast, ref_std)

@@ -41,16 +41,16 @@ def test_moving_robot_bags_are_flagged_not_stationary(shared_dir, name, count, r
     assert any('not stationary' in w for w in session.warnings)
 
 
-def test_moving_robot_result_says_not_stationary(shared_dir, tmp_path, capsys):
+def test_moving_robot_analysis_is_refused_for_too_little_still_data(shared_dir, tmp_path,
+                                                                    capsys):
+    # 2 % of the bag is still: exit code 3, one line, no consumer file.
     bag = shared_dir / 'realdata' / 'ros1_moving_robot' / 'test2.bag'
     code, out, err = _cli(['analyze', bag, '--out', tmp_path, '--format', 'json', '--no-plot'],
                           capsys)
-    assert code == 0
-    doc = json.loads(out)
-    assert doc['warnings'][0].startswith('NOT STATIONARY: motion in ')
-    assert doc['hygiene']['n_motion_events'] >= 1
-    assert 'NOT STATIONARY' in err
-    assert 'NOT STATIONARY' in (tmp_path / 'summary.txt').read_text()
+    assert code == 3
+    assert err.strip().splitlines()[-1].startswith('imu-allan: error: ')
+    assert 'not enough still data' in err
+    assert not (tmp_path / 'imu.yaml').exists()
 
 
 def test_foxy_sqlite_bag_reads_its_exact_constant_values(shared_dir, tmp_path, capsys):
@@ -102,10 +102,11 @@ def test_six_adis16405_runs_comparison_and_spread(shared_dir, tmp_path, capsys):
     code, out, err = _cli(['analyze', *runs, '--out', tmp_path, '--format', 'json'], capsys)
     assert code == 0
     doc = json.loads(out)
-    # Run 4's outlier rows are taken for brief motion: 1200 samples dropped.
-    assert [r['n_samples'] for r in doc['results']] == [1_000_000] * 3 + [998_800] + [
-        1_000_000] * 2
-    assert doc['results'][3]['warnings'][0].startswith('brief motion or outliers in 2 ')
+    # Run 4's outlier rows are spikes, interpolated: every sample is used.
+    assert [r['n_samples'] for r in doc['results']] == [1_000_000] * 6
+    assert doc['results'][3]['hygiene']['n_spikes'] > 60
+    assert any('spikes' in w for w in doc['results'][3]['warnings'])
+    assert all(r['hygiene']['n_motion_events'] == 0 for r in doc['results'])
     spread = doc['comparison']['spread']
     # Datasheet: gyro noise density 0.05 deg/s/rtHz; the runs agree within a few %.
     n_gyro = np.degrees(spread['gyro_x']['N']['mean'])

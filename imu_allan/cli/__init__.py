@@ -70,7 +70,7 @@ def main(argv=None) -> int:
         return int(args.run(args) or 0)
     except InputError as exc:
         print(f'imu-allan: error: {exc}', file=sys.stderr)
-        return 2
+        return getattr(exc, 'exit_code', 2)     # NotEnoughStillData: 3
     except KeyboardInterrupt:
         print('imu-allan: interrupted', file=sys.stderr)
         return 130

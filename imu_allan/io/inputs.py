@@ -459,6 +459,10 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
             if session.stats.n_received == 0:
                 raise InputError(f'{path}: no Imu samples in the input'
                                  + (f' ({reader_warnings[0]})' if reader_warnings else ''))
+            try:    # too little still data, or mostly spikes: no consumer files
+                session.check_usable()
+            except InputError as exc:
+                raise type(exc)(f'{path}: {exc}') from None
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
             result = analyze(session, source=source.label, raw=keeper,

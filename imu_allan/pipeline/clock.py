@@ -1,10 +1,16 @@
 """
-The stamp clock of a session: rate, jitter, gaps, rate changes (Session's first stage).
+The stamp clock of a session: rate, jitter, gaps, rate changes, stamp outliers.
 
-Stamp steps are judged in windows of a fixed number of steps, so the verdicts do not
-depend on how the record is cut into blocks; ordinary windows (regular, on the nominal
-rate) are judged together.  A mixin of :class:`imu_allan.pipeline.session.Session`,
-whose state it shares.
+The session's first stage: :meth:`StampClock.split` cuts blocks into gap-free runs of
+rows in stamp order and hands them on.  Stamp steps are judged in windows of a fixed
+number of steps, so the verdicts do not depend on how the record is cut into blocks;
+ordinary windows (regular, on the nominal rate) are judged together.
+
+A stamp far from the newest one (further than ``irregular_gap_s``, ahead or behind) is
+judged by the stamp after it: when that one goes on from it, the far stamp is a gap
+(ahead) or a clock that restarted (behind: a new segment); otherwise it is a lone
+outlier and dropped.  So one glitched stamp can neither block later data nor be saved
+in a checkpoint as the newest stamp.
 """
 
 import math
@@ -12,28 +18,189 @@ from typing import Callable
 
 import numpy as np
 
-from imu_allan.pipeline.parts import _Parts
+from imu_allan.errors import InputError
+from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, NS, SessionConfig, WarningLog
+from imu_allan.pipeline.steps import is_int, judge_steps, MAX_JITTER, number, split_runs
 
-
-_NS = 1_000_000_000
 #: Stamp steps per judged window (jitter, regularity and rate changes).  Fixed step
 #: counts, not blocks, so that the verdicts do not depend on how the record is cut up.
 _CLOCK_WINDOW = 100
-#: Relative jitter of the stamp steps above which the stamps are irregular.
-_MAX_JITTER = 0.25
+
+#: ``on_run(stamp_ns (n,), samples (n, 6), broken)``: a gap-free run of rows; broken
+#: means the segment ends before it.
+RunSink = Callable[[np.ndarray, np.ndarray, bool], None]
 
 
 # Long by design: the clock's state (rate, jitter window, gap and step counters) is
 # carried from block to block; each judgement of a block is a short method.
-class _StampClock(_Parts):
-    """Rate estimate, stamp windows and gaps: the gap-free runs go on to the sample checks."""
+class StampClock:
+    """
+    Rate estimate, stamp screening, stamp windows and gaps.
 
-    def _monotonic_mask(self, stamp_ns: np.ndarray) -> np.ndarray:
-        """Mask out duplicate and out-of-order stamps against the newest accepted one."""
-        newest = self._newest_ns if self._newest_ns is not None else np.iinfo(np.int64).min
-        prev_max = np.maximum.accumulate(np.concatenate(([newest], stamp_ns[:-1])))
-        dup = stamp_ns == prev_max
-        back = stamp_ns < prev_max
+    Parameters
+    ----------
+    config : SessionConfig
+        The session's settings.
+    stats : HygieneStats
+        Counters this clock adds to.
+    warn : WarningLog
+        Where its warnings go.
+
+    """
+
+    def __init__(self, config: SessionConfig, stats: HygieneStats, warn: WarningLog):
+        self.config = config
+        self.stats = stats
+        self._warn = warn
+        self.rate_hz = float(config.rate_hz)
+        self.first_stamp_ns: int | None = None
+        self.last_stamp_ns: int | None = None
+        self._newest_ns: int | None = None
+        self._break_next = False
+        # Rows that wait for the rate estimate, and a far stamp that waits for the next.
+        self._pending_t: list[np.ndarray] = []
+        self._pending_y: list[np.ndarray] = []
+        self._far: tuple[int, np.ndarray] | None = None
+        # Steps waiting for their window's verdict, and the count and sum of the non-gap
+        # steps (the mean rate of irregular stamps comes from these, so neither gaps nor
+        # a resume across lost samples bias it).
+        self._step_buf: list[np.ndarray] = []
+        self._clock_n = 0
+        self._clock_ns = 0
+        self._jitter_sq = 0.0
+        self._jitter_n = 0
+        self._off_period_ns: float | None = None
+        self._on_run: RunSink = _nowhere
+
+    # ------------------------------------------------------------------ input
+    def split(self, stamp_ns: np.ndarray, samples: np.ndarray, on_run: RunSink) -> None:
+        """
+        Cut a block into gap-free runs in stamp order and hand each to ``on_run``.
+
+        NaN/Inf rows are dropped and break the segment; repeated and out-of-order
+        stamps are dropped (re-sent messages) without a break.
+
+        Parameters
+        ----------
+        stamp_ns : numpy.ndarray
+            Shape (n,), header stamps [ns], int64.
+        samples : numpy.ndarray
+            Shape (n, 6), samples in AXES order.
+        on_run : callable
+            Gets each run, see :data:`RunSink`.
+
+        """
+        self._on_run = on_run
+        n = stamp_ns.size
+        if np.isfinite(samples).all():  # one whole-block reduction: the usual case
+            finite = None
+        else:
+            finite = np.isfinite(samples).all(axis=1)
+            bad = int(n - finite.sum())
+            self.stats.n_nonfinite += bad
+            self._warn('nonfinite', f'{bad} samples with NaN/Inf values dropped '
+                       '(the segment is broken there)')
+        for t_part, y_part, broken in split_runs(stamp_ns, samples, finite):
+            if broken:
+                self._break()
+            for t_ok, y_ok, restart in self._screen(t_part, y_part):
+                if restart:
+                    self._restart_clock()
+                self._ingest(t_ok, y_ok)
+        # NaN rows that end a block break the segment before the next block's rows.
+        if finite is not None and not finite[-1]:
+            self._break()
+
+    def flush(self, on_run: RunSink) -> None:
+        """Pass on the rows held for the rate estimate (end of a recording)."""
+        self._on_run = on_run
+        if self._far is not None:
+            # A far stamp that nothing confirmed: one row, an outlier.
+            self._far = None
+            self._drop_outlier()
+        if self.rate_hz <= 0 and self._pending_t:
+            if sum(t.size for t in self._pending_t) >= 3:
+                self._begin()
+            else:
+                self._pending_t, self._pending_y = [], []
+        self._refine_rate()
+
+    def _break(self) -> None:
+        # Before the rate is known, rows are only collected; a break there is moot.
+        if self.rate_hz > 0:
+            self._break_next = True
+
+    def _restart_clock(self) -> None:
+        """Start a new segment: the stamps jumped back and went on (no step across)."""
+        self.stats.n_clock_restarts += 1
+        self._warn('clock-restart', 'the stamps jumped back and went on (the device clock '
+                   'restarted): a new segment starts there', once=False)
+        self.last_stamp_ns = None
+        if self.rate_hz <= 0 and self._pending_t:
+            # Rows of the old clock still waiting for the rate: they cannot be ordered
+            # with the new ones.
+            lost = sum(t.size for t in self._pending_t)
+            self._pending_t, self._pending_y = [], []
+            self.stats.n_stamp_outliers += lost
+        self._break()
+
+    def _drop_outlier(self) -> None:
+        self.stats.n_stamp_outliers += 1
+        self._warn('stamp-outlier', 'a sample whose stamp lies far from its neighbours '
+                   '(a glitched clock) dropped', once=False)
+
+    def _screen(self, t: np.ndarray, y: np.ndarray) -> list:
+        """
+        Drop repeated, out-of-order and lone far stamps; find clock restarts.
+
+        Returns a list of (stamps, samples, restart): runs of rows in increasing stamp
+        order; restart marks a run that starts a new clock.  A far stamp in the last
+        row is held until the next block.
+        """
+        if self._far is not None:
+            stamp, row = self._far
+            self._far = None
+            t = np.concatenate(([stamp], t))
+            y = np.concatenate((row[None, :], y))
+        far_ns = self.config.irregular_gap_s * NS
+        out: list = []
+        restart = False
+        pos, n = 0, t.size
+        while pos < n:
+            seg = t[pos:]
+            newest = self._newest_ns if self._newest_ns is not None else int(seg[0]) - 1
+            prev = np.maximum.accumulate(np.concatenate(([newest], seg[:-1])))
+            is_far = np.abs(seg.astype(np.float64) - prev) > far_ns
+            k = int(np.argmax(is_far)) if is_far.any() else seg.size
+            if k:
+                ok = self._ordered(seg[:k], prev[:k])
+                self._newest_ns = max(newest, int(seg[:k].max()))
+                if ok.all():    # the usual case: the block's own arrays, not copies
+                    out.append((seg[:k], y[pos:pos + k], restart))
+                elif ok.any():
+                    out.append((seg[:k][ok], y[pos:pos + k][ok], restart))
+                restart = restart and not ok.any()
+            j = pos + k
+            if j >= n:
+                break
+            if j == n - 1:
+                self._far = (int(t[j]), y[j].copy())
+                break
+            step = int(t[j + 1]) - int(t[j])
+            if 0 < step <= far_ns:
+                # The next stamp goes on from this one: a gap ahead, a restart behind.
+                restart = restart or int(t[j]) < int(prev[k])
+                self._newest_ns = int(t[j]) - 1
+                pos = j
+            else:
+                self._drop_outlier()
+                pos = j + 1
+        return out
+
+    def _ordered(self, t: np.ndarray, prev_max: np.ndarray) -> np.ndarray:
+        """Mask out duplicate and out-of-order stamps against the newest before each."""
+        dup = t == prev_max
+        back = t < prev_max
         if dup.any():
             self.stats.n_duplicate += int(dup.sum())
             self._warn('duplicate', f'{int(dup.sum())} samples with a repeated stamp dropped',
@@ -42,19 +209,47 @@ class _StampClock(_Parts):
             self.stats.n_out_of_order += int(back.sum())
             self._warn('order', f'{int(back.sum())} samples with out-of-order stamps dropped',
                        once=False)
-        self._newest_ns = max(newest, int(stamp_ns.max())) if stamp_ns.size else newest
         return ~dup & ~back
+
+    def _ingest(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
+        if self.first_stamp_ns is None:
+            self.first_stamp_ns = int(stamp_ns[0])
+        if self.rate_hz <= 0:
+            self._pending_t.append(stamp_ns)
+            self._pending_y.append(samples)
+            if sum(t.size for t in self._pending_t) >= max(self.config.rate_window, 3):
+                self._begin()
+            return
+        self._ingest_regular(stamp_ns, samples)
+
+    def _begin(self) -> None:
+        """Estimate the rate on exactly the first ``rate_window`` samples, then go on."""
+        t = np.concatenate(self._pending_t)
+        y = np.concatenate(self._pending_y)
+        self._pending_t, self._pending_y = [], []
+        # Exactly rate_window samples, whatever the block sizes: same verdict either way.
+        k = min(t.size, max(self.config.rate_window, 3))
+        self._estimate_rate(t[:k])
+        if self.rate_hz <= 0:
+            raise InputError('the stamps of the first samples span no time: no rate')
+        self._ingest_regular(t[:k], y[:k], judged=True)
+        if k < t.size:
+            self._ingest_regular(t[k:], y[k:])
+
+    def _pass_on(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
+        broken, self._break_next = self._break_next, False
+        self._on_run(stamp_ns, samples, broken)
 
     def _estimate_rate(self, t: np.ndarray) -> None:
         steps = np.diff(t)
-        verdict = _judge_steps(steps, self.config.gap_factor,
-                               self.config.irregular_gap_s * _NS)
+        verdict = judge_steps(steps, self.config.gap_factor,
+                              self.config.irregular_gap_s * NS)
         if verdict is None:
             # Too few usable steps to judge: the mean rate is all there is.
-            self.rate_hz = (t.size - 1) * _NS / float(t[-1] - t[0])
+            self.rate_hz = (t.size - 1) * NS / float(t[-1] - t[0])
             return
         regular, period_ns, jitter = verdict
-        self.rate_hz = _NS / period_ns
+        self.rate_hz = NS / period_ns
         self._note_jitter(jitter, steps.size)
         if not regular:
             self._flag_irregular(jitter)
@@ -74,12 +269,12 @@ class _StampClock(_Parts):
         """
         t = np.sort(np.asarray(stamp_ns, dtype=np.int64))
         steps = np.diff(t)
-        verdict = _judge_steps(steps[steps > 0], self.config.gap_factor,
-                               self.config.irregular_gap_s * _NS)
+        verdict = judge_steps(steps[steps > 0], self.config.gap_factor,
+                              self.config.irregular_gap_s * NS)
         if verdict is None:
             span = float(t[-1] - t[0]) if t.size > 1 else 0.0
-            return (t.size - 1) * _NS / span if span > 0 else 0.0
-        return _NS / verdict[1]
+            return (t.size - 1) * NS / span if span > 0 else 0.0
+        return NS / verdict[1]
 
     def _note_jitter(self, jitter: float, n_steps: int) -> None:
         self._note_jitters(np.array([jitter]), n_steps)
@@ -97,7 +292,7 @@ class _StampClock(_Parts):
         if self.stats.irregular_stamps:
             return
         self.stats.irregular_stamps = True
-        period = _NS / self.rate_hz
+        period = NS / self.rate_hz
         self._warn('irregular', f'irregular stamps (jitter {100 * jitter:.0f}% of the '
                    f'{period / 1e6:.2f} ms period): samples are taken as evenly spaced at '
                    f'{self.rate_hz:.3f} Hz; only steps over {self.config.irregular_gap_s} s '
@@ -107,9 +302,7 @@ class _StampClock(_Parts):
     def _refine_rate(self) -> None:
         """With irregular stamps, take the mean rate of all non-gap steps so far."""
         if self.stats.irregular_stamps and self._clock_n > 0 and self._clock_ns > 0:
-            self.rate_hz = self._clock_n * _NS / self._clock_ns
-            if self.acc is not None:
-                self.acc.rate_hz = self.rate_hz
+            self.rate_hz = self._clock_n * NS / self._clock_ns
 
     def _judge_clock(self, settle: Callable[[], None]) -> None:
         """
@@ -121,8 +314,8 @@ class _StampClock(_Parts):
         """
         steps = np.concatenate(self._step_buf)
         self._step_buf = []
-        verdict = _judge_steps(steps, self.config.gap_factor,
-                               self.config.irregular_gap_s * _NS)
+        verdict = judge_steps(steps, self.config.gap_factor,
+                              self.config.irregular_gap_s * NS)
         if verdict is None:
             return
         regular, period_ns, jitter = verdict
@@ -133,12 +326,12 @@ class _StampClock(_Parts):
             self._flag_irregular(jitter)
         elif not self.stats.irregular_stamps:
             tol = self.config.rate_tolerance
-            if abs(_NS / self.rate_hz / period_ns - 1) > tol:
+            if abs(NS / self.rate_hz / period_ns - 1) > tol:
                 # One warning per episode: a new one only when the period moves again.
                 if self._off_period_ns is None or abs(self._off_period_ns / period_ns - 1) > tol:
                     settle()
                     self.stats.n_rate_changes += 1
-                    self._warn('rate', f'sample rate changed: {_NS / period_ns:.2f} Hz against '
+                    self._warn('rate', f'sample rate changed: {NS / period_ns:.2f} Hz against '
                                f'the nominal {self.rate_hz:.2f} Hz (gaps are located with the '
                                'nominal rate)', once=False)
                 self._off_period_ns = period_ns
@@ -150,7 +343,7 @@ class _StampClock(_Parts):
         """
         Which whole windows of ``steps`` a clock judgement would only note the jitter of.
 
-        Such a window is regular by :func:`_judge_steps`' fast test (every step within
+        Such a window is regular by :func:`judge_steps`' fast test (every step within
         25 % of the shortest, none beyond the irregular gap) and on the nominal rate,
         outside irregular mode: judging it changes nothing but the jitter sums.  Shape
         (len(steps) // _CLOCK_WINDOW,), bool.
@@ -160,9 +353,9 @@ class _StampClock(_Parts):
             return np.zeros(0, bool)
         w = steps[:k * _CLOCK_WINDOW].reshape(k, _CLOCK_WINDOW).astype(np.float64)
         lo, hi, mean = w.min(axis=1), w.max(axis=1), w.mean(axis=1)
-        return ((lo > 0) & (hi <= (1 + _MAX_JITTER) * lo)
-                & (hi <= self.config.irregular_gap_s * _NS)
-                & (np.abs(_NS / self.rate_hz / mean - 1) <= self.config.rate_tolerance))
+        return ((lo > 0) & (hi <= (1 + MAX_JITTER) * lo)
+                & (hi <= self.config.irregular_gap_s * NS)
+                & (np.abs(NS / self.rate_hz / mean - 1) <= self.config.rate_tolerance))
 
     def _note_ordinary(self, steps: np.ndarray) -> None:
         """Note the jitter of whole ordinary windows (see :meth:`_ordinary_windows`)."""
@@ -223,8 +416,8 @@ class _StampClock(_Parts):
     def _split_gaps(self, stamp_ns: np.ndarray, samples: np.ndarray, steps: np.ndarray,
                     skip: int) -> None:
         """Accumulate the rows between gaps; ``steps[:skip]`` are no steps."""
-        period_ns = _NS / self.rate_hz
-        limit = (self.config.irregular_gap_s * _NS if self.stats.irregular_stamps
+        period_ns = NS / self.rate_hz
+        limit = (self.config.irregular_gap_s * NS if self.stats.irregular_stamps
                  else self.config.gap_factor * period_ns)
         real = steps[skip:]
         ok = real <= limit
@@ -234,7 +427,7 @@ class _StampClock(_Parts):
         start = 0
         for g in [int(i) for i in gap_idx] + [stamp_ns.size]:
             if g > start:
-                self._accumulate(stamp_ns[start:g], samples[start:g])
+                self._pass_on(stamp_ns[start:g], samples[start:g])
             if g < stamp_ns.size:
                 missing = max(int(round(steps[g] / period_ns)) - 1, 1)
                 self.stats.n_gaps += 1
@@ -242,56 +435,58 @@ class _StampClock(_Parts):
                 self._warn('gap', f'gap of {steps[g] / 1e9:.3f} s (~{missing} samples) '
                            'in the stamps: the segment is split there, no term spans it',
                            once=False)
-                self._flush_motion(break_after=True)
+                self._break()
             start = g
 
+    # ------------------------------------------------------------- checkpoint
+    def state(self) -> dict:
+        """Return the clock's state as JSON-able data."""
+        return {
+            'rate_hz': self.rate_hz, 'first_stamp_ns': self.first_stamp_ns,
+            'last_stamp_ns': self.last_stamp_ns, 'newest_stamp_ns': self._newest_ns,
+            'break_next': self._break_next,
+            'far': None if self._far is None else [self._far[0], self._far[1].tolist()],
+            'clock_n': self._clock_n, 'clock_ns': self._clock_ns,
+            'step_buf': [int(s) for b in self._step_buf for s in b],
+            'jitter_sq': self._jitter_sq, 'jitter_n': self._jitter_n,
+            'off_period_ns': self._off_period_ns,
+        }
 
-def _judge_steps(steps_ns: np.ndarray, gap_factor: float, max_step_ns: float):
-    """
-    Judge one window of stamp steps: regular clock (with isolated gaps) or irregular.
+    def restore(self, state) -> None:
+        """Take the state of :meth:`state`; InputError when it is invalid."""
+        if not isinstance(state, dict) or set(state) != set(self.state()):
+            raise InputError('the stamp clock state is incomplete')
+        rate = number(state['rate_hz'], 'rate_hz')
+        if rate <= 0:
+            raise InputError(f'the stamp clock has no rate ({rate!r})')
+        for key in ('first_stamp_ns', 'last_stamp_ns', 'newest_stamp_ns'):
+            if state[key] is not None and not is_int(state[key]):
+                raise InputError(f'the stamp clock field {key} is invalid')
+        far = state['far']
+        if far is not None:
+            if (not isinstance(far, list) or len(far) != 2 or not is_int(far[0])
+                    or np.asarray(far[1], dtype=np.float64).shape != (N_AXES,)):
+                raise InputError('the held far stamp is invalid')
+            self._far = (int(far[0]), np.asarray(far[1], dtype=np.float64))
+        steps = state['step_buf']
+        if not isinstance(steps, list) or not all(is_int(s) and s > 0 for s in steps):
+            raise InputError('the stamp steps in progress are invalid')
+        if len(steps) >= _CLOCK_WINDOW:
+            raise InputError('the stamp steps in progress are too many')
+        counts = [state[k] for k in ('clock_n', 'clock_ns', 'jitter_n')]
+        if not all(is_int(c) and c >= 0 for c in counts):
+            raise InputError('the stamp step counts are invalid')
+        off = state['off_period_ns']
+        self.rate_hz = rate
+        self.first_stamp_ns = state['first_stamp_ns']
+        self.last_stamp_ns = state['last_stamp_ns']
+        self._newest_ns = state['newest_stamp_ns']
+        self._break_next = bool(state['break_next'])
+        self._step_buf = [np.array(steps, dtype=np.int64)] if steps else []
+        self._clock_n, self._clock_ns, self._jitter_n = counts
+        self._jitter_sq = number(state['jitter_sq'], 'jitter_sq')
+        self._off_period_ns = None if off is None else number(off, 'off_period_ns')
 
-    Parameters
-    ----------
-    steps_ns : numpy.ndarray
-        Positive stamp steps [ns].
-    gap_factor : float
-        A step longer than this many periods is a gap of a regular clock.
-    max_step_ns : float
-        Steps longer than this are gaps whatever the verdict, and left out [ns].
 
-    Returns
-    -------
-    tuple of (bool, float, float) or None
-        ``(regular, period_ns, jitter_rel)``, or None with fewer than two usable steps.
-        A regular window's period counts each gap as whole periods; an irregular
-        window's is the mean step.
-
-    """
-    s = np.asarray(steps_ns, dtype=np.float64)
-    lo, hi = (float(s.min()), float(s.max())) if s.size else (0.0, 0.0)
-    if s.size >= 2 and 0 < hi <= (1 + _MAX_JITTER) * lo and hi <= max_step_ns:
-        # The usual window (every step near the median, no gap): what the general case
-        # below gives, with the plain mean and std, in a fraction of the time.
-        mean = float(s.mean())
-        return True, mean, float(s.std() / mean)
-    s = s[s <= max_step_ns]
-    if s.size < 2:
-        return None
-    # Median and the steps near it: an isolated gap moves neither, unlike the std.
-    med = float(np.median(s))
-    near = np.abs(s - med) <= _MAX_JITTER * med
-    if med > 0 and near.any():
-        period = float(s[near].mean())
-        clock = s <= gap_factor * period
-        jitter = float(np.sqrt(np.mean((s[clock] - period) ** 2)) / period)
-        n_long = int(s.size - clock.sum())
-        # Bursty arrival stamps also show a tight cluster of short steps, but the waits
-        # between bursts are many and take most of the time; gaps of a clock are few,
-        # or (a lossy link) leave most of the time to the regular steps.
-        isolated = n_long <= max(2, 0.02 * s.size)
-        covered = float(s[clock].sum() / s.sum())
-        if jitter <= _MAX_JITTER and (isolated or covered >= 0.5):
-            # A clock's gap loses whole periods: count them, so gaps do not bias the rate.
-            return True, float(s.sum() / np.maximum(np.round(s / period), 1).sum()), jitter
-    mean = float(s.mean())
-    return False, mean, float(s.std() / mean)
+def _nowhere(stamp_ns: np.ndarray, samples: np.ndarray, broken: bool) -> None:
+    raise AssertionError('rows passed on outside split() or flush()')

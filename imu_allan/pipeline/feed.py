@@ -1,20 +1,129 @@
 """
-An Allan accumulator that works on a thread of its own, fed by the session's checks.
+The session's last stage: the Allan accumulator and what feeds it.
 
-Offline, one input on two cores: while the accumulator sums one run of still samples
-(numpy, outside the GIL), the session already checks the next block.  The accumulator
-receives the same calls in the same order as inline, so its sums are bit-identical.
+:class:`AccumulatorFeed` owns the accumulator, takes the still rows the sample gate
+keeps and hands them on in as few calls as it can.  Offline, one input on two cores,
+the accumulator works on a thread of its own (:class:`BackgroundAccumulator`): while it
+sums one run of still samples (numpy, outside the GIL), the session already checks the
+next block.  It receives the same calls in the same order as inline, so its sums are
+bit-identical.
 """
 
+import json
 import queue
 import threading
 import weakref
 
+import numpy as np
+
 from imu_allan.core.allan.accumulator import AllanAccumulator
+from imu_allan.errors import InputError
+from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig
 
 #: Calls waiting for the accumulator at most (each holds one run of samples).
 _DEPTH = 8
 _STOP = ('stop', None)
+#: Still runs at least this long reach the accumulator as they are, shorter ones joined.
+_DIRECT_ROWS = 4096
+
+
+class AccumulatorFeed:
+    """
+    The accumulator of a session, and the still rows on their way to it.
+
+    Parameters
+    ----------
+    config : SessionConfig
+        Its ``exact_max_m`` and ``background_accumulator``.
+    stats : HygieneStats
+        ``n_used`` counts the rows queued here.
+
+    """
+
+    def __init__(self, config: SessionConfig, stats: HygieneStats):
+        self.config = config
+        self.stats = stats
+        self.acc: AllanAccumulator | BackgroundAccumulator | None = None
+        self.rate_hz = 0.0
+        self._queued: list[np.ndarray] = []
+
+    def start(self, rate_hz: float) -> None:
+        """Start a new, empty accumulator at ``rate_hz`` [Hz]."""
+        kwargs = {'exact_max_m': self.config.exact_max_m} if self.config.exact_max_m else {}
+        acc = AllanAccumulator(N_AXES, rate_hz, **kwargs)
+        self.acc = BackgroundAccumulator(acc) if self.config.background_accumulator else acc
+        self.rate_hz = rate_hz
+
+    def set_rate(self, rate_hz: float) -> None:
+        """Follow a refined rate estimate [Hz]."""
+        if self.acc is not None and rate_hz != self.rate_hz:
+            self.acc.rate_hz = rate_hz
+        self.rate_hz = rate_hz
+
+    def queue(self, samples: np.ndarray) -> None:
+        """Take still rows (n, 6); they reach the accumulator at :meth:`pass_on`."""
+        self._queued.append(samples)
+        self.stats.n_used += samples.shape[0]
+
+    def pass_on(self) -> None:
+        """Hand the queued rows to the accumulator, in order."""
+        # Long runs go as they are (the accumulator copies them anyway); short ones,
+        # window by window while the IMU moved now and then, are joined into one call.
+        if not self._queued:
+            return
+        assert self.acc is not None
+        short: list = []
+        for piece in self._queued + [None]:
+            if piece is not None and piece.shape[0] < _DIRECT_ROWS:
+                short.append(piece)
+                continue
+            if short:
+                self.acc.add(short[0] if len(short) == 1 else np.concatenate(short))
+                short = []
+            if piece is not None:
+                self.acc.add(piece)
+        self._queued = []
+
+    def break_segment(self) -> None:
+        """End the contiguous segment: no Allan term spans what comes next."""
+        self.pass_on()
+        if self.acc is not None:
+            self.acc.break_segment()
+
+    def restart(self) -> None:
+        """Discard everything accumulated so far and start empty."""
+        self._queued = []
+        self.stats.n_used = 0
+        self.start(self.rate_hz)
+
+    def close(self) -> None:
+        """End the recording: a background thread stops, later calls run inline."""
+        self.pass_on()
+        if isinstance(self.acc, BackgroundAccumulator):
+            self.acc = self.acc.close()
+
+    def state(self) -> dict:
+        """Return the accumulator's state as arrays (its own file's keys, prefixed)."""
+        self.pass_on()
+        assert self.acc is not None
+        acc_meta, acc_arrays = self.acc.to_state()
+        arrays = {f'acc__{k}': v for k, v in acc_arrays.items()}
+        arrays['acc__meta'] = np.array(json.dumps(acc_meta))
+        return arrays
+
+    def restore(self, arrays: dict, rate_hz: float) -> None:
+        """Take the accumulator saved by :meth:`state`; InputError when it is invalid."""
+        acc_arrays = {k[5:]: v for k, v in arrays.items() if k.startswith('acc__')}
+        if 'meta' not in acc_arrays:
+            raise InputError('the accumulator state is missing')
+        try:
+            meta = json.loads(str(acc_arrays.pop('meta')))
+        except ValueError:
+            raise InputError('the accumulator metadata is not JSON') from None
+        acc = AllanAccumulator.from_state(meta, acc_arrays)
+        if acc.n_axes != N_AXES or not abs(acc.rate_hz / rate_hz - 1) < 1e-9:
+            raise InputError('the accumulator does not match the stamp clock')
+        self.acc, self.rate_hz = acc, rate_hz
 
 
 class BackgroundAccumulator:

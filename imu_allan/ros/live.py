@@ -58,6 +58,8 @@ class SessionView:
         self.rate_hz = session.rate_hz
         self.duration_s = session.duration_s
         self.warnings = session.warnings
+        #: Why the data cannot be analysed yet (too little still data), or None.
+        self.still_problem = session.still_problem
 
     def curve(self, confidence: float = CONFIDENCE, bounds: bool = True):
         """Return the Allan curve taken with the snapshot (bounds computed on request)."""

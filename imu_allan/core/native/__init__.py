@@ -303,7 +303,7 @@ def motion_scan(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
     """
     Find the first window that moved; pull the reference along the still ones before it.
 
-    The twin is :func:`imu_allan.pipeline.checks._still_run` (same arguments, same rule).
+    The twin is :func:`imu_allan.pipeline.motion._still_run` (same arguments, same rule).
 
     Parameters
     ----------
