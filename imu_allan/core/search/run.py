@@ -11,10 +11,11 @@ import math
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_sf
-from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin, fit_axis
-from imu_allan.core.fit.judge import (follows_curve, P_CONSISTENT, shows_quantization,
-                                      white_region, white_share)
-from imu_allan.core.fit.result import AxisFit, Param
+from imu_allan.core.fit.axis import (_check_inputs, _filtered_start, _n_params, _slot, _thin,
+                                    filter_identified, fit_axis)
+from imu_allan.core.fit.judge import P_CONSISTENT, shows_quantization
+from imu_allan.core.fit.result import AxisFit
+from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
 from imu_allan.core.noise.model import base_name, TERMS
 from imu_allan.core.search.evidence import ramp_test
@@ -62,12 +63,12 @@ class _Run:
             raise InputError(f'the fit needs at least 3 averaging times, got {self.tau.size}')
         self.rate_hz, self.n_samples, self.unit = rate_hz, int(n_samples), unit
         self.effects = effects
-        m = np.maximum(np.round(self.tau * rate_hz), 1).astype(np.int64)
-        n_terms = np.maximum(self.n_samples + 1 - 2 * m, 1)
-        self.fitter = _Fitter(self.tau, self.y, e, m, n_terms, 1.0 / float(rate_hz),
-                              self.n_samples, 'overlapping')
-        self.k = self.tau.size
-        self.penalty = math.log(self.k)
+        self.edf_thin = e
+        # The one rule for the sensor's filter on every axis: the leading taus it bends
+        # are left out (as fit_axis does for plain white noise) unless the filter is
+        # modelled with an identifiable time constant (see :meth:`base`).
+        self.first = _filtered_start(self.tau, self.y, rate_hz)
+        self.use_taus(0)
         self.raw = None if raw is None else np.asarray(raw, dtype=np.float64)
         self.raw_rate = float(raw_rate_hz or rate_hz)
         # A sinusoid, once named, keeps its frequency within 20 % (the re-weighted fits
@@ -76,8 +77,20 @@ class _Run:
         self.lines_hz: list[float] = []
         self.steps: list[Step] = []
         self.notes: list[str] = []
+        self.problems: list[str] = []
         self.labels: list[str] = []
         self.base_labels: list[str] = []
+
+    def use_taus(self, first: int) -> None:
+        """Fit the thinned curve from its ``first`` tau on (a new fitter)."""
+        tau, y, e = self.tau[first:], self.y[first:], self.edf_thin[first:]
+        self.tau, self.y, self.edf_thin = tau, y, e
+        m = np.maximum(np.round(tau * self.rate_hz), 1).astype(np.int64)
+        n_terms = np.maximum(self.n_samples + 1 - 2 * m, 1)
+        self.fitter = _Fitter(tau, y, e, m, n_terms, 1.0 / float(self.rate_hz),
+                              self.n_samples, 'overlapping')
+        self.k = tau.size
+        self.penalty = math.log(self.k)
 
     def slots_of(self, labels):
         """Return the slots of the labels, with narrowed sinusoid frequencies."""
@@ -99,20 +112,57 @@ class _Run:
         dof = self.k - _n_params(self.slots_of(self.labels))
         return dof > 0 and chi2_sf(self.sol.j, dof) < P_CONSISTENT
 
+    def pinned(self) -> bool:
+        """Whether a nonlinear parameter of the current model sits at an end of its range."""
+        for slot, phi in zip(self.slots_of(self.labels), self.sol.phi):
+            for (lo, hi), v in zip(slot.bounds, phi):
+                if v <= lo * 1.02 or v >= hi / 1.02:
+                    return True
+        return False
+
     def base(self, base_labels) -> None:
-        """Fit the paper's model, through the sensor's filter where the curve shows one."""
+        """
+        Fit the paper's model, through the sensor's filter where the curve identifies it.
+
+        One rule on every axis: the filter is modelled (``filtered_white``) only where
+        it buys its margin on the whole curve, its time constant is identifiable
+        (:func:`filter_identified`) and no other time of the model is pinned at an end
+        of its range by it; otherwise the leading taus it bends are left out
+        (:func:`imu_allan.core.fit.axis._filtered_start`) and white noise is fitted to
+        the rest, as :func:`fit_axis` does.
+        """
         self.irls(list(base_labels))
         labels = self.labels
+        modelled = False
         if 'white' in labels and self.rejected() and (
                 self.k - _n_params(self.slots_of(labels)) > 2):
             alt = ['filtered_white' if lb == 'white' else lb for lb in labels]
             trial = _fit_fixed_w(self.fitter.data, self.slots_of(alt))
             i_f = alt.index('filtered_white')
-            # A filter time at the bottom of its range is no filter: plain white noise.
-            shows = trial.phi[i_f][0] > 1.05 * self.slots_of(alt)[i_f].bounds[0][0]
+            bounds = self.slots_of(alt)[i_f].bounds[0]
+            # The trial is scored at the white model's weights; the filter time is
+            # judged after the re-weighting (it moves there).
             if (self.sol.j - trial.j > self.penalty + DELTA_MIN and trial.coef[i_f] > 0
-                    and shows):
+                    and trial.phi[i_f][0] > 1.05 * bounds[0]):
                 self.irls(alt, phi0=trial.phi)
+                i_f = self.labels.index('filtered_white')
+                modelled = (filter_identified(self.sol.phi[i_f][0], self.tau[0], bounds)
+                            and not self.pinned())
+                if not modelled:
+                    self.notes.append(
+                        f'filtered_white: T_f {self.sol.phi[i_f][0]:.3g} s is not '
+                        f'identified by taus from {self.tau[0]:.3g} s (left out)')
+        if not modelled and (self.first or 'filtered_white' in self.labels):
+            if self.first:
+                self.use_taus(self.first)
+                slope = 0.5 * math.log(self.y[1] / self.y[0]) / math.log(self.tau[1] /
+                                                                         self.tau[0])
+                if slope > -0.48:
+                    # The cut stopped at its limit with the curve still flatter than
+                    # white noise: filter and floor cannot be told apart.
+                    self.problems.append(f"the sensor's filter bends the curve beyond "
+                                         f'{self.tau[0]:.3g} s')
+            self.irls(list(base_labels))
         self.base_labels = list(self.labels)
         tau0, avar0, edf0 = self.curve
         self.base_fit = fit_axis(tau0, avar0, edf0, self.rate_hz, self.n_samples,
@@ -270,9 +320,9 @@ def _level_above_zero(fit: AxisFit, label: str) -> bool:
     return p is not None and p.kind == 'estimate' and p.ci95[0] > 0
 
 
-def _finish(fit: AxisFit, steps: list, notes: list, unit: str) -> AxisFit:
-    """Attach the effects, judge consistency, and fall back to the white region for N."""
-    consistent = follows_curve(fit.avar_meas, fit.edf, fit.avar_fit, fit.chi2, fit.dof)
+def _finish(fit: AxisFit, steps: list, notes: list, unit: str,
+            problems: tuple = ()) -> AxisFit:
+    """Attach the effects, judge the fit, and fall back to the curve where it fails."""
     optimised = dict(fit.optimised)
     notes = list(fit.notes) + notes
     flicker = optimised.get('flicker.B')
@@ -283,17 +333,5 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str) -> AxisFit:
         notes.append('B is flicker noise (no Gauss-Markov floor): no T_B')
     effects = tuple({'effect': s.effect, 'term': s.label, 'chi2_drop': s.chi2_drop,
                      'rival': s.rival, 'evidence': s.evidence} for s in steps)
-    if not consistent:
-        notes.append('no listed effect closes the gap between the model and the curve '
-                     f'(chi2 {fit.chi2:.1f} for {fit.dof} dof)')
-        share = white_share(fit)
-        got = None if share is None else white_region(fit.tau_s, fit.avar_meas, fit.edf,
-                                                      share)
-        n_fit = optimised.get('N')
-        if got is not None and n_fit is not None and n_fit.kind == 'estimate' and (
-                abs(n_fit.value / got[0] - 1.0) > 0.05):
-            optimised['N'] = Param(got[0], got[1], 'estimate', n_fit.unit)
-            notes.append(f'N read from the white region of the curve ({got[0]:.4g}; the '
-                         f'distorted fit gave {n_fit.value:.4g})')
-    return replace(fit, optimised=optimised, notes=tuple(notes), effects=effects,
-                   model_consistent=consistent)
+    fit = replace(fit, optimised=optimised, notes=tuple(notes), effects=effects)
+    return judge_fit(fit, problems)
