@@ -67,8 +67,8 @@ def covariance_yaml(result: AnalysisResult) -> str:
     header = ('# Paste into the IMU driver (or imu_with_covariance): robot_localization '
               'reads noise from these message fields.\n# variance = N^2 * rate_hz '
               '(white noise at the sample rate), clamped to >= 1e-9.\n')
-    return result.with_trust_comments(header + yaml.safe_dump(result.imu_covariances(),
-                                                     sort_keys=False))
+    text = header + yaml.safe_dump(result.imu_covariances(), sort_keys=False)
+    return result.with_trust_comments(text)
 
 
 def _draw(result: AnalysisResult, base: Path, ext: str) -> list:

@@ -94,8 +94,8 @@ class AnalysisResult:
 
     def kalibr_yaml(self, rostopic: str | None = None) -> str:
         """Kalibr imu.yaml text; ``rostopic`` is the analysed topic unless given."""
-        return self.with_trust_comments(kalibr_yaml(self._sources(), self.rate_hz,
-                                           rostopic=rostopic or self.topic or '/imu/data'))
+        return self.with_trust_comments(kalibr_yaml(
+            self._sources(), self.rate_hz, rostopic=rostopic or self.topic or '/imu/data'))
 
     def robot_localization_yaml(self, imu_topic: str | None = None) -> str:
         """robot_localization ekf.yaml fragment fusing ``imu_topic`` (default: analysed)."""

@@ -71,8 +71,10 @@ def _unfiltered(fit: AxisFit) -> int:
 
 def _white(fit: AxisFit):
     """
-    The white region past the filter: where the model's white share is >= 0.8, else
-    where the measured ADEV falls with a slope of -1/2 +- 0.1 (None without either).
+    Return N and its range from the white region past the filter (None without one).
+
+    The region is where the model's white share is >= 0.8, else where the measured
+    ADEV falls with a slope of -1/2 +- 0.1.
     """
     share = white_share(fit)
     if share is None or fit.tau_s.size < 2:
@@ -148,7 +150,7 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
                       K=k_bound)
     notes = list(fit.notes) + [
         f'not trusted: {"; ".join(problems)}: N from the white region of the curve, '
-        'B from the ADEV floor (upper bound), K the curve\'s own bound, the rest not '
+        "B from the ADEV floor (upper bound), K the curve's own bound, the rest not "
         'identified']
     return replace(fit, optimised=opt, fit_values=replaced, model=model,
                    trust=tuple(problems), notes=tuple(notes))

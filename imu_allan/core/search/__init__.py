@@ -107,4 +107,5 @@ def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effect
     run.backward()
     fit = run.final()
     steps = run.step_fits(fit) if keep_steps else run.steps
-    return Search(_finish(fit, steps, run.notes, unit, tuple(run.problems)), run.base_fit, tuple(steps))
+    return Search(_finish(fit, steps, run.notes, unit, tuple(run.problems)), run.base_fit,
+                  tuple(steps))

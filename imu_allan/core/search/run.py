@@ -11,12 +11,12 @@ import math
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_sf
-from imu_allan.core.fit.axis import (_check_inputs, _filtered_start, _n_params, _slot, _thin,
-                                    filter_identified, fit_axis)
+from imu_allan.core.fit.axis import (_check_inputs, _filtered_start, _n_params, _slot,
+                                     _thin, filter_identified, fit_axis)
 from imu_allan.core.fit.judge import P_CONSISTENT, shows_quantization
 from imu_allan.core.fit.result import AxisFit
-from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
+from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.noise.model import base_name, TERMS
 from imu_allan.core.search.evidence import ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
