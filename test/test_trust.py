@@ -89,3 +89,24 @@ def test_untrusted_axis_warns_and_comments_every_consumer_file():
     assert 'B_floor' in result.summary_line('gyro_x')
     # The noise model (simulation, noise_model.yaml) is the conservative one too.
     assert math.isclose(fit.model.N, fit.optimised['N'].value, rel_tol=1e-12)
+
+
+def test_adis_rival_models_lie_inside_the_reported_intervals(shared_dir):
+    """ADIS16405 run 1 accel_z: a second Gauss-Markov process rivals flicker noise."""
+    from imu_allan.core.search.evidence import RawKeeper
+    from imu_allan.io.csv_io import read_csv
+    rec = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run1.csv.gz')
+    y = np.asarray(rec.samples, dtype=np.float64)[:, 5:6]
+    curve = allan_curve(y, 100.0, 'dense', confidence=0.95)
+    keeper = RawKeeper(100.0, 1)
+    keeper.add(y)
+    fit = search_axis(curve.tau_s, curve.avar[:, 0], curve.edf[:, 0], 100.0, y.shape[0],
+                      raw=keeper.samples[:, 0], unit='m/s^2').fit
+    assert fit.rivals, fit.notes
+    assert fit.to_json()['rivals'][0]['model'] == fit.rivals[0]['model']
+    for rival in fit.rivals:
+        assert rival['criterion_rise'] <= 10.0
+        for sym in ('N', 'B', 'K'):
+            p = fit.optimised[sym]
+            if p.kind == 'estimate':
+                assert p.ci95[0] * (1 - 1e-9) <= rival[sym] <= p.ci95[1] * (1 + 1e-9), sym

@@ -121,6 +121,10 @@ class AxisFit:
         B read off the ADEV floor past the sensor's filter, ADEV_min / 0.664 (IEEE Std
         952-1997 annex C), with that point's 95 % interval; reported beside B, which is
         the level of the fitted Gauss-Markov (or flicker) term.
+    rivals : tuple of dict
+        Rival models that fit about as well (:mod:`imu_allan.core.search.choice`):
+        'model' (what differs), 'criterion_rise' (chi-square or -2 ln L + BIC above
+        the chosen model) and their N, B, T_B, K [SI].
     p_value : float or None
         Chi-square p-value of ``chi2`` on ``dof`` (None without degrees of freedom);
         computed where the fit is made, so a process that only reports it needs no scipy.
@@ -146,6 +150,7 @@ class AxisFit:
     trust: tuple = ()
     fit_values: dict = field(default_factory=dict)
     b_floor: Param | None = None
+    rivals: tuple = ()
     p_value: float | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
@@ -210,6 +215,8 @@ class AxisFit:
                 'b_floor': None if self.b_floor is None else self.b_floor.to_json(),
                 'trusted': self.trusted, 'trust_problems': list(self.trust),
                 'fit_values': {k: v.to_json() for k, v in self.fit_values.items()},
+                'rivals': [{k: (v if isinstance(v, str) else json_num(v))
+                            for k, v in r.items()} for r in self.rivals],
                 'gof': {'chi2': json_num(self.chi2), 'dof': int(self.dof),
                         'p_value': self.p_value}}
 

@@ -79,7 +79,9 @@ def _white(fit: AxisFit):
     share = white_share(fit)
     if share is None or fit.tau_s.size < 2:
         return None
-    i = _unfiltered(fit)
+    # With the filter in the model its share already says where white noise carries
+    # the curve; with plain white noise the filter-bent leading taus are no region.
+    i = 0 if 'filtered_white' in fit.terms else _unfiltered(fit)
     tau, avar, edf = fit.tau_s[i:], fit.avar_meas[i:], fit.edf[i:]
     got = white_region(tau, avar, edf, share[i:])
     if got is None and tau.size >= 2:

@@ -39,6 +39,7 @@ from typing import Sequence
 from imu_allan.core.allan.blas import _single_thread_blas
 from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN, EFFECT_TERM,
                                          MAX_REPEATS, MAX_STEPS, Search, SEARCH_EFFECTS, Step)
+from imu_allan.core.search.choice import with_rivals
 from imu_allan.core.search.run import _finish, _Run
 from imu_allan.errors import InputError
 
@@ -106,6 +107,7 @@ def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effect
     run.forward()
     run.backward()
     fit = run.final()
+    fit = with_rivals(fit, run)
     steps = run.step_fits(fit) if keep_steps else run.steps
     return Search(_finish(fit, steps, run.notes, unit, tuple(run.problems)), run.base_fit,
                   tuple(steps))
