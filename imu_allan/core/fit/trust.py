@@ -69,19 +69,22 @@ def _unfiltered(fit: AxisFit) -> int:
     return _filtered_start(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0])
 
 
-def _white(fit: AxisFit):
+def _white(fit: AxisFit, trusted_model: bool = True):
     """
     Return N and its range from the white region past the filter (None without one).
 
     The region is where the model's white share is >= 0.8, else where the measured
-    ADEV falls with a slope of -1/2 +- 0.1.
+    ADEV falls with a slope of -1/2 +- 0.1.  With ``trusted_model`` False (the
+    conservative value of a fit already judged untrusted) the filter-bent leading taus
+    are left out even where the model holds the filter: its shares are the distorted
+    fit's.
     """
     share = white_share(fit)
     if share is None or fit.tau_s.size < 2:
         return None
     # With the filter in the model its share already says where white noise carries
     # the curve; with plain white noise the filter-bent leading taus are no region.
-    i = 0 if 'filtered_white' in fit.terms else _unfiltered(fit)
+    i = 0 if trusted_model and 'filtered_white' in fit.terms else _unfiltered(fit)
     tau, avar, edf = fit.tau_s[i:], fit.avar_meas[i:], fit.edf[i:]
     got = white_region(tau, avar, edf, share[i:])
     if got is None and tau.size >= 2:
@@ -124,7 +127,7 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
     opt = dict(fit.optimised)
     unit_n, unit_b, unit_k = (opt[s].unit for s in ('N', 'B', 'K'))
     tau, avar = fit.tau_s, fit.avar_meas
-    got = _white(fit)
+    got = _white(fit, trusted_model=False)
     if got is not None:
         n_new = Param(got[0], got[1], 'estimate', unit_n)
     else:

@@ -106,6 +106,7 @@ def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effect
     run.ramp_first()
     run.forward()
     run.backward()
+    run.undecided()
     fit = run.final()
     fit = with_rivals(fit, run)
     steps = run.step_fits(fit) if keep_steps else run.steps

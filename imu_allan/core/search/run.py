@@ -18,7 +18,7 @@ from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter
 from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.noise.model import base_name, TERMS
-from imu_allan.core.search.evidence import ramp_test
+from imu_allan.core.search.evidence import RAMP_LR_MIN, ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
 from imu_allan.core.search.rules import (_label_for, _sinusoid_evidence, DELTA_MIN, MAX_STEPS,
                                          Step)
@@ -180,8 +180,12 @@ class _Run:
         if check is None:
             return
         if not check.significant:
-            self.notes.append(f'rate_ramp: not supported by the record (likelihood ratio '
-                              f'{check.lr:.1f} against more random walk)')
+            if check.lr >= CANNOT_TELL_LR:
+                self.notes.append(cannot_tell('rate_ramp', 'a rate ramp or more random walk',
+                                              check.lr, RAMP_LR_MIN, self.duration_s()))
+            else:
+                self.notes.append(f'rate_ramp: not supported by the record (likelihood '
+                                  f'ratio {check.lr:.1f} against more random walk)')
             return
         slots = self.slots_of(self.labels + ['rate_ramp'])
         new = _fit_fixed_w(self.fitter.data, slots, list(sol.phi) + [()])
@@ -256,6 +260,37 @@ class _Run:
             self.irls(self.labels + [label], phi0=new.phi, local=True)
             self.steps.append(Step(effect, label, drop, rival, evidence))
 
+    def duration_s(self) -> float:
+        """Length of the record [s]."""
+        return self.n_samples / float(self.rate_hz)
+
+    def undecided(self) -> None:
+        """
+        Say where the record cannot tell a further Gauss-Markov process from none.
+
+        The final model plus one more Gauss-Markov process is fitted at the current
+        weights; a chi-square drop worth its parameters by AIC (2 per parameter) but
+        short of the search's margin (BIC plus :data:`DELTA_MIN`) is "cannot tell",
+        with the record length whose expected drop would reach the margin (the drop,
+        a Fisher information, grows with the number of samples).
+        """
+        if 'gauss_markov' not in self.effects:
+            return
+        label = _label_for('gauss_markov', self.labels)
+        slots = self.slots_of(self.labels + [label]) if label else []
+        if not label or _n_params(slots) >= self.k:
+            return
+        self.fitter.data.set_sigma(self.sigma)
+        phi0 = list(self.sol.phi) + [tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)]
+        new = _fit_fixed_w(self.fitter.data, slots, phi0, grid_slots=_grid_slots(
+            'gauss_markov', slots))
+        drop = float(self.sol.j - new.j)
+        need = 2 * self.penalty + DELTA_MIN
+        if new.coef[-1] > 0 and 2 * 2.0 < drop < need:
+            self.notes.append(cannot_tell('gauss_markov', 'one more Gauss-Markov process '
+                                          'or none', drop, need, self.duration_s(),
+                                          'chi2 drop'))
+
     def drop_steps(self, dropped: list, why: str) -> None:
         """Remove steps (and their terms) from the model's record."""
         gone = {st.label for st in dropped}
@@ -309,6 +344,25 @@ class _Run:
             f = fit if i == len(self.steps) - 1 else self.full_fit(labels)
             out.append(st._replace(fit=f))
         return out
+
+
+#: A likelihood ratio (or chi-square drop) at least this large, yet short of what naming
+#: an effect needs, is "cannot tell from this record" rather than "not supported".
+CANNOT_TELL_LR = 4.0
+
+
+def cannot_tell(effect: str, what: str, value: float, need: float, duration_s: float,
+                statistic: str = 'likelihood ratio') -> str:
+    """
+    Note that the record cannot separate two explanations, and the length that would.
+
+    The statistic (a likelihood ratio or a chi-square drop, i.e. the Fisher information
+    of the effect at the fitted value) grows in proportion to the number of samples, so
+    a record ``need / value`` times longer would reach the threshold on average.
+    """
+    hours = duration_s * need / max(value, 1e-9) / 3600.0
+    return (f'{effect}: cannot tell from this record whether {what} ({statistic} '
+            f'{value:.1f}, needs {need:.1f}); a record of about {hours:.2g} h would')
 
 
 def _level_above_zero(fit: AxisFit, label: str) -> bool:
