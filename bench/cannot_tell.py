@@ -1,6 +1,7 @@
 """
-"Cannot tell" against simulation: a ramp against more random walk, two Gauss-Markov
-processes against one (issue 25 item 7).
+Check "cannot tell" against simulation (issue 25 item 7).
+
+Two questions: a ramp or more random walk, two Gauss-Markov processes or one.
 
 Usage: ``.venv/bin/python bench/cannot_tell.py [--seeds 3]``.  A ramp (or a second
 Gauss-Markov process) of a size from invisible to obvious is hidden in white noise, a

@@ -9,6 +9,7 @@ same curve get the same treatment.  bench/trust_power.py runs the same cases ove
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -110,3 +111,33 @@ def test_adis_rival_models_lie_inside_the_reported_intervals(shared_dir):
             p = fit.optimised[sym]
             if p.kind == 'estimate':
                 assert p.ci95[0] * (1 - 1e-9) <= rival[sym] <= p.ci95[1] * (1 + 1e-9), sym
+
+
+def _ramp_notes(ramp: float, seed: int) -> tuple:
+    noise = AxisNoise(N=1e-3, B=3e-4, T_B=30.0, K=2e-6, R=ramp)
+    _, y = simulate_imu(NoiseSpec(name='t', axes={'gyro_x': noise}), 10.0, 7200.0, seed=seed)
+    y = y[:, 0]
+    taus = 2.0 ** (np.arange(0, 40) / 2.0) / 10.0
+    taus = taus[taus <= y.size / 10.0 / 4.0]
+    curve = allan_curve(y, 10.0, taus, confidence=0.95)
+    s = search_axis(curve.tau_s, curve.avar[:, 0], curve.edf[:, 0], 10.0, y.size, raw=y,
+                    unit='rad/s')
+    return tuple(st.effect for st in s.steps), s.fit.notes
+
+
+def test_a_small_ramp_is_cannot_tell_with_the_length_that_would():
+    # bench/cannot_tell.py: a ramp of 1e-7 rad/s^2 in 2 h at 10 Hz is short of the
+    # likelihood ratio that names it, but not nothing.
+    hours = []
+    for seed in (200, 201, 202):
+        effects, notes = _ramp_notes(1e-7, seed)
+        for note in notes:
+            got = re.search(r'^rate_ramp: cannot tell .* a record of about ([\d.e+]+) h '
+                            r'would$', note)
+            if got:
+                hours.append(float(got.group(1)))
+                assert 'rate_ramp' not in effects
+    assert hours and all(h > 2.0 for h in hours), hours
+    # No ramp at all: nothing to tell.
+    effects, notes = _ramp_notes(0.0, 200)
+    assert not any('cannot tell' in n for n in notes if n.startswith('rate_ramp'))

@@ -37,9 +37,9 @@ random_walk, rate_ramp, sinusoid; the model's own low-pass is ``filtered_white``
 from typing import Sequence
 
 from imu_allan.core.allan.blas import _single_thread_blas
+from imu_allan.core.search.choice import with_rivals
 from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN, EFFECT_TERM,
                                          MAX_REPEATS, MAX_STEPS, Search, SEARCH_EFFECTS, Step)
-from imu_allan.core.search.choice import with_rivals
 from imu_allan.core.search.run import _finish, _Run
 from imu_allan.errors import InputError
 
