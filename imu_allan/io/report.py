@@ -52,7 +52,7 @@ def summary_text(result: AnalysisResult) -> str:
             lines += [f'  {axis} note: {n}' for n in fit.notes]
     lines += [''] + result.covering_lines()
     if result.warnings:
-        lines += ['', 'input warnings:'] + [f'  - {w}' for w in result.warnings]
+        lines += ['', 'warnings:'] + [f'  - {w}' for w in result.warnings]
     return '\n'.join(lines) + '\n'
 
 
@@ -62,7 +62,7 @@ def kalman_yaml(result: AnalysisResult) -> str:
     header = ('# Bias-state Kalman model per axis (Maia et al. eqs. 16-17): states b_gm '
               '(Gauss-Markov) and b_rw (random walk).\n# Discrete forms for dt_s; '
               'Rd = S_N / dt. Units: rad, m, s.\n')
-    return header + yaml.safe_dump(k, sort_keys=False, width=120)
+    return result.with_trust_comments(header + yaml.safe_dump(k, sort_keys=False, width=120))
 
 
 def covariance_yaml(result: AnalysisResult) -> str:
@@ -70,7 +70,8 @@ def covariance_yaml(result: AnalysisResult) -> str:
     header = ('# Paste into the IMU driver (or imu_with_covariance): robot_localization '
               'reads noise from these message fields.\n# variance = N^2 * rate_hz '
               '(white noise at the sample rate), clamped to >= 1e-9.\n')
-    return header + yaml.safe_dump(result.imu_covariances(), sort_keys=False)
+    text = header + yaml.safe_dump(result.imu_covariances(), sort_keys=False)
+    return result.with_trust_comments(text)
 
 
 def _draw(result: AnalysisResult, base: Path, ext: str) -> list:
@@ -116,8 +117,8 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
         _atomic_write(out / FILES['kalibr'], result.kalibr_yaml()),
         _atomic_write(out / FILES['kalman'], kalman_yaml(result)),
         _atomic_write(out / FILES['robot_localization'], covariance_yaml(result)),
-        _atomic_write(out / FILES['model'],
-                      yaml.safe_dump(dump_params(spec), sort_keys=False)),
+        _atomic_write(out / FILES['model'], result.with_trust_comments(
+            yaml.safe_dump(dump_params(spec), sort_keys=False))),
         _atomic_write(out / FILES['summary'], summary_text(result)),
         _atomic_write(out / FILES['ekf'], result.robot_localization_yaml(imu_topic)),
         _atomic_write(out / FILES['driver'], result.driver_yaml()),

@@ -7,7 +7,7 @@ Kalman matrices, the Kalibr file and the Imu covariances in one frozen
 DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import cached_property
 import math
 from typing import Any, Callable
@@ -30,9 +30,12 @@ from imu_allan.pipeline.workers import worker_pool
 
 #: Confidence of the reported Allan bands and parameter intervals.
 CONFIDENCE = 0.95
-B_CONVENTION = ('B is the bias instability read off the ADEV floor (ADEV_min = 0.664 B); '
-                'its Gauss-Markov driving PSD is S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B) '
-                '(Maia et al. eq. 8)')
+B_CONVENTION = ('B is the level of the fitted bias-instability term: a Gauss-Markov '
+                'process whose ADEV peaks at 0.664 B at tau = 1.89 T_B, driving PSD '
+                'S_B = 2 B^2 ln2 / (pi 0.4365^2 T_B) (Maia et al. eq. 8), or flicker noise '
+                'of ADEV 0.664 B; the measured floor also holds the other terms, so '
+                'B_floor = ADEV_min / 0.664 (IEEE Std 952 read-off) is reported beside '
+                'it and is >= B up to its interval')
 _CORE = ('N', 'B', 'K', 'T_B')
 
 
@@ -114,28 +117,29 @@ class AnalysisResult:
         note = ['# Written: the fitted pair (what the sensor showed).  A random-walk '
                 'estimator wants the covering pair:']
         note += pair_comments(self._sources(), self.covers, self.covering_horizon_s)
-        return '\n'.join(note) + '\n' + text
+        return self.with_trust_comments('\n'.join(note) + '\n' + text)
 
     def robot_localization_yaml(self, imu_topic: str | None = None,
                                 orientation: bool = True) -> str:
         """robot_localization ekf.yaml fragment fusing ``imu_topic`` (default: analysed)."""
-        return robot_localization_yaml(self._sources(), self.rate_hz,
-                                       imu_topic or self.topic or '/imu/data',
-                                       orientation=orientation)
+        return self.with_trust_comments(robot_localization_yaml(
+            self._sources(), self.rate_hz, imu_topic or self.topic or '/imu/data',
+            orientation=orientation))
 
     def driver_yaml(self) -> str:
         """Per-sample stdev and variance per axis and worst axis, for driver parameters."""
-        return driver_yaml(self._sources(), self.rate_hz)
+        return self.with_trust_comments(driver_yaml(self._sources(), self.rate_hz))
 
     def vins_yaml(self) -> str:
         """VINS-Mono / VINS-Fusion acc_n, gyr_n, acc_w, gyr_w (covering pair, per step)."""
-        return vins_yaml(self._sources(), self.rate_hz, self.covers, self.covering_horizon_s)
+        return self.with_trust_comments(vins_yaml(self._sources(), self.rate_hz, self.covers,
+                                                  self.covering_horizon_s))
 
     def openvins_yaml(self, rostopic: str | None = None) -> str:
         """Return the OpenVINS kalibr_imu_chain.yaml (covering pair, densities)."""
-        return openvins_yaml(self._sources(), self.rate_hz,
-                             rostopic or self.topic or '/imu/data', self.covers,
-                             self.covering_horizon_s)
+        return self.with_trust_comments(openvins_yaml(
+            self._sources(), self.rate_hz, rostopic or self.topic or '/imu/data', self.covers,
+            self.covering_horizon_s))
 
     def covering_lines(self) -> list:
         """Summary lines: fitted and covering N, K per axis with the factors."""
@@ -195,7 +199,10 @@ class AnalysisResult:
                        (f'{sym}_ci95_hi', _g(p.ci95[1])), (f'{sym}_unit', p.unit),
                        (f'{sym}_kind', p.kind)]
         problems = _trust_problems(fit)
-        if fit.model_consistent is False:
+        if fit.trust:
+            problems.append('fit not trusted, conservative values used: '
+                            + '; '.join(fit.trust))
+        elif fit.model_consistent is False:
             problems.append('no listed effect explains the curve (see the notes)')
         if any(k in self.hygiene and self.hygiene[k] for k in ('n_motion_events',)):
             problems.append('motion was detected')
@@ -219,7 +226,42 @@ class AnalysisResult:
                 continue
             text = format_quoted(sym, sensor, p.value, digits=3)
             parts.append(f'{sym} < {text}' if p.kind == 'upper_bound' else f'{sym} {text}')
-        return f'{axis}: ' + ', '.join(parts)
+            if sym == 'B' and fit.b_floor is not None:
+                parts.append('B_floor ' + format_quoted('B', sensor, fit.b_floor.value,
+                                                        digits=3))
+        line = f'{axis}: ' + ', '.join(parts)
+        return line + (' (NOT TRUSTED: conservative values)' if fit.trust else '')
+
+    def trust_warnings(self) -> list:
+        """One top-level warning per axis whose fit is not trusted (conservative values)."""
+        out = []
+        for axis in AXES:
+            fit = self.fits.get(axis)
+            if fit is None or not fit.trust:
+                continue
+            used = ', '.join(f'{s} {"<= " if p.kind == "upper_bound" else ""}{p.value:.3g}'
+                             + (f' [{p.ci95[0]:.3g}, {p.ci95[1]:.3g}]'
+                                if p.kind == 'estimate' else '')
+                             for s, p in fit.optimised.items()
+                             if s in ('N', 'B', 'K') and math.isfinite(p.value))
+            fitted = ', '.join(f'{s} {p.value:.3g} ({p.kind})'
+                               for s, p in fit.fit_values.items() if s in ('N', 'B'))
+            out.append(f'{axis}: the fitted model is not trusted ({"; ".join(fit.trust)}); '
+                       f'every output uses conservative values from the curve: {used} '
+                       f'[SI] (N from the white region, B from the ADEV floor); the fit '
+                       f'gave {fitted}')
+        return out
+
+    def with_trust_comments(self, text: str) -> str:
+        """Consumer-file text with one comment line per untrusted axis (after %YAML)."""
+        lines = [f'# WARNING {c}' for a in AXES
+                 for c in [self.fits[a].trust_comment(a) if self.fits.get(a) else ''] if c]
+        if not lines:
+            return text
+        head, sep, rest = text.partition('\n')
+        if head.startswith('%YAML'):
+            return head + sep + '\n'.join(lines) + '\n' + rest
+        return '\n'.join(lines) + '\n' + text
 
     def summary_lines(self) -> list:
         """One summary line per axis."""
@@ -353,7 +395,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
     units = unit_warnings(session.rate_hz, None if samples is None else samples.mean(axis=0),
                           _gyro_white(curve, fits))
-    return AnalysisResult(
+    result = AnalysisResult(
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
         n_samples=int(session.stats.n_used), warnings=tuple(session.warnings) + tuple(units),
         # n_read / n_lost: what the input delivered and lost (a reader overrides them).
@@ -361,6 +403,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
                  'n_lost': 0}, curve=curve, fits=fits,
         kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic,
         covering_tau_max_s=float(covering_tau_max_s))
+    # No confident wrong number: an axis whose fit is not trusted is a top-level warning.
+    return replace(result, warnings=result.warnings + tuple(result.trust_warnings()))
 
 
 def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:

@@ -204,7 +204,7 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     gaps = [first.gap]
     findings: list[Finding] = []
     notes = [n for n in search.fit.notes if 'not confirm' in n or 'same periodogram' in n
-             or 'rate_ramp' in n]
+             or 'rate_ramp' in n or 'cannot tell' in n or n.startswith('not trusted')]
     for step in search.steps:
         z = gap_z(adev, state.adev_sim, s_ln)
         bands = find_bands(tau, z)

@@ -7,12 +7,16 @@ and re-weights (IRLS) with the same :class:`Fitter`.  These names are the fit's
 interface for that; their bodies live in :mod:`.axis` and :mod:`.solver`.
 """
 
-from imu_allan.core.fit.axis import _check_inputs, _n_params, _slot, _thin
+from imu_allan.core.fit.axis import (_check_inputs, _filtered_start, _n_params, _slot, _thin,
+                                     filter_identified)
 from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter, _Slot, _Solution
 
 #: ``check_curve(tau, avar, edf, rate_hz, n_samples) -> (tau, avar, edf)``: the usable
 #: points of a curve, sorted by tau (InputError for bad arrays, rate or length).
 check_curve = _check_inputs
+#: ``filtered_start(tau_s, avar, rate_hz) -> int``: the first tau the sensor's low-pass
+#: filter does not bend (the one rule for the filter's taus on every axis).
+filtered_start = _filtered_start
 #: ``thin(tau_s, per_octave=2.0) -> indices``: at most that many points per octave.
 thin = _thin
 #: ``term_slot(label, tau_s, rate_hz) -> Slot``: a term label with its registry entry
@@ -33,5 +37,5 @@ Slot = _Slot
 #: A fit at fixed weights: coefficients (scaled), nonlinear parameters, chi-square J.
 Solution = _Solution
 
-__all__ = ['check_curve', 'fit_fixed_weights', 'Fitter', 'n_params', 'Slot', 'Solution',
-           'term_slot', 'thin']
+__all__ = ['check_curve', 'filter_identified', 'filtered_start', 'fit_fixed_weights', 'Fitter',
+           'n_params', 'Slot', 'Solution', 'term_slot', 'thin']

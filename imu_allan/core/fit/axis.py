@@ -23,6 +23,9 @@ from imu_allan.errors import InputError
 
 #: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
 DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
+#: A filter time constant below this share of the shortest fitted tau is not identified
+#: (:func:`filter_identified`).
+FILTER_MIN_TAU_SHARE = 0.2
 #: Penalty per parameter of the information criterion (AIC).
 IC_PENALTY = 2.0
 Z95 = 1.959963984540054
@@ -101,6 +104,21 @@ def _filtered_start(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> int:
            and tau.size - first > 3):
         first += 1
     return first
+
+
+def filter_identified(t_f_s: float, tau0_s: float, bounds: tuple) -> bool:
+    """
+    Whether the curve identifies a filter time constant T_f.
+
+    The filter bends the Allan curve only at taus of the order of T_f: one far below
+    the shortest fitted tau leaves no trace the fit can measure (a T_f of a 25th of
+    the sample period, fitted to reshape the curve elsewhere, is a distortion, not a
+    filter).  T_f must reach :data:`FILTER_MIN_TAU_SHARE` of the shortest fitted tau
+    and stay clear of its search range's ends.
+    """
+    lo, hi = bounds
+    return (t_f_s >= FILTER_MIN_TAU_SHARE * tau0_s and t_f_s > 1.05 * lo
+            and t_f_s < hi / 1.05)
 
 
 def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
@@ -235,8 +253,9 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     dof = int(tau.size - _n_params(slots))
     threshold = _profile_threshold(chi2_value, dof)
 
+    pinned: list[str] = []
     optimised, values = _estimates(fitter, slots, sol, supported, threshold, symbols, unit,
-                                   notes)
+                                   notes, pinned)
 
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
@@ -258,7 +277,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                    terms=tuple(s.label for s in slots if s.label in supported),
                    notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
                    avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
-                   avar_meas=avar, edf=edf, components=components)
+                   avar_meas=avar, edf=edf, components=components, pinned=tuple(pinned))
 
 
 def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple:

@@ -27,8 +27,17 @@ Z95_ONE_SIDED = 1.6448536269514722
 
 
 def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: float,
-               symbols: dict, unit: str, notes: list) -> tuple[dict, dict]:
-    """Values and 95 % profile intervals of the supported terms (notes appended)."""
+               symbols: dict, unit: str, notes: list,
+               pinned: list | None = None) -> tuple[dict, dict]:
+    """
+    Values and 95 % profile intervals of the supported terms (notes appended).
+
+    A nonlinear parameter whose estimate sits at an end of its search range (within
+    2 %) is not identified by the taus: a correlation or filter time pinned there is
+    the fit reshaping the curve, not a measurement.  It is reported as not identified
+    (at the upper end: as a lower bound, the record being too short) and its name is
+    appended to ``pinned``.
+    """
     optimised: dict[str, Param] = {}
     values: dict[str, dict] = {}
     for i, s in enumerate(slots):
@@ -46,6 +55,16 @@ def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: f
                 lo_b, hi_b = s.bounds[s.term.nonlinear.index(sym)]
                 ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold,
                                        (lo_b, hi_b))
+                if v <= lo_b * 1.02 or v >= hi_b / 1.02:
+                    if pinned is not None:
+                        pinned.append(symbols[(s.label, sym)])
+                    if v <= lo_b * 1.02:
+                        notes.append(f'{symbols[(s.label, sym)]}: pinned at the shortest '
+                                     'value of its range; not identified by these taus')
+                        optimised[symbols[(s.label, sym)]] = Param(
+                            math.nan, (math.nan, math.nan), 'not_identified',
+                            _unit(template, unit))
+                        continue
                 if ci[1] >= hi_b * 0.999:
                     kind, ci = 'lower_bound', (ci[0], math.inf)
                     notes.append(f'{symbols[(s.label, sym)]}: may exceed the longest tau '

@@ -105,6 +105,26 @@ class AxisFit:
     model_consistent : bool or None
         Whether the final model explains the curve (chi-square p >= 1e-3); None when no
         search ran.
+    pinned : tuple of str
+        Nonlinear parameters whose estimate sits at an end of its search range (not
+        identified by the taus).
+    trust : tuple of str
+        Why the fitted numbers are not to be trusted (empty when they are): the model
+        does not follow its curve, a parameter sits at a bound, or N differs from the
+        curve's white region beyond its interval.  ``optimised`` then holds the
+        conservative values every output uses (N from the white region with its
+        interval, B from the ADEV floor as an upper bound, K the curve's own bound,
+        every other parameter not identified) and ``fit_values`` the fitted ones.
+    fit_values : dict of str to Param
+        The fitted parameters that ``optimised`` replaced (empty when trusted).
+    b_floor : Param or None
+        B read off the ADEV floor past the sensor's filter, ADEV_min / 0.664 (IEEE Std
+        952-1997 annex C), with that point's 95 % interval; reported beside B, which is
+        the level of the fitted Gauss-Markov (or flicker) term.
+    rivals : tuple of dict
+        Rival models that fit about as well (:mod:`imu_allan.core.search.choice`):
+        'model' (what differs), 'criterion_rise' (chi-square or -2 ln L + BIC above
+        the chosen model) and their N, B, T_B, K [SI].
     p_value : float or None
         Chi-square p-value of ``chi2`` on ``dof`` (None without degrees of freedom);
         computed where the fit is made, so a process that only reports it needs no scipy.
@@ -126,6 +146,11 @@ class AxisFit:
     components: tuple = ()
     effects: tuple = ()
     model_consistent: bool | None = None
+    pinned: tuple = ()
+    trust: tuple = ()
+    fit_values: dict = field(default_factory=dict)
+    b_floor: Param | None = None
+    rivals: tuple = ()
     p_value: float | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
@@ -153,6 +178,22 @@ class AxisFit:
             out += c_si * TERMS[base_name(label)].shape(tau, *phi)
         return out
 
+    @property
+    def trusted(self) -> bool:
+        """Whether the fitted numbers are used as fitted (no :attr:`trust` problem)."""
+        return not self.trust
+
+    def trust_comment(self, axis: str = '') -> str:
+        """One line for consumer files: what is wrong and which values are used ('')."""
+        if not self.trust:
+            return ''
+        used = ', '.join(f'{k} {"<= " if p.kind == "upper_bound" else ""}{p.value:.4g}'
+                         for k, p in self.optimised.items()
+                         if k in ('N', 'B', 'K') and p.kind in ('estimate', 'upper_bound'))
+        where = f'{axis}: ' if axis else ''
+        return (f'{where}fit not trusted ({"; ".join(self.trust)}); conservative values '
+                f'used: {used} (SI units)')
+
     def to_json(self) -> dict:
         """
         Return the JSON-ready result of the axis.
@@ -171,6 +212,11 @@ class AxisFit:
                 'effects': [dict(e, chi2_drop=json_num(e['chi2_drop']))
                             for e in self.effects],
                 'model_consistent': self.model_consistent,
+                'b_floor': None if self.b_floor is None else self.b_floor.to_json(),
+                'trusted': self.trusted, 'trust_problems': list(self.trust),
+                'fit_values': {k: v.to_json() for k, v in self.fit_values.items()},
+                'rivals': [{k: (v if isinstance(v, str) else json_num(v))
+                            for k, v in r.items()} for r in self.rivals],
                 'gof': {'chi2': json_num(self.chi2), 'dof': int(self.dof),
                         'p_value': self.p_value}}
 

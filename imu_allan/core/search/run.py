@@ -12,13 +12,13 @@ import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_sf
 from imu_allan.core.fit import fit_axis
-from imu_allan.core.fit.api import (check_curve, fit_fixed_weights, Fitter, n_params,
-                                    term_slot, thin)
-from imu_allan.core.fit.judge import (follows_curve, P_CONSISTENT, shows_quantization,
-                                      white_region, white_share)
-from imu_allan.core.fit.result import AxisFit, Param
+from imu_allan.core.fit.api import (check_curve, filter_identified, filtered_start,
+                                    fit_fixed_weights, Fitter, n_params, term_slot, thin)
+from imu_allan.core.fit.judge import P_CONSISTENT, shows_quantization
+from imu_allan.core.fit.result import AxisFit
+from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.noise.model import base_name, TERMS
-from imu_allan.core.search.evidence import ramp_test
+from imu_allan.core.search.evidence import RAMP_LR_MIN, ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
 from imu_allan.core.search.rules import (_label_for, _sinusoid_evidence, DELTA_MIN, MAX_STEPS,
                                          Step)
@@ -63,12 +63,12 @@ class _Run:
             raise InputError(f'the fit needs at least 3 averaging times, got {self.tau.size}')
         self.rate_hz, self.n_samples, self.unit = rate_hz, int(n_samples), unit
         self.effects = effects
-        m = np.maximum(np.round(self.tau * rate_hz), 1).astype(np.int64)
-        n_terms = np.maximum(self.n_samples + 1 - 2 * m, 1)
-        self.fitter = Fitter(self.tau, self.y, e, m, n_terms, 1.0 / float(rate_hz),
-                             self.n_samples, 'overlapping')
-        self.k = self.tau.size
-        self.penalty = math.log(self.k)
+        self.edf_thin = e
+        # The one rule for the sensor's filter on every axis: the leading taus it bends
+        # are left out (as fit_axis does for plain white noise) unless the filter is
+        # modelled with an identifiable time constant (see :meth:`base`).
+        self.first = filtered_start(self.tau, self.y, rate_hz)
+        self.use_taus(0)
         self.raw = None if raw is None else np.asarray(raw, dtype=np.float64)
         self.raw_rate = float(raw_rate_hz or rate_hz)
         # A sinusoid, once named, keeps its frequency within 20 % (the re-weighted fits
@@ -77,8 +77,20 @@ class _Run:
         self.lines_hz: list[float] = []
         self.steps: list[Step] = []
         self.notes: list[str] = []
+        self.problems: list[str] = []
         self.labels: list[str] = []
         self.base_labels: list[str] = []
+
+    def use_taus(self, first: int) -> None:
+        """Fit the thinned curve from its ``first`` tau on (a new fitter)."""
+        tau, y, e = self.tau[first:], self.y[first:], self.edf_thin[first:]
+        self.tau, self.y, self.edf_thin = tau, y, e
+        m = np.maximum(np.round(tau * self.rate_hz), 1).astype(np.int64)
+        n_terms = np.maximum(self.n_samples + 1 - 2 * m, 1)
+        self.fitter = Fitter(tau, y, e, m, n_terms, 1.0 / float(self.rate_hz),
+                             self.n_samples, 'overlapping')
+        self.k = tau.size
+        self.penalty = math.log(self.k)
 
     def slots_of(self, labels):
         """Return the slots of the labels, with narrowed sinusoid frequencies."""
@@ -100,20 +112,57 @@ class _Run:
         dof = self.k - n_params(self.slots_of(self.labels))
         return dof > 0 and chi2_sf(self.sol.j, dof) < P_CONSISTENT
 
+    def pinned(self) -> bool:
+        """Whether a nonlinear parameter of the current model sits at an end of its range."""
+        for slot, phi in zip(self.slots_of(self.labels), self.sol.phi):
+            for (lo, hi), v in zip(slot.bounds, phi):
+                if v <= lo * 1.02 or v >= hi / 1.02:
+                    return True
+        return False
+
     def base(self, base_labels) -> None:
-        """Fit the paper's model, through the sensor's filter where the curve shows one."""
+        """
+        Fit the paper's model, through the sensor's filter where the curve identifies it.
+
+        One rule on every axis: the filter is modelled (``filtered_white``) only where
+        it buys its margin on the whole curve, its time constant is identifiable
+        (:func:`filter_identified`) and no other time of the model is pinned at an end
+        of its range by it; otherwise the leading taus it bends are left out
+        (:func:`imu_allan.core.fit.api.filtered_start`) and white noise is fitted to
+        the rest, as :func:`fit_axis` does.
+        """
         self.irls(list(base_labels))
         labels = self.labels
+        modelled = False
         if 'white' in labels and self.rejected() and (
                 self.k - n_params(self.slots_of(labels)) > 2):
             alt = ['filtered_white' if lb == 'white' else lb for lb in labels]
             trial = fit_fixed_weights(self.fitter.data, self.slots_of(alt))
             i_f = alt.index('filtered_white')
-            # A filter time at the bottom of its range is no filter: plain white noise.
-            shows = trial.phi[i_f][0] > 1.05 * self.slots_of(alt)[i_f].bounds[0][0]
+            bounds = self.slots_of(alt)[i_f].bounds[0]
+            # The trial is scored at the white model's weights; the filter time is
+            # judged after the re-weighting (it moves there).
             if (self.sol.j - trial.j > self.penalty + DELTA_MIN and trial.coef[i_f] > 0
-                    and shows):
+                    and trial.phi[i_f][0] > 1.05 * bounds[0]):
                 self.irls(alt, phi0=trial.phi)
+                i_f = self.labels.index('filtered_white')
+                modelled = (filter_identified(self.sol.phi[i_f][0], self.tau[0], bounds)
+                            and not self.pinned())
+                if not modelled:
+                    self.notes.append(
+                        f'filtered_white: T_f {self.sol.phi[i_f][0]:.3g} s is not '
+                        f'identified by taus from {self.tau[0]:.3g} s (left out)')
+        if not modelled and (self.first or 'filtered_white' in self.labels):
+            if self.first:
+                self.use_taus(self.first)
+                slope = 0.5 * math.log(self.y[1] / self.y[0]) / math.log(self.tau[1] /
+                                                                         self.tau[0])
+                if slope > -0.48:
+                    # The cut stopped at its limit with the curve still flatter than
+                    # white noise: filter and floor cannot be told apart.
+                    self.problems.append(f"the sensor's filter bends the curve beyond "
+                                         f'{self.tau[0]:.3g} s')
+            self.irls(list(base_labels))
         self.base_labels = list(self.labels)
         tau0, avar0, edf0 = self.curve
         self.base_fit = fit_axis(tau0, avar0, edf0, self.rate_hz, self.n_samples,
@@ -131,8 +180,12 @@ class _Run:
         if check is None:
             return
         if not check.significant:
-            self.notes.append(f'rate_ramp: not supported by the record (likelihood ratio '
-                              f'{check.lr:.1f} against more random walk)')
+            if check.lr >= CANNOT_TELL_LR:
+                self.notes.append(cannot_tell('rate_ramp', 'a rate ramp or more random walk',
+                                              check.lr, RAMP_LR_MIN, self.duration_s()))
+            else:
+                self.notes.append(f'rate_ramp: not supported by the record (likelihood '
+                                  f'ratio {check.lr:.1f} against more random walk)')
             return
         slots = self.slots_of(self.labels + ['rate_ramp'])
         new = fit_fixed_weights(self.fitter.data, slots, list(sol.phi) + [()])
@@ -207,6 +260,37 @@ class _Run:
             self.irls(self.labels + [label], phi0=new.phi, local=True)
             self.steps.append(Step(effect, label, drop, rival, evidence))
 
+    def duration_s(self) -> float:
+        """Length of the record [s]."""
+        return self.n_samples / float(self.rate_hz)
+
+    def undecided(self) -> None:
+        """
+        Say where the record cannot tell a further Gauss-Markov process from none.
+
+        The final model plus one more Gauss-Markov process is fitted at the current
+        weights; a chi-square drop worth its parameters by AIC (2 per parameter) but
+        short of the search's margin (BIC plus :data:`DELTA_MIN`) is "cannot tell",
+        with the record length whose expected drop would reach the margin (the drop,
+        a Fisher information, grows with the number of samples).
+        """
+        if 'gauss_markov' not in self.effects:
+            return
+        label = _label_for('gauss_markov', self.labels)
+        slots = self.slots_of(self.labels + [label]) if label else []
+        if not label or n_params(slots) >= self.k:
+            return
+        self.fitter.data.set_sigma(self.sigma)
+        phi0 = list(self.sol.phi) + [tuple(math.sqrt(lo * hi) for lo, hi in slots[-1].bounds)]
+        new = fit_fixed_weights(self.fitter.data, slots, phi0, grid_slots=_grid_slots(
+            'gauss_markov', slots))
+        drop = float(self.sol.j - new.j)
+        need = 2 * self.penalty + DELTA_MIN
+        if new.coef[-1] > 0 and 2 * 2.0 < drop < need:
+            self.notes.append(cannot_tell('gauss_markov', 'one more Gauss-Markov process '
+                                          'or none', drop, need, self.duration_s(),
+                                          'chi2 drop'))
+
     def drop_steps(self, dropped: list, why: str) -> None:
         """Remove steps (and their terms) from the model's record."""
         gone = {st.label for st in dropped}
@@ -262,6 +346,25 @@ class _Run:
         return out
 
 
+#: A likelihood ratio (or chi-square drop) at least this large, yet short of what naming
+#: an effect needs, is "cannot tell from this record" rather than "not supported".
+CANNOT_TELL_LR = 4.0
+
+
+def cannot_tell(effect: str, what: str, value: float, need: float, duration_s: float,
+                statistic: str = 'likelihood ratio') -> str:
+    """
+    Note that the record cannot separate two explanations, and the length that would.
+
+    The statistic (a likelihood ratio or a chi-square drop, i.e. the Fisher information
+    of the effect at the fitted value) grows in proportion to the number of samples, so
+    a record ``need / value`` times longer would reach the threshold on average.
+    """
+    hours = duration_s * need / max(value, 1e-9) / 3600.0
+    return (f'{effect}: cannot tell from this record whether {what} ({statistic} '
+            f'{value:.1f}, needs {need:.1f}); a record of about {hours:.2g} h would')
+
+
 def _level_above_zero(fit: AxisFit, label: str) -> bool:
     """Whether the fit holds the term with a 95 % interval of its level above zero."""
     if label not in fit.terms:
@@ -271,9 +374,9 @@ def _level_above_zero(fit: AxisFit, label: str) -> bool:
     return p is not None and p.kind == 'estimate' and p.ci95[0] > 0
 
 
-def _finish(fit: AxisFit, steps: list, notes: list, unit: str) -> AxisFit:
-    """Attach the effects, judge consistency, and fall back to the white region for N."""
-    consistent = follows_curve(fit.avar_meas, fit.edf, fit.avar_fit, fit.chi2, fit.dof)
+def _finish(fit: AxisFit, steps: list, notes: list, unit: str,
+            problems: tuple = ()) -> AxisFit:
+    """Attach the effects, judge the fit, and fall back to the curve where it fails."""
     optimised = dict(fit.optimised)
     notes = list(fit.notes) + notes
     flicker = optimised.get('flicker.B')
@@ -284,17 +387,5 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str) -> AxisFit:
         notes.append('B is flicker noise (no Gauss-Markov floor): no T_B')
     effects = tuple({'effect': s.effect, 'term': s.label, 'chi2_drop': s.chi2_drop,
                      'rival': s.rival, 'evidence': s.evidence} for s in steps)
-    if not consistent:
-        notes.append('no listed effect closes the gap between the model and the curve '
-                     f'(chi2 {fit.chi2:.1f} for {fit.dof} dof)')
-        share = white_share(fit)
-        got = None if share is None else white_region(fit.tau_s, fit.avar_meas, fit.edf,
-                                                      share)
-        n_fit = optimised.get('N')
-        if got is not None and n_fit is not None and n_fit.kind == 'estimate' and (
-                abs(n_fit.value / got[0] - 1.0) > 0.05):
-            optimised['N'] = Param(got[0], got[1], 'estimate', n_fit.unit)
-            notes.append(f'N read from the white region of the curve ({got[0]:.4g}; the '
-                         f'distorted fit gave {n_fit.value:.4g})')
-    return replace(fit, optimised=optimised, notes=tuple(notes), effects=effects,
-                   model_consistent=consistent)
+    fit = replace(fit, optimised=optimised, notes=tuple(notes), effects=effects)
+    return judge_fit(fit, problems)

@@ -1,0 +1,174 @@
+"""
+No confident wrong number: judge a fitted axis and fall back to the curve where needed.
+
+A fit is not trusted when the final model does not follow its curve
+(:func:`imu_allan.core.fit.judge.follows_curve`), when a nonlinear parameter sits at an
+end of its search range (``AxisFit.pinned``), or when its N differs from the curve's
+white region (:func:`imu_allan.core.fit.judge.white_region`) beyond both intervals.
+Then every output uses conservative values read off the measured curve instead of the
+distorted fit's:
+
+- N: the white region's level and its 95 % range (an estimate); without a white
+  region, the curve's own bound min sqrt(AVAR tau) as an upper bound;
+- B: the ADEV floor, B_floor = ADEV_min / 0.664 (IEEE Std 952-1997 annex C), as an
+  upper bound (the floor holds every term's share, so B cannot exceed it);
+- K: the curve's own bound min sqrt(3 AVAR / tau) (IEEE Std 952 C.1 slope +1/2) as
+  an upper bound;
+- every other parameter (T_B, T_f, further processes): not identified.
+"""
+
+from dataclasses import replace
+import math
+
+import numpy as np
+
+from imu_allan.core.allan.quantiles import chi2_ppf
+from imu_allan.core.fit.axis import _filtered_start
+from imu_allan.core.fit.judge import follows_curve, white_region, white_share
+from imu_allan.core.fit.result import AxisFit, Param
+from imu_allan.core.noise.params import AxisNoise
+
+
+def trust_problems(fit: AxisFit, consistent: bool) -> list:
+    """
+    Return why a fit's numbers are not to be trusted ([] when they are).
+
+    Parameters
+    ----------
+    fit : AxisFit
+        The final fit of the axis.
+    consistent : bool
+        Whether the model follows its curve (:func:`follows_curve`).
+
+    Returns
+    -------
+    list of str
+        One phrase per problem.
+
+    """
+    problems = []
+    if not consistent:
+        problems.append(f'the model does not follow its curve (chi2 {fit.chi2:.1f} for '
+                        f'{fit.dof} dof)')
+    if fit.pinned:
+        problems.append(f'{", ".join(fit.pinned)} at the end of its search range')
+    got = _white(fit)
+    n_fit = fit.optimised.get('N')
+    if got is not None and n_fit is not None and n_fit.kind == 'estimate':
+        value, (lo, hi) = got
+        if n_fit.ci95[1] < lo or n_fit.ci95[0] > hi:
+            problems.append(f'N {n_fit.value:.3g} differs from the white region of the curve '
+                            f'({value:.3g}, 95 % {lo:.3g}-{hi:.3g}) beyond its interval')
+    return problems
+
+
+def _unfiltered(fit: AxisFit) -> int:
+    """Index of the first fitted tau past the sensor's filter (the one rule of fit_axis)."""
+    if fit.tau_s.size < 4:
+        return 0
+    return _filtered_start(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0])
+
+
+def _white(fit: AxisFit, trusted_model: bool = True):
+    """
+    Return N and its range from the white region past the filter (None without one).
+
+    The region is where the model's white share is >= 0.8, else where the measured
+    ADEV falls with a slope of -1/2 +- 0.1.  With ``trusted_model`` False (the
+    conservative value of a fit already judged untrusted) the filter-bent leading taus
+    are left out even where the model holds the filter: its shares are the distorted
+    fit's.
+    """
+    share = white_share(fit)
+    if share is None or fit.tau_s.size < 2:
+        return None
+    # With the filter in the model its share already says where white noise carries
+    # the curve; with plain white noise the filter-bent leading taus are no region.
+    i = 0 if trusted_model and 'filtered_white' in fit.terms else _unfiltered(fit)
+    tau, avar, edf = fit.tau_s[i:], fit.avar_meas[i:], fit.edf[i:]
+    got = white_region(tau, avar, edf, share[i:])
+    if got is None and tau.size >= 2:
+        slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
+        white = np.zeros(tau.size)
+        white[:-1][np.abs(slope + 0.5) <= 0.1] = 1.0
+        got = white_region(tau, avar, edf, white)
+    return got
+
+
+def b_floor(fit: AxisFit) -> Param | None:
+    """
+    B read off the ADEV floor: ADEV_min / 0.664 (IEEE Std 952-1997 annex C), 95 %.
+
+    The minimum is taken over the fitted taus past the sensor's filter (a low-pass
+    lowers the shortest taus below any floor); the interval is that point's chi-square
+    interval (NIST SP 1065 sec. 5.3).  None without a fitted curve.
+    """
+    if not fit.tau_s.size or 'B' not in fit.optimised:
+        return None
+    i = _unfiltered(fit)
+    adev = np.sqrt(fit.avar_meas[i:])
+    j = int(np.argmin(adev))
+    e = max(float(fit.edf[i + j]), 1.0)
+    lo = adev[j] * math.sqrt(e / float(chi2_ppf(0.975, e))) / 0.664
+    hi = adev[j] * math.sqrt(e / float(chi2_ppf(0.025, e))) / 0.664
+    return Param(float(adev[j] / 0.664), (float(lo), float(hi)), 'estimate',
+                 fit.optimised['B'].unit)
+
+
+def conservative(fit: AxisFit, problems: list) -> AxisFit:
+    """
+    Return the fit with conservative values in ``optimised`` (see the module doc).
+
+    The fitted values that were replaced move to ``fit_values``; ``model`` becomes
+    N, B (flicker at the floor) and K, so the noise-model file is conservative too.
+    """
+    if not problems:
+        return fit
+    opt = dict(fit.optimised)
+    unit_n, unit_b, unit_k = (opt[s].unit for s in ('N', 'B', 'K'))
+    tau, avar = fit.tau_s, fit.avar_meas
+    got = _white(fit, trusted_model=False)
+    if got is not None:
+        n_new = Param(got[0], got[1], 'estimate', unit_n)
+    else:
+        # No white region: the descending part of the curve past the filter bounds N
+        # from above (every other term only adds to AVAR tau there).
+        i = _unfiltered(fit)
+        j = i + int(np.argmin(avar[i:]))
+        bound = float(np.sqrt(np.max(avar[i:j + 1] * tau[i:j + 1])))
+        n_new = Param(bound, (0.0, bound), 'upper_bound', unit_n)
+    floor = b_floor(fit)
+    b_value = floor.value if floor is not None else math.nan
+    b_new = Param(b_value, (0.0, b_value), 'upper_bound', unit_b)
+    k_bound = float(np.sqrt(np.min(3.0 * avar / tau)))
+    k_new = Param(k_bound, (0.0, k_bound), 'upper_bound', unit_k)
+    new = {'N': n_new, 'B': b_new, 'K': k_new}
+    replaced = {}
+    for sym, p in opt.items():
+        if sym in new:
+            replaced[sym] = p
+            opt[sym] = new[sym]
+        elif p.kind != 'not_identified':
+            replaced[sym] = p
+            opt[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified', p.unit)
+    model = AxisNoise(N=n_new.value, B=b_value if math.isfinite(b_value) else 0.0,
+                      K=k_bound)
+    notes = list(fit.notes) + [
+        f'not trusted: {"; ".join(problems)}: N from the white region of the curve, '
+        "B from the ADEV floor (upper bound), K the curve's own bound, the rest not "
+        'identified']
+    return replace(fit, optimised=opt, fit_values=replaced, model=model,
+                   trust=tuple(problems), notes=tuple(notes))
+
+
+def judge_fit(fit: AxisFit, problems: tuple = ()) -> AxisFit:
+    """
+    Judge a final fit: set ``model_consistent`` and fall back where it is not trusted.
+
+    ``problems`` are further reasons found by the caller (the search: a filter that
+    bends the curve beyond the taus it may leave out).
+    """
+    consistent = follows_curve(fit.avar_meas, fit.edf, fit.avar_fit, fit.chi2, fit.dof)
+    fit = replace(fit, model_consistent=consistent, b_floor=None)
+    fit = replace(fit, b_floor=b_floor(fit))
+    return conservative(fit, list(problems) + trust_problems(fit, consistent))

@@ -1,0 +1,204 @@
+"""
+Intervals that include the choice of model: rival minima of the likelihood.
+
+The profile interval of a parameter (:mod:`imu_allan.core.fit.intervals`) is searched
+outwards from the estimate and stops at the first crossing of its threshold.  A
+correlation time can have a second minimum that fits about as well (the ADIS16405
+accelerometers: T_B 0.07 s in one run, 27 s in another, each with a tight interval).
+The 95 % confidence set is every value whose profile stays within the threshold, so
+the bias-instability time is profiled on a grid over its whole range; every grid
+model within the threshold of the best is a rival.  Then:
+
+- B, K and N get intervals that also span their values under the rivals;
+- T_B, when its confidence set falls apart into pieces (a rival beyond a gap where the
+  profile rises above the threshold), is not identified: its value flips between
+  rival models;
+- the rivals (their T_B, the rise of the chi-square and their B, K, N) go to the JSON.
+"""
+
+from dataclasses import replace
+import math
+import re
+
+import numpy as np
+
+from imu_allan.core.fit.axis import _n_params, _profile_threshold
+from imu_allan.core.fit.result import AxisFit, Param
+from imu_allan.core.fit.solver import _fit_fixed_w, _Fix
+from imu_allan.core.search.rivals import _neg2_loglik
+from imu_allan.core.search.rules import _label_for
+
+_RIVAL = re.compile(r'^(\w+) \(chi2 drop ([-\d.e+]+)\)$')
+#: Grid points over the range of T_B (log-spaced).
+GRID_POINTS = 8
+#: A rival structure (the runner-up effect of a step in its place) within this many
+#: units of -2 ln L + BIC of the chosen model fits about equally well: the search's own
+#: margin :data:`imu_allan.core.search.rules.DELTA_MIN` is what an effect must buy.
+RIVAL_DELTA = 10.0
+#: Parameters whose intervals are widened by the rivals, with the term each comes from.
+_LEVELS = {'N': ('white', 'filtered_white'), 'B': ('bias_instability',),
+           'K': ('random_walk',)}
+
+
+def _levels(slots, sol, scale: float, i_b: int) -> dict:
+    """N, B, T_B and K of one solution (0 where the term is absent or zero)."""
+    out = {'N': 0.0, 'B': 0.0, 'K': 0.0, 'T_B': math.nan}
+    for k, (s, c, phi) in enumerate(zip(slots, sol.coef, sol.phi)):
+        params = s.term.to_params(float(c) * scale, *phi)
+        for sym, bases in _LEVELS.items():
+            if s.term.name in bases and s.label == s.term.name and sym != 'B':
+                out[sym] = float(params[sym])
+        if k == i_b:
+            out['B'], out['T_B'] = float(params[s.term.symbols[0]]), float(phi[0])
+    return out
+
+
+def _largest_gm(slots, sol, scale: float) -> int | None:
+    """Index of the Gauss-Markov slot with the largest B (reported as B, T_B), or None."""
+    family = [k for k, s in enumerate(slots)
+              if s.term.name in ('bias_instability', 'gauss_markov') and sol.coef[k] > 0]
+    if not family:
+        return None
+    return max(family, key=lambda k: slots[k].term.to_params(
+        float(sol.coef[k]) * scale, *sol.phi[k])[slots[k].term.symbols[0]])
+
+
+def structural_rivals(run) -> list:
+    """
+    Re-fit the model with each step's runner-up effect in its place; return the rivals.
+
+    A step whose runner-up bought a chi-square drop within :data:`RIVAL_DELTA` of its
+    own is re-fitted with the runner-up instead (IRLS at its own weights), and kept as
+    a rival when its -2 ln L + BIC (:func:`imu_allan.core.search.rivals._neg2_loglik`)
+    is within :data:`RIVAL_DELTA` of the chosen model's.  Returns per rival a
+    description, the difference of the criterion and N, B, T_B, K.
+    """
+    out = []
+    scale = run.fitter.data.scale
+    slots = run.slots_of(run.labels)
+    run.fitter.data.set_sigma(run.sigma)
+    mine = _neg2_loglik(run.fitter, run.sol, _n_params(slots), run.penalty)
+    for st in run.steps:
+        got = _RIVAL.match(st.rival or '')
+        if got is None or abs(st.chi2_drop - float(got.group(2))) > RIVAL_DELTA:
+            continue
+        rest = [lb for lb in run.labels if lb != st.label]
+        label = _label_for(got.group(1), rest)
+        if label is None:
+            continue
+        labels = rest + [label]
+        r_slots = run.slots_of(labels)
+        phi0 = [p for lb, p in zip(run.labels, run.sol.phi) if lb != st.label] + [
+            tuple(math.sqrt(lo * hi) for lo, hi in r_slots[-1].bounds)]
+        sol, _ = run.fitter.irls(r_slots, phi0=phi0)
+        value = _neg2_loglik(run.fitter, sol, _n_params(r_slots), run.penalty)
+        run.fitter.data.set_sigma(run.sigma)
+        if value - mine <= RIVAL_DELTA:
+            i_b = _largest_gm(r_slots, sol, scale)
+            levels = _levels(r_slots, sol, scale, -1 if i_b is None else i_b)
+            out.append((f'{got.group(1)} instead of {st.effect}', float(value - mine),
+                        levels))
+    return out
+
+
+def _bias_slot(slots, sol, t_b: float) -> int | None:
+    """Index of the Gauss-Markov slot whose time is the reported T_B (None without)."""
+    family = [k for k, s in enumerate(slots)
+              if s.term.name in ('bias_instability', 'gauss_markov')]
+    if not family:
+        return None
+    return min(family, key=lambda k: abs(math.log(sol.phi[k][0] / t_b)))
+
+
+def rival_models(fitter, slots, sol, dof: int, i: int) -> list:
+    """
+    Profile T_B over its whole range; return the grid models within the threshold.
+
+    Parameters
+    ----------
+    fitter : imu_allan.core.fit.solver._Fitter
+        The search's fitter at the final model's weights.
+    slots : list of _Slot
+        The final model's slots.
+    sol : _Solution
+        Its solution.
+    dof : int
+        Its degrees of freedom.
+    i : int
+        Index of the slot whose time is T_B.
+
+    Returns
+    -------
+    list of (float, bool, dict)
+        Per grid point: the rise of the chi-square over the best, whether it lies
+        within the 95 % threshold, and N, B, T_B, K there.
+
+    """
+    lo, hi = slots[i].bounds[0]
+    threshold = _profile_threshold(sol.j, dof)
+    out = []
+    best = sol.j
+    for t_b in np.geomspace(lo * 1.05, hi / 1.05, GRID_POINTS):
+        symbol = slots[i].term.nonlinear[0]
+        grid = _fit_fixed_w(fitter.data, slots, sol.phi, _Fix(i, symbol, float(t_b)),
+                            local=True)
+        best = min(best, grid.j)
+        out.append((grid.j, _levels(slots, grid, fitter.data.scale, i)))
+    return [(j - best, j - best <= threshold, lv) for j, lv in out]
+
+
+def with_rivals(fit: AxisFit, run) -> AxisFit:
+    """
+    Widen the intervals of ``fit`` by its rival models (see the module doc).
+
+    Rivals are the grid models of T_B within the threshold beyond the fit's own T_B
+    interval, and the rival structures of :func:`structural_rivals`.  N, B and K
+    intervals span their values under every rival; T_B is not identified when its
+    confidence set falls apart, or when a rival structure puts it outside its interval.
+    """
+    slots, sol = run.slots_of(run.labels), run.sol
+    run.fitter.data.set_sigma(run.sigma)
+    t_b = fit.optimised.get('T_B')
+    rivals, flips = [], []
+    if t_b is not None and t_b.kind == 'estimate':
+        i = _bias_slot(slots, sol, t_b.value)
+        if i is not None:
+            dof = run.fitter.data.tau.size - _n_params(slots)
+            grid = rival_models(run.fitter, slots, sol, dof, i)
+            own = np.array([t_b.ci95[0] <= g[2]['T_B'] <= t_b.ci95[1] for g in grid])
+            inside = np.array([g[1] for g in grid]) | own
+            pieces = int(np.sum(np.diff(inside.astype(int)) == 1)) + int(inside[0])
+            for g, o in zip(grid, own):
+                if g[1] and not o and g[2]['B'] > 0:
+                    rivals.append((f'T_B {g[2]["T_B"]:.3g} s', float(g[0]), g[2]))
+                    if pieces > 1:
+                        flips.append(rivals[-1][0])
+    for r in structural_rivals(run):
+        rivals.append(r)
+        if (t_b is not None and t_b.kind == 'estimate' and math.isfinite(r[2]['T_B'])
+                and not t_b.ci95[0] <= r[2]['T_B'] <= t_b.ci95[1]):
+            flips.append(r[0])
+    if not rivals:
+        return fit
+    optimised = dict(fit.optimised)
+    notes = list(fit.notes)
+    for sym in ('N', 'B', 'K'):
+        p = optimised.get(sym)
+        if p is None or p.kind != 'estimate':
+            continue
+        values = [r[2][sym] for r in rivals]
+        lo, hi = min([p.ci95[0]] + values), max([p.ci95[1]] + values)
+        if (lo, hi) != p.ci95:
+            optimised[sym] = p._replace(ci95=(float(lo), float(hi)))
+    if flips:
+        optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
+        notes.append(f'T_B: flips between rival models that fit about as well ('
+                     f'{t_b.value:.3g} s; {", ".join(flips)}): not identified')
+    elif t_b is not None and t_b.kind == 'estimate':
+        ts = [r[2]['T_B'] for r in rivals if math.isfinite(r[2]['T_B'])]
+        optimised['T_B'] = t_b._replace(ci95=(float(min([t_b.ci95[0]] + ts)),
+                                              float(max([t_b.ci95[1]] + ts))))
+    notes.append('intervals of N, B, K span the rival models: '
+                 + ', '.join(r[0] for r in rivals))
+    listed = tuple({'model': r[0], 'criterion_rise': r[1], **r[2]} for r in rivals)
+    return replace(fit, optimised=optimised, notes=tuple(notes), rivals=listed)
