@@ -1,0 +1,223 @@
+"""
+Precision now, and when: the record length at which each parameter meets its target.
+
+For each axis the fitted model is carried to records of growing length (a grid of
+four-fold steps from the present length to :data:`HORIZON_S`, plus 1, 3 and 10 h), the
+expected relative 95 % half-width of every parameter is computed there
+(:class:`imu_allan.core.plan.precision.CurveModel`) and the length at which it falls
+to its target is interpolated in log-log (the widths fall about as L^-1/2 once a term
+is resolved).  A parameter the fit reports as an upper bound is planned at its bound:
+a smaller true value takes longer, so the time is "at least".  The grid is shared by
+the six axes, whose curves share their taus and so the quadrature of Sigma.
+"""
+
+import math
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from imu_allan.core.fit.covariance import _CurveCovariance
+from imu_allan.core.noise.model import TERMS
+from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
+                                           expected_widths, fit_taus, relative_width)
+from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
+from imu_allan.core.plan.separation import LAMBDA_SEPARATED, mismatch, rivals, scaled
+
+#: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise).
+DEFAULT_TARGETS = {'N': 0.10, 'B': 0.10, 'K': 0.25, 'T_B': 0.25}
+#: Target of every other parameter (the extra terms).
+DEFAULT_OTHER_TARGET = 0.25
+#: Longest record the planner looks at [s] (1000 h).
+HORIZON_S = 3.6e6
+#: Record lengths at which the expected widths are always reported [h].
+REPORT_HOURS = (1.0, 3.0, 10.0)
+#: Symbols of the core terms and their term (for the bounds of unsupported terms).
+_CORE = {'N': 'white', 'B': 'bias_instability', 'K': 'random_walk'}
+
+
+def target_of(name: str, targets: Mapping[str, float] | None) -> float:
+    """Target relative half-width of one parameter (``targets`` override the defaults)."""
+    merged = dict(DEFAULT_TARGETS, **(targets or {}))
+    return float(merged.get(name, merged.get(name.split('.')[-1], DEFAULT_OTHER_TARGET)))
+
+
+def planning_model(components: Sequence, optimised: Mapping | None = None) -> tuple:
+    """
+    Components to plan with, and the models of the parameters planned at an upper bound.
+
+    Parameters
+    ----------
+    components : sequence of (label, coef, phi)
+        The fitted model (``AxisFit.components``).
+    optimised : mapping of str to Param, optional
+        The fit's reported parameters; a core parameter reported as an upper bound is
+        planned at that bound (its term added or raised to it) in a model of its own,
+        so that the bound does not blur the other parameters' plans.
+
+    Returns
+    -------
+    comps : list of Component
+        The point estimates (terms with a positive coefficient).
+    bounds : dict of str to list of Component
+        Per parameter planned at a bound, the model with that term at its bound.
+
+    """
+    comps = [Component(str(lb), float(c), tuple(float(v) for v in p))
+             for lb, c, p in components if c > 0]
+    bounds: dict = {}
+    for sym, base in _CORE.items():
+        p = (optimised or {}).get(sym)
+        if p is None or p.kind != 'upper_bound' or not p.value > 0:
+            continue
+        labels = [c.label for c in comps]
+        raised = list(comps)
+        if base == 'bias_instability':
+            if base not in labels:
+                continue        # no T_B to plan B with
+            i = labels.index(base)
+            coef = TERMS[base].to_coef(p.value, *comps[i].phi)
+            raised[i] = Component(base, max(coef, comps[i].coef), comps[i].phi)
+            bounds['B'] = bounds['T_B'] = raised
+            continue
+        coef = TERMS[base].to_coef(p.value)
+        if base in labels:
+            i = labels.index(base)
+            raised[i] = Component(base, max(coef, comps[i].coef), ())
+        else:
+            raised.append(Component(base, coef, ()))
+        bounds[sym] = raised
+    return comps, bounds
+
+
+def length_grid(duration_s: float) -> np.ndarray:
+    """Record lengths to evaluate [s]: four-fold steps from now, and 1, 3, 10 h."""
+    steps = [duration_s * 4.0 ** k for k in range(20) if duration_s * 4.0 ** k <= HORIZON_S]
+    return np.unique(np.array(steps + [HORIZON_S] + [h * 3600.0 for h in REPORT_HOURS]))
+
+
+def _crossing(lengths: np.ndarray, widths: np.ndarray, target: float) -> float:
+    """First length where the width falls to ``target`` (log-log interpolation)."""
+    ok = widths <= target
+    if not ok.any():
+        return math.inf
+    j = int(np.argmax(ok))
+    if j == 0:
+        return float(lengths[0])
+    w0, w1 = widths[j - 1], widths[j]
+    if not math.isfinite(w0):
+        return float(lengths[j])
+    f = math.log(w0 / target) / math.log(w0 / w1)
+    return float(math.exp(math.log(lengths[j - 1]) + f * math.log(lengths[j] / lengths[j - 1])))
+
+
+def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
+              targets: Mapping[str, float] | None = None,
+              present: Mapping[str, Mapping] | None = None,
+              lengths_s: Sequence[float] | None = None) -> dict:
+    """
+    Plan every axis: width now, time to target, widths at 1, 3 and 10 h, separations.
+
+    Parameters
+    ----------
+    models : mapping of str to (list of Component, dict)
+        Per axis, :func:`planning_model`'s output.
+    rate_hz : float
+        Sample rate [Hz].
+    duration_s : float
+        Length of the record behind the models [s] (0 or less: a datasheet, no record).
+    targets : mapping of str to float, optional
+        Target relative 95 % half-widths by parameter name (or symbol).
+    present : mapping of str to mapping, optional
+        Per axis, the fit's reported parameters (Param): their intervals give the
+        present widths; without them the model's expected widths at ``duration_s``.
+    lengths_s : sequence of float, optional
+        Record lengths to evaluate instead of :func:`length_grid`.
+
+    Returns
+    -------
+    dict of str to AxisPlan
+
+    """
+    start = duration_s if duration_s > 0 else 60.0
+    grid = np.asarray(lengths_s if lengths_s is not None else length_grid(start), float)
+    # Per axis the point-estimate model and one model per parameter planned at a bound.
+    cms: dict = {}
+    for axis, (comps, bounds) in models.items():
+        variants = {'': comps}
+        variants.update({name: b for name, b in bounds.items() if b})
+        cms[axis] = {k: CurveModel(v, rate_hz) for k, v in variants.items() if v}
+    widths: dict = {(a, k): [] for a, v in cms.items() for k in v}
+    lams: dict = {a: [] for a in cms}
+    for length in grid:
+        n = max(int(round(length * rate_hz)), 8)
+        m, tau = fit_taus(rate_hz, n)
+        cov = _CurveCovariance(m, np.maximum(n + 1 - 2 * m, 1), 1.0 / rate_hz, n)
+        for axis, variants in cms.items():
+            for key, cm in variants.items():
+                avar = _avar(cm.comps, cm.theta, tau)
+                scale = float(np.max(avar))
+                sigma = cov.sigma([c.term for c in cm.comps],
+                                  np.array([c.coef / scale for c in cm.comps]),
+                                  [c.phi for c in cm.comps])
+                jac = _jacobian(cm.comps, cm.theta, tau) / scale
+                widths[(axis, key)].append(dict(zip(cm.names, expected_widths(jac, sigma))))
+                if key == '':
+                    lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau)
+                                       for q, r in rivals(cm.comps, float(tau.max()))})
+    out = {}
+    for axis, variants in cms.items():
+        columns, values = {}, {}
+        for key, cm in variants.items():
+            for j, name in enumerate(cm.names):
+                if (key == '' and name not in variants) or key == name:
+                    columns[name] = np.array([row[name] for row in widths[(axis, key)]])
+                    values[name] = [v for c in cm.comps for v in c.values()][j]
+        out[axis] = _axis_plan(columns, values, set(variants) - {''}, grid, lams[axis],
+                               duration_s, targets, (present or {}).get(axis))
+    return out
+
+
+def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams: list,
+               duration_s: float, targets, present) -> AxisPlan:
+    """One axis' plan from the expected widths of its parameters on the length grid."""
+    params = []
+    for name, col in columns.items():
+        target = target_of(name, targets)
+        now = math.nan
+        if duration_s > 0:
+            p = (present or {}).get(name)
+            if p is not None and p.kind == 'estimate':
+                now = relative_width(p.value, p.ci95)
+            elif p is not None:
+                now = math.inf
+            else:
+                now = float(np.interp(math.log(duration_s), np.log(grid), col))
+        if name in bounded:
+            kind = 'at_least'
+        elif duration_s > 0 and now <= target:
+            kind = 'pinned'
+        else:
+            kind = 'predicted'
+        when = _crossing(grid, col, target)
+        if kind == 'pinned':
+            when = duration_s
+        elif duration_s > 0:
+            when = max(when, duration_s)
+        if not math.isfinite(when) and kind != 'at_least':
+            kind = 'beyond'
+        at = {h: float(col[int(np.argmin(np.abs(grid - h * 3600.0)))])
+              for h in REPORT_HOURS if np.isclose(grid, h * 3600.0).any()}
+        params.append(ParamPlan(name, float(values[name]), float(now), target, float(when), kind,
+                                at))
+    order = {'N': 0, 'B': 1, 'T_B': 2, 'K': 3}
+    params.sort(key=lambda p: (order.get(p.name, 4), p.name))
+    seps = []
+    questions = sorted({q for row in lams for q in row})
+    for q in questions:
+        lam = np.array([row.get(q, 0.0) for row in lams])
+        when = _crossing(grid, 1.0 / np.maximum(lam, 1e-300), 1.0 / LAMBDA_SEPARATED)
+        lam_now = (float(np.interp(math.log(duration_s), np.log(grid), lam))
+                   if duration_s > 0 else math.nan)
+        seps.append(Separation(q, lam_now, float(when),
+                               bool(duration_s > 0 and lam_now >= LAMBDA_SEPARATED)))
+    return AxisPlan(float(duration_s), tuple(params), tuple(seps))
