@@ -22,6 +22,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from imu_allan import AXES
+from imu_allan.cli.plan import add_target_option, parse_targets
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import (keep_large_blocks, one_blas_thread, start_workers,
                                         worker_pool)
@@ -62,17 +63,21 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--jobs', type=int, default=0,
                    help='parallel inputs, or for one input the processes searching its '
                         'axes (default: the number of cores, at most 2 for one input)')
+    add_target_option(p)
+    p.add_argument('--no-plan', action='store_true',
+                   help='skip the precision plan (record length to each target)')
     p.set_defaults(run=run)
     return p
 
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, config, out, plot = args
+    path, topic, config, out, plot, plan = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
-        result, seconds = analyze_input(path, topic, config, quiet=True)
+        result, seconds = analyze_input(path, topic, config, quiet=True, plan=plan is not None,
+                                        plan_targets=plan)
         files = write_outputs(result, out, plot=plot)
     except InputError as exc:
         return None, str(exc), [], 0.0
@@ -190,7 +195,8 @@ def run(args) -> int:
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]
-    jobs = [(p, args.topic, config, o, plot) for p, o in zip(paths, outs)]
+    plan = None if args.no_plan else parse_targets(args.target)
+    jobs = [(p, args.topic, config, o, plot, plan) for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
@@ -198,7 +204,8 @@ def run(args) -> int:
         # One input: its six axes are searched on the cores (several inputs: one each).
         if workers > 1:   # and the accumulator sums on a thread of its own
             config = replace(config, background_accumulator=True)
-        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers)
+        result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
+                                        plan=plan is not None, plan_targets=plan)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, \
                 (worker_pool(min(workers, 2) if plot else 1) or nullcontext()) as pool:
@@ -232,6 +239,8 @@ def run(args) -> int:
                   f'at {result.rate_hz:.2f} Hz, analysed in {seconds:.1f} s)')
             for line in result.summary_lines():
                 print('  ' + line)
+            for axis, axis_plan in result.plans.items():
+                print(f'  {axis} plan: {axis_plan.progress_line()}')
             for w in result.warnings:
                 print(f'  warning: {w}')
             print(f'  files: {Path(files[0]).parent}/ ({", ".join(Path(f).name for f in files)})')

@@ -366,7 +366,7 @@ def raw_tap() -> tuple:
 
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
-                  prefetch: bool = True):
+                  prefetch: bool = True, plan: bool = False, plan_targets: dict | None = None):
     """
     Stream one input through a Session and fit it.
 
@@ -420,7 +420,8 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
             result = analyze(session, source=source.label, raw=keeper,
-                             topic=source.topic or '', workers=workers)
+                             topic=source.topic or '', workers=workers, plan=plan,
+                             plan_targets=plan_targets)
         finally:
             if bar is not None:
                 bar.close()

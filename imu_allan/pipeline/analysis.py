@@ -7,7 +7,7 @@ Kalman matrices, the Kalibr file and the Imu covariances in one frozen
 DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 import math
 from typing import Any, Callable
 
@@ -66,6 +66,9 @@ class AnalysisResult:
         First header stamp of the recording [ns since the epoch] (offline inputs).
     frame_id : str
         header.frame_id of the messages ('' for CSV and the node).
+    plans : dict of str to imu_allan.core.plan.AxisPlan
+        Per axis, the precision now and the record length to each target (empty
+        unless :func:`analyze` was asked to plan).
 
     """
 
@@ -81,6 +84,7 @@ class AnalysisResult:
     topic: str = ''
     start_ns: int | None = None
     frame_id: str = ''
+    plans: dict = field(default_factory=dict)
 
     def models(self) -> dict:
         """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""
@@ -205,6 +209,8 @@ class AnalysisResult:
                     sym: format_quoted(sym, sensor_of(axis), p.value, digits=4)
                     for sym, p in fit.optimised.items()
                     if sym in _CORE and p.kind in ('estimate', 'upper_bound')}
+            if axis in self.plans:
+                entry['plan'] = self.plans[axis].to_json()
             axes[axis] = entry
         return {
             'source': self.source,
@@ -251,7 +257,8 @@ def _map_axes(jobs: list, workers: int, meanwhile: Callable[[], Any]) -> tuple[l
 
 
 def analyze(session, source: str = '', raw=None, topic: str = '',
-            workers: int = 1) -> AnalysisResult | None:
+            workers: int = 1, plan: bool = False,
+            plan_targets: dict | None = None) -> AnalysisResult | None:
     """
     Fit every axis of a session's current Allan curve, effect search included.
 
@@ -274,6 +281,10 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     workers : int
         Processes that search the axes (1: in this process, as the node does; the
         results are the same either way).
+    plan : bool
+        Also plan the record length (:mod:`imu_allan.core.plan`, a few seconds).
+    plan_targets : dict of str to float, optional
+        Target relative 95 % half-widths by parameter (default the planner's).
 
     Returns
     -------
@@ -299,11 +310,17 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     fits.update(zip(jobs, found))
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
+    plans = {}
+    if plan:
+        from imu_allan.core.plan import plan_fits     # scipy
+        plans = plan_fits(fits, float(session.rate_hz), float(session.duration_s),
+                          plan_targets)
     return AnalysisResult(
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
         n_samples=int(session.stats.n_used), warnings=tuple(session.warnings),
         hygiene=asdict(session.stats), curve=curve, fits=fits,
-        kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic)
+        kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic,
+        plans=plans)
 
 
 def _trust_problems(fit: AxisFit) -> list:

@@ -90,9 +90,18 @@ def planning_model(components: Sequence, optimised: Mapping | None = None) -> tu
 
 
 def length_grid(duration_s: float) -> np.ndarray:
-    """Record lengths to evaluate [s]: four-fold steps from now, and 1, 3, 10 h."""
-    steps = [duration_s * 4.0 ** k for k in range(20) if duration_s * 4.0 ** k <= HORIZON_S]
-    return np.unique(np.array(steps + [HORIZON_S] + [h * 3600.0 for h in REPORT_HOURS]))
+    """
+    Record lengths to evaluate [s]: now, then 1, 3, 10, 30 ... 1000 h.
+
+    Without a record (``duration_s`` 0) the grid starts at 1, 5 and 15 min.  The widths
+    fall about as L^-1/2 between the points once a term is resolved, so a log-log
+    interpolation over these steps is close; :func:`plan_axes` stops early once every
+    target is met beyond 10 h.
+    """
+    long_h = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+    first = [duration_s] if duration_s > 0 else [60.0, 300.0, 900.0]
+    later = [h * 3600.0 for h in long_h if h * 3600.0 > first[-1] * 1.05]
+    return np.array(first + later)
 
 
 def _crossing(lengths: np.ndarray, widths: np.ndarray, target: float) -> float:
@@ -148,7 +157,11 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         cms[axis] = {k: CurveModel(v, rate_hz) for k, v in variants.items() if v}
     widths: dict = {(a, k): [] for a, v in cms.items() for k in v}
     lams: dict = {a: [] for a in cms}
+    done = 0
     for length in grid:
+        if _all_met(widths, lams, targets) and length > max(REPORT_HOURS) * 3600.0:
+            break
+        done += 1
         n = max(int(round(length * rate_hz)), 8)
         m, tau = fit_taus(rate_hz, n)
         cov = _CurveCovariance(m, np.maximum(n + 1 - 2 * m, 1), 1.0 / rate_hz, n)
@@ -164,6 +177,7 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
                 if key == '':
                     lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau)
                                        for q, r in rivals(cm.comps, float(tau.max()))})
+    grid = grid[:done]
     out = {}
     for axis, variants in cms.items():
         columns, values = {}, {}
@@ -175,6 +189,14 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         out[axis] = _axis_plan(columns, values, set(variants) - {''}, grid, lams[axis],
                                duration_s, targets, (present or {}).get(axis))
     return out
+
+
+def _all_met(widths: dict, lams: dict, targets) -> bool:
+    """Whether at the last length evaluated every target is met, every rival rejected."""
+    for rows in widths.values():
+        if not rows or any(w > target_of(n, targets) for n, w in rows[-1].items()):
+            return False
+    return all(v >= LAMBDA_SEPARATED for rows in lams.values() if rows for v in rows[-1].values())
 
 
 def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams: list,

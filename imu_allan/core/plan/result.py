@@ -30,7 +30,7 @@ def percent(w: float) -> str:
         return '-'
     if math.isinf(w) or w > 10.0:
         return 'n/a'
-    return f'+-{100.0 * w:.2g} %'
+    return f'+-{100.0 * w:.0f} %' if w >= 0.1 else f'+-{100.0 * w:.2g} %'
 
 
 class ParamPlan(NamedTuple):
