@@ -22,7 +22,8 @@ import sys
 from typing import TYPE_CHECKING
 
 from imu_allan import AXES
-from imu_allan.cli.plan import add_target_option, parse_targets
+from imu_allan.cli.plan import add_target_option
+from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import (keep_large_blocks, one_blas_thread, start_workers,
                                         worker_pool)

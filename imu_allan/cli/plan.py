@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 import sys
 
+from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 
 #: Datasheet flags: option -> parameter key of the units module.
@@ -24,23 +25,6 @@ def add_target_option(p: argparse.ArgumentParser) -> None:
     p.add_argument('--target', action='append', default=[], metavar='P=WIDTH',
                    help='target relative 95 %% half-width of a parameter, e.g. N=0.05 or '
                         'K=25%% (defaults: N and B 10 %%, K, T_B and other terms 25 %%)')
-
-
-def parse_targets(items) -> dict:
-    """Return {parameter: relative half-width} from ``P=W`` strings ('25%' or 0.25)."""
-    out = {}
-    for item in items or []:
-        name, sep, text = str(item).partition('=')
-        try:
-            value = (float(text.strip().rstrip('%')) / 100.0 if text.strip().endswith('%')
-                     else float(text))
-        except ValueError:
-            value = float('nan')
-        if not sep or not name.strip() or not 0.0 < value < 10.0:
-            raise InputError(f'--target {item!r}: expected PARAM=WIDTH with a relative '
-                             'half-width such as N=0.1 or K=25%')
-        out[name.strip()] = value
-    return out
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

@@ -15,6 +15,7 @@ import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from imu_allan import AXES
+from imu_allan.ros.plan_report import progress_report
 
 #: No message for this long is reported as a WARN on /diagnostics.
 NO_DATA_WARN_S = 2.0
@@ -83,6 +84,10 @@ class _Reports:
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
         if self.live.n_buffer_dropped:
             text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
+        plan_text, plan_kv = progress_report(getattr(self._last_result, 'plans', {}))
+        if self.collection_stopped:
+            plan_text = ' | stopped collecting: every precision target met (stop_when_pinned)'
+        text, values = text + plan_text, values + plan_kv
         level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
         return self._status('progress', level, text, values)
 
@@ -108,6 +113,10 @@ class _Reports:
 
     def _progress(self) -> None:
         if self.session.duration_s >= self.values['min_duration_s']:
+            # The results hold ~/noise_parameters now: the plan goes to the log (and to
+            # the progress status on /diagnostics).
+            if getattr(self._last_result, 'plans', None):
+                self.get_logger().info(self._progress_status().message)
             return
         status = self._progress_status(log=True)
         self.get_logger().info(status.message)

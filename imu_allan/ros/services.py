@@ -8,6 +8,7 @@ once; the summary follows on ~/diagnosis.
 """
 
 import threading
+import time
 
 from std_msgs.msg import String
 
@@ -20,6 +21,8 @@ class _Services:
 
     def _on_reset(self, request, response):
         self.live.reset()
+        self.collection_stopped = False
+        self._plans, self._plan_mark = {}, time.monotonic()
         self._last_result = None
         self._axis_statuses = []
         response.success = True

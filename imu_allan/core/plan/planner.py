@@ -18,6 +18,7 @@ import numpy as np
 
 from imu_allan.core.fit.covariance import _CurveCovariance
 from imu_allan.core.noise.model import TERMS
+from imu_allan.core.noise.params import AxisNoise
 from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
                                            expected_widths, fit_taus, relative_width)
 from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
@@ -214,7 +215,9 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
                 now = math.inf
             else:
                 now = float(np.interp(math.log(duration_s), np.log(grid), col))
-        if name in bounded:
+        if math.isinf(target):
+            kind = 'pinned'             # no target: nothing to wait for
+        elif name in bounded:
             kind = 'at_least'
         elif duration_s > 0 and now <= target:
             kind = 'pinned'
@@ -223,9 +226,13 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
         when = _crossing(grid, col, target)
         if kind == 'pinned':
             when = duration_s
+        elif kind == 'at_least' and duration_s > 0 and when <= duration_s:
+            # At its bound the term would be resolved by now: it is smaller, by how
+            # much the record cannot say yet.
+            when = math.nan
         elif duration_s > 0:
             when = max(when, duration_s)
-        if not math.isfinite(when) and kind != 'at_least':
+        if math.isinf(when) and kind != 'at_least':
             kind = 'beyond'
         at = {h: float(col[int(np.argmin(np.abs(grid - h * 3600.0)))])
               for h in REPORT_HOURS if np.isclose(grid, h * 3600.0).any()}
@@ -243,3 +250,67 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
         seps.append(Separation(q, lam_now, float(when),
                                bool(duration_s > 0 and lam_now >= LAMBDA_SEPARATED)))
     return AxisPlan(float(duration_s), tuple(params), tuple(seps))
+
+
+def noise_components(noise: AxisNoise) -> list:
+    """
+    The (label, coef, phi) components of an axis model (a datasheet or parameter file).
+
+    Parameters
+    ----------
+    noise : AxisNoise
+        The model, SI.
+
+    Returns
+    -------
+    list of (str, float, tuple)
+        As ``AxisFit.components``.
+
+    """
+    out = []
+    if noise.Q:
+        out.append(('quantization', noise.Q ** 2, ()))
+    if noise.N:
+        out.append(('white', noise.N ** 2, ()))
+    if noise.B and noise.T_B:
+        out.append(('bias_instability', TERMS['bias_instability'].to_coef(noise.B, noise.T_B),
+                    (noise.T_B,)))
+    elif noise.B:
+        out.append(('flicker', noise.B ** 2, ()))
+    for i, gm in enumerate(g for g in noise.gauss_markov if g.B):
+        label = 'gauss_markov' if i == 0 else f'gauss_markov_{i + 1}'
+        out.append((label, TERMS['gauss_markov'].to_coef(gm.B, gm.T), (gm.T,)))
+    if noise.K:
+        out.append(('random_walk', noise.K ** 2, ()))
+    if noise.R:
+        out.append(('rate_ramp', noise.R ** 2, ()))
+    for i, s in enumerate(s for s in noise.sinusoids if s.A):
+        out.append(('sinusoid' if i == 0 else f'sinusoid_{i + 1}', s.A ** 2, (s.f0_hz,)))
+    return out
+
+
+def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
+              targets: Mapping[str, float] | None = None) -> dict:
+    """
+    Plan the axes of an analysis: per axis with a fit, its :class:`AxisPlan`.
+
+    Parameters
+    ----------
+    fits : mapping of str to AxisFit or None
+        The fits per axis.
+    rate_hz : float
+        Sample rate [Hz].
+    duration_s : float
+        Length of the analysed record [s].
+    targets : mapping of str to float, optional
+        Target relative half-widths by parameter (defaults :data:`DEFAULT_TARGETS`).
+
+    Returns
+    -------
+    dict of str to AxisPlan
+
+    """
+    models = {a: planning_model(f.components, f.optimised) for a, f in fits.items()
+              if f is not None and f.components}
+    present = {a: fits[a].optimised for a in models}
+    return plan_axes(models, rate_hz, duration_s, targets, present)

@@ -8,9 +8,10 @@ weights the curve with Sigma^-1, so the covariance of its parameters theta (here
 logarithms of the reported parameters N, B, T_B, K ...) is the inverse of the Fisher
 information F = J^T Sigma^-1 J, J = d avar / d theta at the taus the fit would use
 (Cramer-Rao; the GLS estimate attains it to first order: Bates & Watts, nonlinear
-regression, ch. 2).  The expected 95 % interval of log p is +-1.96 sd, so its relative
-half-width (hi - lo) / (2 p) is sinh(1.96 sd), the width the profile intervals of the
-fit report.
+regression, ch. 2).  The expected 95 % interval of log p is +-z sd, so its relative
+half-width (hi - lo) / (2 p) is sinh(z sd), the width the profile intervals of the fit
+report; z^2 is the fit's own profile threshold, chi2(0.95; 1) = 3.84 scaled by the
+dispersion the fit sees on average (:func:`interval_threshold`).
 """
 
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
+from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.allan.taus import tau_grid
 from imu_allan.core.fit.axis import _PLAIN, _thin
 from imu_allan.core.fit.covariance import _CurveCovariance
@@ -151,6 +153,24 @@ class CurveModel:
         return expected_widths(_jacobian(self.comps, self.theta, tau) / scale, sigma)
 
 
+def interval_threshold(dof: int) -> float:
+    """
+    Expected rise of the chi-square that bounds the fit's 95 % profile intervals.
+
+    The fit (:func:`imu_allan.core.fit.axis._profile_threshold`) uses chi2(0.95; 1) when
+    its J_min <= dof and F(0.95; 1, dof) J_min / dof otherwise.  Under the model J_min
+    ~ chi2_dof, so the threshold averages to F(0.95; 1, dof) E[max(1, X)], X =
+    chi2_dof / dof, with E[max(1, X)] = P(chi2_dof <= dof) + P(chi2_{dof+2} > dof)
+    (E[chi2_nu; chi2_nu > c] = nu P(chi2_{nu+2} > c)); the first case is rounded up to
+    the F quantile too (they differ by under 4 % beyond 20 dof).
+    """
+    if dof <= 0:
+        return float(chi2_ppf(0.95, 1))
+    mean_dispersion = (1.0 - float(chi2_sf(float(dof), dof))
+                       + float(chi2_sf(float(dof), dof + 2)))
+    return float(f_ppf(0.95, 1, dof)) * mean_dispersion
+
+
 def expected_widths(jac: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """
     Expected relative 95 % half-widths from the Fisher information of a GLS fit.
@@ -165,8 +185,9 @@ def expected_widths(jac: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     Returns
     -------
     np.ndarray
-        Shape (p,), sinh(1.96 sd(log p)) per parameter [-]; inf where the parameter
-        is not identified (sd above 3, or a null direction of the information).
+        Shape (p,), sinh(sqrt(t) sd(log p)) per parameter, t the profile threshold
+        (:func:`interval_threshold`, about 1.96^2) [-]; inf where the parameter is not
+        identified (sd above 3, or a null direction of the information).
 
     """
     fisher = jac.T @ np.linalg.pinv(sigma, rcond=1e-12, hermitian=True) @ jac
@@ -176,7 +197,8 @@ def expected_widths(jac: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     scaled = fisher / np.outer(d, d) + 1e-10 * np.eye(d.size)
     inv = np.linalg.inv(scaled) / np.outer(d, d)
     sd = np.sqrt(np.maximum(np.diag(inv), 0.0))
-    return np.where(sd < _MAX_SD, np.sinh(Z95 * np.minimum(sd, _MAX_SD)), np.inf)
+    z = math.sqrt(interval_threshold(jac.shape[0] - jac.shape[1]))
+    return np.where(sd < _MAX_SD, np.sinh(z * np.minimum(sd, _MAX_SD)), np.inf)
 
 
 def relative_width(value: float, ci95: Sequence[float]) -> float:

@@ -24,10 +24,16 @@ def hours(t_s: float) -> str:
     return f'{t_s / 3600.0:.2g} h' if t_s < 36000.0 else f'{t_s / 3600.0:.0f} h'
 
 
-def percent(w: float) -> str:
-    """Return a relative half-width as '+-12 %' ('n/a' when not identified)."""
+def percent(w: float, tight: bool = False) -> str:
+    """
+    Return a relative half-width as '+-12 %' ('n/a' when not identified).
+
+    With ``tight`` (a target) an infinite width reads 'none' (no target).
+    """
     if math.isnan(w):
         return '-'
+    if math.isinf(w) and w > 0 and tight:
+        return 'none'
     if math.isinf(w) or w > 10.0:
         return 'n/a'
     return f'+-{100.0 * w:.0f} %' if w >= 0.1 else f'+-{100.0 * w:.2g} %'
@@ -69,7 +75,7 @@ class ParamPlan(NamedTuple):
     def to_json(self) -> dict:
         """Return the JSON entry (None for NaN/inf)."""
         return {'value': json_num(self.value), 'width_now': json_num(self.width_now),
-                'target': self.target, 'time_s': json_num(self.time_s), 'kind': self.kind,
+                'target': json_num(self.target), 'time_s': json_num(self.time_s), 'kind': self.kind,
                 'widths_at_h': {f'{h:g}': json_num(w) for h, w in self.widths_at.items()}}
 
 
@@ -119,9 +125,19 @@ class AxisPlan(NamedTuple):
     separations: tuple
 
     def remaining_s(self) -> float:
-        """Further recording until every target is met [s] (inf: not within 1000 h)."""
-        need = max((p.time_s for p in self.params), default=self.duration_s)
-        return max(need - self.duration_s, 0.0)
+        """
+        Further recording until every target is met [s].
+
+        inf when a target is beyond 1000 h; NaN when only an upper bound is known of a
+        parameter the record should already have resolved at that bound.  With a
+        parameter planned at a bound the time is a lower limit.
+        """
+        times = [p.time_s for p in self.params if p.kind != 'pinned']
+        if not times:
+            return 0.0
+        if any(math.isnan(t) for t in times):
+            return math.nan
+        return max(max(times) - self.duration_s, 0.0)
 
     def all_pinned(self) -> bool:
         """Whether every parameter meets its target now."""
@@ -139,16 +155,19 @@ class AxisPlan(NamedTuple):
                 'remaining_s': json_num(self.remaining_s())}
 
     def progress_line(self) -> str:
-        """One line: which parameters are pinned, and the time to the rest."""
+        """One line: which parameters are pinned, and the time to each of the rest."""
         pinned = [p.name for p in self.params if p.kind == 'pinned']
-        rest = [p for p in self.params if p.kind != 'pinned']
+        rest = []
+        for p in self.params:
+            if p.kind == 'pinned':
+                continue
+            if p.kind == 'at_least' and math.isnan(p.time_s):
+                rest.append(f'{p.name} only bounded yet')
+                continue
+            more = hours(max(p.time_s - self.duration_s, 0.0))
+            rest.append(f'{p.name} in {">= " if p.kind == "at_least" else ""}{more}')
         text = f'pinned: {", ".join(pinned) or "none"}'
-        if rest:
-            need = max(p.time_s for p in rest)
-            sign = '>= ' if any(p.kind == 'at_least' for p in rest) else ''
-            text += (f'; {", ".join(p.name for p in rest)} in {sign}'
-                     f'{hours(max(need - self.duration_s, 0.0))} more')
-        return text
+        return text + ('; ' + ', '.join(rest) if rest else '')
 
     def table_lines(self) -> list:
         """Human table: parameter, width now, target, record length, widths at 1/3/10 h."""
@@ -157,9 +176,11 @@ class AxisPlan(NamedTuple):
         for p in self.params:
             need = hours(p.time_s)
             need = {'pinned': 'met', 'at_least': '>= ' + need}.get(p.kind, need)
+            if p.kind == 'at_least' and math.isnan(p.time_s):
+                need = 'bound only'
             cells = [percent(p.widths_at.get(h, math.nan)) for h in (1.0, 3.0, 10.0)]
             lines.append(f'  {p.name:<18} {percent(p.width_now):>10} '
-                         f'{percent(p.target):>8} {need:>12} ' + ' '.join(
+                         f'{percent(p.target, tight=True):>8} {need:>12} ' + ' '.join(
                              f'{c:>10}' for c in cells))
         for s in self.separations:
             state = 'separated now' if s.separated else f'needs {hours(s.time_s)}'
