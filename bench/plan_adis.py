@@ -21,7 +21,7 @@ import numpy as np
 
 from imu_allan import AXES
 from imu_allan.core.plan import planning_model
-from imu_allan.core.plan.planner import _crossing
+from imu_allan.core.plan.planner import _crossing, calibrated
 from imu_allan.core.plan.precision import CurveModel, relative_width
 from imu_allan.core.search.evidence import RawKeeper
 from imu_allan.io.csv_io import read_csv
@@ -45,9 +45,13 @@ def analysis_of(stamps: np.ndarray, samples: np.ndarray):
     return analyze(session, raw=keeper)
 
 
-def predicted_lengths(fit, rate_hz: float, duration_s: float, widths: dict,
-                      lengths_s: np.ndarray) -> dict:
-    """Per parameter: (record length at which the short fit's plan reaches widths[p], kind)."""
+def predicted_lengths(fit, rate_hz: float, widths: dict, lengths_s: np.ndarray) -> dict:
+    """
+    Per parameter: (record length at which the short fit's plan reaches widths[p], kind).
+
+    ``lengths_s[0]`` is the short record's length: there the expected widths are scaled
+    to the short fit's intervals as the planner does (:func:`calibrated`).
+    """
     comps, bounds = planning_model(fit.components, fit.optimised)
     out = {}
     for key, c in {'': comps, **bounds}.items():
@@ -58,7 +62,11 @@ def predicted_lengths(fit, rate_hz: float, duration_s: float, widths: dict,
         for j, name in enumerate(cm.names):
             if name in widths and ((key == '' and name not in bounds) or key == name):
                 kind = 'at_least' if key else 'predicted'
-                out[name] = (_crossing(lengths_s, rows[:, j], widths[name]), kind)
+                col = rows[:, j]
+                q = fit.optimised.get(name)
+                if not key and q is not None and q.kind == 'estimate':
+                    col = calibrated(col, col[0], relative_width(q.value, q.ci95))
+                out[name] = (_crossing(lengths_s, col, widths[name]), kind)
     return out
 
 
@@ -81,7 +89,7 @@ def compare_run(path: Path, minutes: float) -> list:
             q = ff.optimised.get(p)
             if q is not None and q.kind == 'estimate':
                 achieved[p] = relative_width(q.value, q.ci95)
-        pred = predicted_lengths(fs, short.rate_hz, short.duration_s, achieved, lengths)
+        pred = predicted_lengths(fs, short.rate_hz, achieved, lengths)
         for p, w_full in achieved.items():
             q = fs.optimised.get(p)
             w_short = relative_width(q.value, q.ci95) if q and q.kind == 'estimate' else math.inf

@@ -192,6 +192,37 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
     return out
 
 
+def calibrated(widths: np.ndarray, expected_now: float, actual_now: float) -> np.ndarray:
+    """
+    Expected widths scaled to the interval the fit reports now.
+
+    A real sensor's curve is rarely explained to its own precision: the fit then
+    widens its intervals by the dispersion J / dof (and its model may miss a slow
+    effect).  The log-scale sd of every expected width is multiplied by the ratio of
+    the present interval's sd to the expected one, asinh(actual) / asinh(expected) (the
+    widths are sinh(z sd)); the ratio is taken as it is (a lucky narrow interval now
+    shortens the plan as much as a wide one lengthens it).
+
+    Parameters
+    ----------
+    widths : np.ndarray
+        Shape (n,), expected relative half-widths on the length grid [-].
+    expected_now, actual_now : float
+        The expected and the reported relative half-width at the present length [-].
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n,), the scaled widths; ``widths`` unchanged when either is not finite.
+
+    """
+    if not (math.isfinite(expected_now) and math.isfinite(actual_now) and expected_now > 0
+            and actual_now > 0):
+        return widths
+    ratio = math.asinh(actual_now) / math.asinh(expected_now)
+    return np.sinh(ratio * np.arcsinh(widths))
+
+
 def _all_met(widths: dict, lams: dict, targets) -> bool:
     """Whether at the last length evaluated every target is met, every rival rejected."""
     for rows in widths.values():
@@ -215,6 +246,9 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
                 now = math.inf
             else:
                 now = float(np.interp(math.log(duration_s), np.log(grid), col))
+            if name not in bounded:
+                col = calibrated(col, float(np.interp(math.log(duration_s), np.log(grid), col)),
+                                 now)
         if math.isinf(target):
             kind = 'pinned'             # no target: nothing to wait for
         elif name in bounded:
