@@ -1,5 +1,5 @@
 """
-Does the planner predict when the intervals reach their targets?
+Check that the planner predicts when the intervals reach their targets.
 
 Usage: ``.venv/bin/python bench/plan_validate.py [--seeds 6] [--hours 32] [--models ...]``
 (``--quick`` for a small run).  For each model (the paper's Xsens MTi-7 and u-blox
@@ -51,7 +51,7 @@ def models() -> dict:
 
 
 def width_columns(comps: list, bounds: dict, rate_hz: float, lengths_s: np.ndarray) -> dict:
-    """Expected relative half-width per parameter at every length (bounds: own model)."""
+    """Return the expected relative half-width per parameter at every length."""
     out: dict = {}
     variants = {'': comps, **bounds}
     for key, c in variants.items():

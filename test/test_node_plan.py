@@ -6,14 +6,14 @@ Uses the rig of test_node.py (a node and a peer on SingleThreadedExecutors in th
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.parameter import Parameter
+from test_node import context, rig, statuses, T0_NS, wait  # noqa: F401 - fixtures
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: I100
-from imu_allan.core.noise.params import parse_params  # noqa: I100
+from imu_allan.core.noise.params import parse_params
 from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.plan import plan_fits
-from test_node import context, rig, statuses, T0_NS, wait  # noqa: F401 - fixtures
 
 #: A strong bias instability with T_B under a second: 200 s at 200 Hz estimate N, B and
 #: T_B (K, with B this strong, stays a bound on most axes).

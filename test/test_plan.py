@@ -1,6 +1,8 @@
 """
-The planner: expected interval widths against fits of simulated records, times to
-targets, bounds, separations, targets, the plan command and the analysis' plan table.
+The planner against fits of simulated records; its command and the analysis' table.
+
+Expected interval widths, times to targets, bounds, separations, targets, the plan
+command and the plan table of the analysis.
 
 Small seeded versions of bench/plan_validate.py (the full tables: docs/planning.md).
 """
@@ -11,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import REPO
 from imu_allan import AXES
 from imu_allan.cli import main
 from imu_allan.core.allan import allan_curve
@@ -26,7 +29,6 @@ from imu_allan.io.report import summary_text
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session, SessionConfig
 
-from conftest import REPO
 
 XSENS_GYRO = load_params(REPO / 'config' / 'xsens_mti7.yaml').axes['gyro_x']
 

@@ -1,5 +1,5 @@
 """
-``imu-allan plan``: how long must I record this sensor?
+``imu-allan plan``: how long must this sensor be recorded.
 
 From a short record (any input ``analyze`` reads: the fit of its minutes) or from a
 datasheet's numbers (``--N --B --T_B --K`` with ``--sensor``, or a parameter file

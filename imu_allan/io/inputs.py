@@ -382,6 +382,10 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         Do not print warnings on stderr (they are in the result anyway).
     progress : bool, optional
         Show a progress line on stderr for long inputs (default: not ``quiet``).
+    plan : bool
+        Also plan the record length (:func:`imu_allan.pipeline.analysis.analyze`).
+    plan_targets : dict of str to float, optional
+        The plan's target relative half-widths by parameter.
     workers : int
         Processes for the axes' effect searches (see
         :func:`imu_allan.pipeline.analysis.analyze`).

@@ -222,6 +222,9 @@ class ImuAllanNode(_Reports, _Services, Node):
         # message at once with the current covariances (a byte patch, ~1 us).
         if not self.collection_stopped:
             self.live.append(raw)
+        else:                       # received (the data status stays OK), not collected
+            self.live.n_received += 1
+            self.live.last_rx = time.monotonic()
         if self.pub_imu is not None:
             patched = self.relay.patch(raw)
             if patched is None:  # an unusual layout: through a Python message

@@ -41,7 +41,7 @@ def plan_values(plan: AxisPlan | None) -> list:
 
 def progress_report(plans: dict) -> tuple[str, list]:
     """
-    The plan part of a progress report: one text and key/value pairs.
+    Return the plan part of a progress report: one text and key/value pairs.
 
     Parameters
     ----------

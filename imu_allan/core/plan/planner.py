@@ -194,7 +194,7 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
 
 def calibrated(widths: np.ndarray, expected_now: float, actual_now: float) -> np.ndarray:
     """
-    Expected widths scaled to the interval the fit reports now.
+    Scale expected widths to the interval the fit reports now.
 
     A real sensor's curve is rarely explained to its own precision: the fit then
     widens its intervals by the dispersion J / dof (and its model may miss a slow
@@ -288,7 +288,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
 
 def noise_components(noise: AxisNoise) -> list:
     """
-    The (label, coef, phi) components of an axis model (a datasheet or parameter file).
+    Return the (label, coef, phi) components of an axis model (datasheet, parameter file).
 
     Parameters
     ----------

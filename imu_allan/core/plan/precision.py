@@ -56,11 +56,11 @@ class Component:
 
     @property
     def term(self) -> Term:
-        """The registry term."""
+        """Return the registry term."""
         return TERMS[base_name(self.label)]
 
     def names(self) -> list:
-        """Reported names of the term's symbols (N, B, T_B, gauss_markov.T ...)."""
+        """Return the reported names of the term's symbols (N, B, T_B, gauss_markov.T ...)."""
         base = base_name(self.label)
         return [sym if self.label == base and sym in _PLAIN.get(base, ()) else
                 f'{self.label}.{sym}' for sym in self.term.symbols]
@@ -95,7 +95,7 @@ def _avar(comps: Sequence[Component], theta: np.ndarray, tau: np.ndarray) -> np.
 
 
 def _jacobian(comps: Sequence[Component], theta: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """d avar / d theta, shape (k, p), central differences in the log-parameters."""
+    """Return d avar / d theta, shape (k, p), central differences in the log-parameters."""
     jac = np.empty((tau.size, theta.size))
     for j in range(theta.size):
         up, down = theta.copy(), theta.copy()
@@ -148,14 +148,14 @@ class CurveModel:
         return tau, sigma, scale
 
     def widths(self, duration_s: float) -> np.ndarray:
-        """Expected relative 95 % half-width of every parameter, in ``names`` order."""
+        """Return the expected relative 95 % half-width of every parameter (``names`` order)."""
         tau, sigma, scale = self.geometry(duration_s)
         return expected_widths(_jacobian(self.comps, self.theta, tau) / scale, sigma)
 
 
 def interval_threshold(dof: int) -> float:
     """
-    Expected rise of the chi-square that bounds the fit's 95 % profile intervals.
+    Return the expected rise of the chi-square that bounds the fit's 95 % profile intervals.
 
     The fit (:func:`imu_allan.core.fit.axis._profile_threshold`) uses chi2(0.95; 1) when
     its J_min <= dof and F(0.95; 1, dof) J_min / dof otherwise.  Under the model J_min
@@ -173,7 +173,7 @@ def interval_threshold(dof: int) -> float:
 
 def expected_widths(jac: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """
-    Expected relative 95 % half-widths from the Fisher information of a GLS fit.
+    Return the expected relative 95 % half-widths from the Fisher information of a GLS fit.
 
     Parameters
     ----------

@@ -75,7 +75,8 @@ class ParamPlan(NamedTuple):
     def to_json(self) -> dict:
         """Return the JSON entry (None for NaN/inf)."""
         return {'value': json_num(self.value), 'width_now': json_num(self.width_now),
-                'target': json_num(self.target), 'time_s': json_num(self.time_s), 'kind': self.kind,
+                'target': json_num(self.target), 'time_s': json_num(self.time_s),
+                'kind': self.kind,
                 'widths_at_h': {f'{h:g}': json_num(w) for h, w in self.widths_at.items()}}
 
 
@@ -144,7 +145,7 @@ class AxisPlan(NamedTuple):
         return all(p.kind == 'pinned' for p in self.params)
 
     def param(self, name: str) -> ParamPlan | None:
-        """The plan of one parameter, None when absent."""
+        """Return the plan of one parameter, None when absent."""
         return next((p for p in self.params if p.name == name), None)
 
     def to_json(self) -> dict:

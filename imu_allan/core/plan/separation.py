@@ -95,7 +95,7 @@ def mismatch(true_avar: np.ndarray, sigma: np.ndarray, rival: Sequence[Component
 
 
 def scaled(comps: Sequence[Component], scale: float) -> list:
-    """The components with their coefficients divided by ``scale``."""
+    """Return the components with their coefficients divided by ``scale``."""
     return [Component(c.label, c.coef / scale, c.phi) for c in comps]
 
 
