@@ -73,7 +73,8 @@ def _models_from_numbers(args) -> tuple[dict, float, str]:
         values = {k: to_si(v, k, args.sensor) for k, v in given.items()}
         if 'T_B' in values and not values.get('B'):
             raise InputError('--T_B needs --B')
-        axes = {args.sensor: AxisNoise(**values)}
+        axes = {args.sensor: AxisNoise(N=values.get('N', 0.0), B=values.get('B', 0.0),
+                                       T_B=values.get('T_B'), K=values.get('K', 0.0))}
         label = f'datasheet {args.sensor}'
     models = {a: planning_model(noise_components(n)) for a, n in axes.items()}
     models = {a: m for a, m in models.items() if m[0]}

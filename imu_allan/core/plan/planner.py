@@ -301,7 +301,7 @@ def noise_components(noise: AxisNoise) -> list:
         As ``AxisFit.components``.
 
     """
-    out = []
+    out: list[tuple[str, float, tuple]] = []
     if noise.Q:
         out.append(('quantization', noise.Q ** 2, ()))
     if noise.N:
