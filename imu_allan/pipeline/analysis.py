@@ -310,17 +310,36 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     fits.update(zip(jobs, found))
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
-    plans = {}
-    if plan:
-        from imu_allan.core.plan import plan_fits     # scipy
-        plans = plan_fits(fits, float(session.rate_hz), float(session.duration_s),
-                          plan_targets)
+    plans = _plans(fits, float(session.rate_hz), float(session.duration_s), plan_targets,
+                   workers) if plan else {}
     return AnalysisResult(
         rate_hz=float(session.rate_hz), duration_s=float(session.duration_s),
         n_samples=int(session.stats.n_used), warnings=tuple(session.warnings),
         hygiene=asdict(session.stats), curve=curve, fits=fits,
         kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic,
         plans=plans)
+
+
+def _plan_job(job: tuple) -> dict:
+    """Plan some axes: (fits, rate_hz, duration_s, targets) -> {axis: AxisPlan}."""
+    from imu_allan.core.plan import plan_fits     # scipy: in the workers only
+
+    return plan_fits(*job)
+
+
+def _plans(fits: dict, rate_hz: float, duration_s: float, targets, workers: int) -> dict:
+    """Plan the fitted axes, split over the worker processes when workers > 1."""
+    fitted = [a for a, f in fits.items() if f is not None]
+    pool = worker_pool(min(workers, len(fitted)))
+    if pool is None:
+        return _plan_job((fits, rate_hz, duration_s, targets))
+    jobs = [({a: fits[a] for a in fitted[i::workers]}, rate_hz, duration_s, targets)
+            for i in range(workers)]
+    with pool:
+        done: dict = {}
+        for part in pool.map(_plan_job, [j for j in jobs if j[0]]):
+            done.update(part)
+    return {a: done[a] for a in fitted if a in done}
 
 
 def _trust_problems(fit: AxisFit) -> list:

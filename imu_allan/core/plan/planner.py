@@ -16,6 +16,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from imu_allan.core.allan.blas import _single_thread_blas
 from imu_allan.core.fit.covariance import _CurveCovariance
 from imu_allan.core.noise.model import TERMS
 from imu_allan.core.noise.params import AxisNoise
@@ -158,15 +159,23 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         cms[axis] = {k: CurveModel(v, rate_hz) for k, v in variants.items() if v}
     widths: dict = {(a, k): [] for a, v in cms.items() for k in v}
     lams: dict = {a: [] for a in cms}
-    done = 0
-    for length in grid:
-        if _all_met(widths, lams, targets) and length > max(REPORT_HOURS) * 3600.0:
+    # Each axis stops once its targets are met beyond 10 h (per axis, so that a plan
+    # does not depend on which other axes are planned with it).
+    done: dict = {}
+    for i, length in enumerate(grid):
+        for axis in cms:
+            if axis not in done and length > max(REPORT_HOURS) * 3600.0 and _all_met(
+                    {k: v for k, v in widths.items() if k[0] == axis},
+                    {axis: lams[axis]}, targets):
+                done[axis] = i
+        if len(done) == len(cms):
             break
-        done += 1
         n = max(int(round(length * rate_hz)), 8)
         m, tau = fit_taus(rate_hz, n)
         cov = _CurveCovariance(m, np.maximum(n + 1 - 2 * m, 1), 1.0 / rate_hz, n)
         for axis, variants in cms.items():
+            if axis in done:
+                continue
             for key, cm in variants.items():
                 avar = _avar(cm.comps, cm.theta, tau)
                 scale = float(np.max(avar))
@@ -178,7 +187,6 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
                 if key == '':
                     lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau)
                                        for q, r in rivals(cm.comps, float(tau.max()))})
-    grid = grid[:done]
     out = {}
     for axis, variants in cms.items():
         columns, values = {}, {}
@@ -187,8 +195,9 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
                 if (key == '' and name not in variants) or key == name:
                     columns[name] = np.array([row[name] for row in widths[(axis, key)]])
                     values[name] = [v for c in cm.comps for v in c.values()][j]
-        out[axis] = _axis_plan(columns, values, set(variants) - {''}, grid, lams[axis],
-                               duration_s, targets, (present or {}).get(axis))
+        n_done = len(next(iter(widths[(axis, k)] for k in variants)))
+        out[axis] = _axis_plan(columns, values, set(variants) - {''}, grid[:n_done],
+                               lams[axis], duration_s, targets, (present or {}).get(axis))
     return out
 
 
@@ -347,4 +356,6 @@ def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
     models = {a: planning_model(f.components, f.optimised) for a, f in fits.items()
               if f is not None and f.components}
     present = {a: fits[a].optimised for a in models}
-    return plan_axes(models, rate_hz, duration_s, targets, present)
+    # One BLAS thread, as the fit: tiny matrices, and the same rounding in every process.
+    with _single_thread_blas():
+        return plan_axes(models, rate_hz, duration_s, targets, present)
