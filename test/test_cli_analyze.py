@@ -477,7 +477,7 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
         keeper.add(values[np.isfinite(values).all(axis=1)])
         k += tick
     session.flush()
-    node_doc = analyze(session, source='node', raw=keeper).to_json()
+    node_doc = analyze(session, source='node', raw=keeper, plan=True).to_json()  # plans too
     code, out, err = _cli(['analyze', bag, '--out', tmp_path / 'out', '--format', 'json',
                            '--no-plot'], capsys)
     assert code == 0, err

@@ -14,7 +14,7 @@ import sys
 from imu_allan import __version__
 from imu_allan.errors import InputError
 
-SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'fleet', 'demo')
+SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'fleet', 'demo', 'plan')
 #: Every command: (module in SUBCOMMANDS, one-line help).  Only the module of the command
 #: that runs is imported, so ``imu-allan --help`` loads neither numpy nor scipy.
 COMMANDS = {
@@ -25,6 +25,7 @@ COMMANDS = {
     'diagnose': ('diagnose', 'find what the noise model misses (simulation vs measurement)'),
     'fleet': ('fleet', 'characterise many IMUs on Dask; flag changes and outliers'),
     'demo': ('demo', 'run the node on a simulated IMU (make demo)'),
+    'plan': ('plan', 'how long to record: expected interval widths and time to targets'),
 }
 
 

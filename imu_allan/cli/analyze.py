@@ -23,6 +23,8 @@ from typing import TYPE_CHECKING
 
 from imu_allan import AXES
 from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
+from imu_allan.cli.plan import add_target_option
+from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import one_blas_thread, start_workers, worker_pool
 
@@ -82,17 +84,21 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help='longest averaging time the covering white + random-walk pair of '
                         'the VINS and OpenVINS files must bound (default 100 s; a VIO '
                         'window is seconds, a GNSS outage minutes)')
+    add_target_option(p)
+    p.add_argument('--no-plan', action='store_true',
+                   help='skip the precision plan (record length to each target)')
     p.set_defaults(run=run)
     return p
 
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, config, out, plot, units, tau_max_s = args
+    path, topic, config, out, plot, units, tau_max_s, plan = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
-        result, seconds = analyze_input(path, topic, config, quiet=True, units=units)
+        result, seconds = analyze_input(path, topic, config, quiet=True, units=units,
+                                        plan=plan is not None, plan_targets=plan)
         result = replace(result, covering_tau_max_s=tau_max_s)
         with writing(out):
             files = write_outputs(result, out, plot=plot)
@@ -232,7 +238,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
     if not (math.isfinite(args.cover_tau_max) and args.cover_tau_max > 0):
         raise InputError(f'--cover-tau-max must be a positive number of seconds, got '
                          f'{args.cover_tau_max}')
-    jobs = [(p, args.topic, config, o, plot, units, args.cover_tau_max)
+    plan = None if args.no_plan else parse_targets(args.target)
+    jobs = [(p, args.topic, config, o, plot, units, args.cover_tau_max, plan)
             for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
@@ -242,7 +249,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         if workers > 1:   # and the accumulator sums on a thread of its own
             config = replace(config, background_accumulator=True)
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
-                                        units=units)
+                                        units=units, plan=plan is not None,
+                                        plan_targets=plan)
         result = replace(result, covering_tau_max_s=args.cover_tau_max)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, writing(outs[0]), \
@@ -278,6 +286,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
                   f'at {result.rate_hz:.2f} Hz, analysed in {seconds:.1f} s)')
             for line in result.summary_lines():
                 print('  ' + line)
+            for axis, axis_plan in result.plans.items():
+                print(f'  {axis} plan: {axis_plan.progress_line()}')
             for w in result.warnings:
                 print(f'  warning: {w}')
             print(f'  files: {Path(files[0]).parent}/ ({", ".join(Path(f).name for f in files)})')

@@ -404,7 +404,8 @@ def raw_tap() -> tuple:
 
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
-                  prefetch: bool = True, units: DeclaredUnits | None = None):
+                  prefetch: bool = True, units: DeclaredUnits | None = None,
+                  plan: bool = False, plan_targets: dict | None = None):
     """
     Stream one input through a Session and fit it.
 
@@ -420,6 +421,10 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         Do not print warnings on stderr (they are in the result anyway).
     progress : bool, optional
         Show a progress line on stderr for long inputs (default: not ``quiet``).
+    plan : bool
+        Also plan the record length (:func:`imu_allan.pipeline.analysis.analyze`).
+    plan_targets : dict of str to float, optional
+        The plan's target relative half-widths by parameter.
     workers : int
         Processes for the axes' effect searches (see
         :func:`imu_allan.pipeline.analysis.analyze`).
@@ -466,7 +471,8 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
             if bar is not None:
                 bar.set_stage('fitting the noise model of')
             result = analyze(session, source=source.label, raw=keeper,
-                             topic=source.topic or '', workers=workers)
+                             topic=source.topic or '', workers=workers, plan=plan,
+                             plan_targets=plan_targets)
         finally:
             if bar is not None:
                 bar.close()

@@ -51,6 +51,11 @@ def summary_text(result: AnalysisResult) -> str:
         if fit is not None and fit.notes:
             lines += [f'  {axis} note: {n}' for n in fit.notes]
     lines += [''] + result.covering_lines()
+    if result.plans:
+        lines += ['', 'precision (relative 95 % half-width) now, the record length to '
+                  'reach each target, and at 1, 3, 10 h:']
+        for axis, plan in result.plans.items():
+            lines += [f'{axis}: {plan.progress_line()}'] + plan.table_lines()
     if result.warnings:
         lines += ['', 'warnings:'] + [f'  - {w}' for w in result.warnings]
     return '\n'.join(lines) + '\n'

@@ -7,7 +7,7 @@ Kalman matrices, the Kalibr file and the Imu covariances in one frozen
 DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
 """
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
 import math
 from typing import Any, Callable
@@ -76,6 +76,9 @@ class AnalysisResult:
     covering_tau_max_s : float
         Upper end of the covering pair's horizon [s] (the lower end is the sample period),
         :mod:`imu_allan.core.outputs.covering`.
+    plans : dict of str to imu_allan.core.plan.AxisPlan
+        Per axis, the precision now and the record length to each target (empty
+        unless :func:`analyze` was asked to plan).
 
     """
 
@@ -92,6 +95,7 @@ class AnalysisResult:
     start_ns: int | None = None
     frame_id: str = ''
     covering_tau_max_s: float = DEFAULT_HORIZON_S
+    plans: dict = field(default_factory=dict)
 
     def models(self) -> dict:
         """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""
@@ -295,6 +299,8 @@ class AnalysisResult:
                     if sym in _CORE and p.kind in ('estimate', 'upper_bound')}
             cover = self.covers.get(axis)
             entry['covering'] = None if cover is None else cover.to_json()
+            if axis in self.plans:
+                entry['plan'] = self.plans[axis].to_json()
             axes[axis] = entry
         return {
             'source': self.source,
@@ -343,7 +349,8 @@ def _map_axes(jobs: list, workers: int, meanwhile: Callable[[], Any]) -> tuple[l
 
 def analyze(session, source: str = '', raw=None, topic: str = '',
             workers: int = 1,
-            covering_tau_max_s: float = DEFAULT_HORIZON_S) -> AnalysisResult | None:
+            covering_tau_max_s: float = DEFAULT_HORIZON_S, plan: bool = False,
+            plan_targets: dict | None = None) -> AnalysisResult | None:
     """
     Fit every axis of a session's current Allan curve, effect search included.
 
@@ -368,6 +375,10 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         results are the same either way).
     covering_tau_max_s : float
         Upper end of the covering pair's horizon [s] (:attr:`AnalysisResult.covers`).
+    plan : bool
+        Also plan the record length (:mod:`imu_allan.core.plan`, a few seconds).
+    plan_targets : dict of str to float, optional
+        Target relative 95 % half-widths by parameter (default the planner's).
 
     Returns
     -------
@@ -393,6 +404,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     fits.update(zip(jobs, found))
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
     sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
+    plans = _plans(fits, float(session.rate_hz), float(session.duration_s), plan_targets,
+                   workers) if plan else {}
     units = unit_warnings(session.rate_hz, None if samples is None else samples.mean(axis=0),
                           _gyro_white(curve, fits))
     result = AnalysisResult(
@@ -402,7 +415,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         hygiene={**asdict(session.stats), 'n_read': int(session.stats.n_received),
                  'n_lost': 0}, curve=curve, fits=fits,
         kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic,
-        covering_tau_max_s=float(covering_tau_max_s))
+        covering_tau_max_s=float(covering_tau_max_s), plans=plans)
     # No confident wrong number: an axis whose fit is not trusted is a top-level warning.
     return replace(result, warnings=result.warnings + tuple(result.trust_warnings()))
 
@@ -417,6 +430,28 @@ def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:
         elif curve.tau_s.size:    # white noise: ADEV(tau) = N / sqrt(tau)
             out[j] = curve.adev[0, j] * math.sqrt(curve.tau_s[0])
     return out
+
+
+def _plan_job(job: tuple) -> dict:
+    """Plan some axes: (fits, rate_hz, duration_s, targets) -> {axis: AxisPlan}."""
+    from imu_allan.core.plan import plan_fits     # scipy: in the workers only
+
+    return plan_fits(*job)
+
+
+def _plans(fits: dict, rate_hz: float, duration_s: float, targets, workers: int) -> dict:
+    """Plan the fitted axes, split over the worker processes when workers > 1."""
+    fitted = [a for a, f in fits.items() if f is not None]
+    pool = worker_pool(min(workers, len(fitted)))
+    if pool is None:
+        return _plan_job((fits, rate_hz, duration_s, targets))
+    jobs = [({a: fits[a] for a in fitted[i::workers]}, rate_hz, duration_s, targets)
+            for i in range(workers)]
+    with pool:
+        done: dict = {}
+        for part in pool.map(_plan_job, [j for j in jobs if j[0]]):
+            done.update(part)
+    return {a: done[a] for a in fitted if a in done}
 
 
 def _trust_problems(fit: AxisFit) -> list:

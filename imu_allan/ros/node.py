@@ -17,10 +17,12 @@ bench/bench_node.py: several times cheaper per message than the SingleThreadedEx
 which it falls back to when unavailable).
 """
 
+from dataclasses import replace
 import os
 from pathlib import Path
 import sys
 import threading
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -38,12 +40,14 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from imu_allan.core.diagnose import RawKeeper
+from imu_allan.core.plan import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.io.report import write_outputs
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.live import LiveInput, SessionView
 from imu_allan.ros.params import as_declared_type, BY_NAME, default_output_dir, PARAMS
+from imu_allan.ros.plan_report import targets_met
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 from imu_allan.ros.reports import matrix_msg, NodeReports
 from imu_allan.ros.services import NodeServices
@@ -134,6 +138,8 @@ class ImuAllanNode(Node):
         self.live = LiveInput(self.values, self.output_dir, self.get_logger())
         self._last_result = None
         self._fit_thread: threading.Thread | None = None
+        # When the last plan was made (plans run every plan_period_s: they cost CPU).
+        self._plan_mark = time.monotonic()
 
         qos = QoSProfile(
             depth=self.values['qos_depth'], history=HistoryPolicy.KEEP_LAST,
@@ -229,6 +235,12 @@ class ImuAllanNode(Node):
     def _forget(self) -> None:
         self._last_result = None
         self.reports.clear()
+        self._plan_mark = time.monotonic()
+
+    @property
+    def collection_stopped(self) -> bool:
+        """Whether stop_when_pinned stopped the collection (cleared by ~/reset)."""
+        return self.reports.collection_stopped
 
     def _stamped(self, statuses: list) -> DiagnosticArray:
         array = DiagnosticArray(status=statuses)
@@ -249,7 +261,11 @@ class ImuAllanNode(Node):
     def _on_imu(self, raw: bytes) -> None:
         # The only per-message Python work: count, append and (if asked) relay the
         # message at once with the current covariances (a byte patch, ~1 us).
-        self.live.append(raw)
+        if not self.collection_stopped:
+            self.live.append(raw)
+        else:                       # received (the data status stays OK), not collected
+            self.live.n_received += 1
+            self.live.last_rx = time.monotonic()
         if self.pub_imu is not None:
             patched = self.relay.patch(raw)
             if patched is None:  # an unusual layout: through a Python message
@@ -273,7 +289,8 @@ class ImuAllanNode(Node):
         return self._fit_thread is not None and self._fit_thread.is_alive()
 
     def _publish(self) -> None:
-        if self.session.duration_s < self.values['min_duration_s'] or self.fitting:
+        if (self.session.duration_s < self.values['min_duration_s'] or self.fitting
+                or self.collection_stopped):
             return
         self.live.process()
         view, raw = self.live.snapshot()
@@ -299,19 +316,54 @@ class ImuAllanNode(Node):
             return None
         # The raw copy feeds the effect search's periodogram and ramp evidence, so the
         # node publishes the model analyze and diagnose give for the same data.
-        result = analyze(view, source=self.subscription.topic_name, raw=raw,
-                         topic=self.subscription.topic_name,
-                         covering_tau_max_s=self.values['covering_tau_max_s'])
+        result, planned = self._analyze(view, raw)
         if result is None:
             return None
         self._last_result = result
         self.relay.update(result.imu_covariances())
         self.pub_params.publish(self._stamped(self.reports.fitted(result, view)))
+        if planned:
+            self._stop_if_pinned(result, view.duration_s)
         self.pub_q.publish(matrix_msg(*result.process_noise()))
         self.pub_r.publish(matrix_msg(*result.measurement_noise()))
         self.pub_kalibr.publish(String(data=result.kalibr_yaml()))
         self.get_logger().info('published: ' + '; '.join(result.summary_lines()))
         return result
+
+    def _analyze(self, view: SessionView, raw: RawKeeper | None) -> tuple:
+        """
+        Analyse a snapshot; plan the record length when plan_period_s has passed.
+
+        The plan costs several fits' CPU, so it runs at most every plan_period_s (the
+        first one plan_period_s after the start or ~/reset); between plans the last one
+        rides along with each result.  Returns the result (or None) and whether it
+        was planned now.
+        """
+        period = self.values['plan_period_s']
+        plan = period > 0 and time.monotonic() - self._plan_mark >= period
+        result = analyze(view, source=self.subscription.topic_name, raw=raw,
+                         topic=self.subscription.topic_name,
+                         covering_tau_max_s=self.values['covering_tau_max_s'], plan=plan,
+                         plan_targets=parse_targets(self.values['plan_targets']))
+        if result is not None and plan:
+            self._plan_mark = time.monotonic()
+            self.reports.plans = result.plans
+        elif result is not None and self.reports.plans:
+            result = replace(result, plans=self.reports.plans)
+        return result, plan and result is not None
+
+    def _stop_if_pinned(self, result, duration_s: float) -> None:
+        """With stop_when_pinned: stop collecting once every target is met, and say so."""
+        fitted = sum(f is not None for f in result.fits.values())
+        if (not self.values['stop_when_pinned'] or self.collection_stopped
+                or duration_s < self.values['min_duration_s']
+                or not targets_met(result.plans, fitted)):
+            return
+        self.reports.collection_stopped = True
+        self.get_logger().info(
+            f'every precision target met on every axis after {duration_s:.0f} s: '
+            'stopped collecting (stop_when_pinned); the results stay published, '
+            '~/reset starts over')
 
     def _checkpoint(self) -> None:
         try:
@@ -338,11 +390,8 @@ class ImuAllanNode(Node):
             self._fit_thread.join()
         self.live.checkpoint(flush=True)
         view, raw = self.live.snapshot()
-        # The same model as the periodic fit: raw copy and topic included.
-        result = analyze(view, source=self.subscription.topic_name, raw=raw,
-                         topic=self.subscription.topic_name,
-                         covering_tau_max_s=self.values['covering_tau_max_s']) \
-            if view.curve(bounds=False) is not None else None
+        # The same model as the periodic fit: raw copy, topic and plan included.
+        result = self._analyze(view, raw)[0] if view.curve(bounds=False) is not None else None
         if result is None:
             raise InputError('not enough data for any Allan deviation yet')
         self._last_result = result

@@ -11,6 +11,8 @@ import os
 from pathlib import Path
 import sys
 
+from imu_allan.core.plan.targets import parse_targets
+from imu_allan.errors import InputError
 from imu_allan.pipeline.session import MOTION_POLICIES, SessionConfig
 
 
@@ -56,6 +58,11 @@ class NodeParam:
                 return f'{self.name} = {value} is outside [{lo}, {hi}] {self.unit}'.rstrip()
         if self.value_type is str and self.limits and value not in self.limits:
             return f'{self.name} must be one of {", ".join(self.limits)}, got {value!r}'
+        if self.name == 'plan_targets':
+            try:
+                parse_targets(value)
+            except InputError as exc:
+                return f'{self.name}: {exc}'
         return None
 
 
@@ -66,6 +73,15 @@ PARAMS: tuple[NodeParam, ...] = (
               'Nominal IMU rate; 0 estimates it from the first stamps'),
     NodeParam('min_duration_s', float, 3600.0, 's', (1.0, 1.0e6),
               'Recording length before results are published'),
+    NodeParam('stop_when_pinned', bool, False, '', (),
+              'Stop collecting once every axis meets every precision target '
+              '(min_duration_s stays a floor)'),
+    NodeParam('plan_targets', str, '', '', (),
+              "Precision targets as relative 95 % half-widths, e.g. 'N=0.05,K=25%'; "
+              "'' keeps the defaults (N, B 10 %; K, T_B and other terms 25 %)"),
+    NodeParam('plan_period_s', float, 300.0, 's', (0.0, 86400.0),
+              'Period of the precision plan (a few fits of CPU), first after one period; '
+              '0 never plans'),
     NodeParam('publish_period_s', float, 30.0, 's', (0.1, 86400.0),
               'Period of the fit and of the result topics once min_duration_s is reached'),
     NodeParam('process_period_s', float, 0.2, 's', (0.005, 10.0),

@@ -18,6 +18,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from imu_allan import AXES
 from imu_allan.ros.live import LiveInput
+from imu_allan.ros.plan_report import plan_values, progress_report
 
 #: No message for this long is reported as a WARN on /diagnostics.
 NO_DATA_WARN_S = 2.0
@@ -50,6 +51,10 @@ class NodeReports:
         self.axis_statuses: list[DiagnosticStatus] = []
         # (wall time, duration) of the last progress log: the ETA's speed.
         self._progress_mark = (self.started, 0.0)
+        #: The last plan per axis (:mod:`imu_allan.core.plan`), set by the node.
+        self.plans: dict = {}
+        #: Set when stop_when_pinned stopped the collection (cleared by ~/reset).
+        self.collection_stopped = False
 
     @property
     def hardware_id(self) -> str:
@@ -68,12 +73,15 @@ class NodeReports:
         self.axis_statuses = []
         for axis in AXES:
             level, message, values = result.axis_status(axis)
+            values = list(values) + plan_values(result.plans.get(axis))
             self.axis_statuses.append(self.status(axis, _LEVELS[level], message, values))
         return self.axis_statuses + [self.input_status(view)]
 
     def clear(self) -> None:
-        """Forget the last fit's statuses (after ~/reset)."""
+        """Forget the last fit's statuses and plans (after ~/reset)."""
         self.axis_statuses = []
+        self.plans = {}
+        self.collection_stopped = False
 
     def input_status(self, session) -> DiagnosticStatus:
         """One status with the input-hygiene counters and the warnings, if any."""
@@ -118,6 +126,10 @@ class NodeReports:
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
         if self.live.n_buffer_dropped:
             text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
+        plan_text, plan_kv = progress_report(self.plans)
+        if self.collection_stopped:
+            plan_text = ' | stopped collecting: every precision target met (stop_when_pinned)'
+        text, values = text + plan_text, values + plan_kv
         level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
         return self.status('progress', level, text, values)
 

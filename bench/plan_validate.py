@@ -1,0 +1,146 @@
+"""
+Check that the planner predicts when the intervals reach their targets.
+
+Usage: ``.venv/bin/python bench/plan_validate.py [--seeds 6] [--hours 32] [--models ...]``
+(``--quick`` for a small run).  For each model (the paper's Xsens MTi-7 and u-blox
+C102-F9R, gyro and accelerometer, from config/, and an ADIS16405-like gyro) it
+simulates ``--seeds`` records of ``--hours`` at the sensor's rate, fits prefixes of
+growing length as ``imu-allan analyze`` does (dense curve, effect search) and takes,
+per parameter and length, the median relative 95 % half-width (hi - lo) / (2 value)
+over the seeds; the length at which that median reaches a target (log-log
+interpolation) is "actual".  "Predicted" is the planner's length for the same target:
+from the true model, and (median over the seeds) from the fit of each record's first
+hour, as the node would predict it.  Targets: every round width whose actual length lies
+inside the simulated lengths.  Prints one markdown table (docs/planning.md).
+"""
+
+import argparse
+import math
+from pathlib import Path
+import sys
+import time
+
+import numpy as np
+
+from imu_allan.core.allan import allan_curve
+from imu_allan.core.noise.params import AxisNoise, load_params
+from imu_allan.core.noise.simulate import simulate_axis
+from imu_allan.core.plan import noise_components, planning_model
+from imu_allan.core.plan.planner import _crossing
+from imu_allan.core.plan.precision import CurveModel, relative_width
+from imu_allan.core.search import search_axis
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+#: An ADIS16405-like gyro: the six real runs' typical N, B, T_B (docs/fitting.md) and K.
+ADIS_GYRO = AxisNoise(N=0.041 * math.pi / 180.0, B=0.011 * math.pi / 180.0, T_B=60.0,
+                      K=1.0e-3 * math.pi / 180.0)
+TARGETS = (0.5, 0.35, 0.25, 0.2, 0.15, 0.1, 0.07, 0.05, 0.035, 0.025, 0.015, 0.01, 0.007,
+           0.005, 0.0035, 0.0025, 0.0015, 0.001)
+PARAMS = ('N', 'B', 'T_B', 'K')
+
+
+def models() -> dict:
+    """Name -> (AxisNoise, rate_hz, unit)."""
+    xs = load_params(CONFIG / 'xsens_mti7.yaml').axes
+    ub = load_params(CONFIG / 'ublox_c102_f9r.yaml').axes
+    return {'xsens_gyro': (xs['gyro_x'], 100.0, 'rad/s'),
+            'xsens_accel': (xs['accel_x'], 100.0, 'm/s^2'),
+            'ublox_gyro': (ub['gyro_x'], 50.0, 'rad/s'),
+            'ublox_accel': (ub['accel_x'], 50.0, 'm/s^2'),
+            'adis_gyro': (ADIS_GYRO, 100.0, 'rad/s')}
+
+
+def width_columns(comps: list, bounds: dict, rate_hz: float, lengths_s: np.ndarray) -> dict:
+    """Return the expected relative half-width per parameter at every length."""
+    out: dict = {}
+    variants = {'': comps, **bounds}
+    for key, c in variants.items():
+        if not c:
+            continue
+        cm = CurveModel(c, rate_hz)
+        rows = np.array([cm.widths(length) for length in lengths_s])
+        for j, name in enumerate(cm.names):
+            if (key == '' and name not in bounds) or key == name:
+                out[name] = rows[:, j]
+    return out
+
+
+def fit_widths(y: np.ndarray, rate_hz: float, unit: str):
+    """Search one record; return its fit and the relative half-width per parameter."""
+    c = allan_curve(y, rate_hz, 'dense', confidence=0.95)
+    fit = search_axis(c.tau_s, c.avar[:, 0], c.edf[:, 0], rate_hz, y.size, unit=unit).fit
+    widths = {}
+    for name in PARAMS:
+        p = fit.optimised.get(name)
+        widths[name] = (relative_width(p.value, p.ci95) if p is not None
+                        and p.kind == 'estimate' else math.inf)
+    return fit, widths
+
+
+def run_model(name: str, noise: AxisNoise, rate_hz: float, unit: str, seeds: int,
+              lengths_h: np.ndarray, early_h: float) -> list:
+    """Rows (model, param, target, predicted true, predicted early, actual) of one model."""
+    lengths_s = lengths_h * 3600.0
+    actual = {p: np.full((seeds, lengths_h.size), math.inf) for p in PARAMS}
+    early: dict = {p: [] for p in PARAMS}
+    for seed in range(seeds):
+        rng = np.random.default_rng(1000 + seed)
+        y = simulate_axis(noise, rate_hz, int(round(lengths_s[-1] * rate_hz)), rng)
+        for i, length in enumerate(lengths_s):
+            _, w = fit_widths(y[:int(round(length * rate_hz))], rate_hz, unit)
+            for p in PARAMS:
+                actual[p][seed, i] = w[p]
+        fit, _ = fit_widths(y[:int(round(early_h * 3600.0 * rate_hz))], rate_hz, unit)
+        comps, bounds = planning_model(fit.components, fit.optimised)
+        early_cols = width_columns(comps, bounds, rate_hz, lengths_s)
+        for p in PARAMS:
+            early[p].append(early_cols.get(p, np.full(lengths_s.size, math.inf)))
+        print(f'{name} seed {seed} done', file=sys.stderr)
+    comps, bounds = planning_model(noise_components(noise))
+    true_cols = width_columns(comps, bounds, rate_hz, lengths_s)
+    rows = []
+    for p in PARAMS:
+        med = np.median(actual[p], axis=0)
+        for target in TARGETS:
+            t_act = _crossing(lengths_s, med, target)
+            # Only targets reached inside the simulated lengths (not at the first one).
+            if not (lengths_s[0] < t_act < lengths_s[-1]):
+                continue
+            t_true = _crossing(lengths_s, true_cols[p], target)
+            t_early = float(np.median([_crossing(lengths_s, col, target)
+                                       for col in early[p]]))
+            rows.append((name, p, target, t_true, t_early, t_act))
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    ap.add_argument('--seeds', type=int, default=6)
+    ap.add_argument('--hours', type=float, default=32.0)
+    ap.add_argument('--early-hours', type=float, default=1.0)
+    ap.add_argument('--models', default=','.join(models()))
+    ap.add_argument('--quick', action='store_true', help='3 seeds, 4 h, two models')
+    args = ap.parse_args()
+    if args.quick:
+        args.seeds, args.hours, args.models = 3, 4.0, 'xsens_gyro,ublox_gyro'
+    lengths_h = np.geomspace(args.hours / 256.0, args.hours, 17)
+    t0 = time.time()
+    rows = []
+    for name in args.models.split(','):
+        noise, rate, unit = models()[name]
+        rows += run_model(name, noise, rate, unit, args.seeds, lengths_h, args.early_hours)
+    print(f'| model | param | target | predicted (true model) | predicted ({args.early_hours:g} h '
+          'fit) | actual | ratio true | ratio fit |')
+    print('|---|---|---|---|---|---|---|---|')
+    worst = 1.0
+    for name, p, target, t_true, t_early, t_act in rows:
+        r_true, r_early = t_true / t_act, t_early / t_act
+        worst = max(worst, r_true, 1.0 / r_true)
+        print(f'| {name} | {p} | +-{100 * target:g} % | {t_true / 3600:.3g} h | '
+              f'{t_early / 3600:.3g} h | {t_act / 3600:.3g} h | {r_true:.2f} | {r_early:.2f} |')
+    print(f'\nworst factor (true model): {worst:.2f}; {len(rows)} rows; '
+          f'{args.seeds} seeds, {args.hours:g} h; {time.time() - t0:.0f} s', file=sys.stderr)
+
+
+if __name__ == '__main__':
+    main()

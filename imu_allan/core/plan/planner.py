@@ -1,0 +1,361 @@
+"""
+Precision now, and when: the record length at which each parameter meets its target.
+
+For each axis the fitted model is carried to records of growing length (a grid of
+four-fold steps from the present length to :data:`HORIZON_S`, plus 1, 3 and 10 h), the
+expected relative 95 % half-width of every parameter is computed there
+(:class:`imu_allan.core.plan.precision.CurveModel`) and the length at which it falls
+to its target is interpolated in log-log (the widths fall about as L^-1/2 once a term
+is resolved).  A parameter the fit reports as an upper bound is planned at its bound:
+a smaller true value takes longer, so the time is "at least".  The grid is shared by
+the six axes, whose curves share their taus and so the quadrature of Sigma.
+"""
+
+import math
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from imu_allan.core.allan.blas import _single_thread_blas
+from imu_allan.core.fit.covariance import _CurveCovariance
+from imu_allan.core.noise.model import TERMS
+from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
+                                           expected_widths, fit_taus, relative_width)
+from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
+from imu_allan.core.plan.separation import LAMBDA_SEPARATED, mismatch, rivals, scaled
+
+#: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise).
+DEFAULT_TARGETS = {'N': 0.10, 'B': 0.10, 'K': 0.25, 'T_B': 0.25}
+#: Target of every other parameter (the extra terms).
+DEFAULT_OTHER_TARGET = 0.25
+#: Longest record the planner looks at [s] (1000 h).
+HORIZON_S = 3.6e6
+#: Record lengths at which the expected widths are always reported [h].
+REPORT_HOURS = (1.0, 3.0, 10.0)
+#: Symbols of the core terms and their term (for the bounds of unsupported terms).
+_CORE = {'N': 'white', 'B': 'bias_instability', 'K': 'random_walk'}
+
+
+def target_of(name: str, targets: Mapping[str, float] | None) -> float:
+    """Target relative half-width of one parameter (``targets`` override the defaults)."""
+    merged = dict(DEFAULT_TARGETS, **(targets or {}))
+    return float(merged.get(name, merged.get(name.split('.')[-1], DEFAULT_OTHER_TARGET)))
+
+
+def planning_model(components: Sequence, optimised: Mapping | None = None) -> tuple:
+    """
+    Components to plan with, and the models of the parameters planned at an upper bound.
+
+    Parameters
+    ----------
+    components : sequence of (label, coef, phi)
+        The fitted model (``AxisFit.components``).
+    optimised : mapping of str to Param, optional
+        The fit's reported parameters; a core parameter reported as an upper bound is
+        planned at that bound (its term added or raised to it) in a model of its own,
+        so that the bound does not blur the other parameters' plans.
+
+    Returns
+    -------
+    comps : list of Component
+        The point estimates (terms with a positive coefficient).
+    bounds : dict of str to list of Component
+        Per parameter planned at a bound, the model with that term at its bound.
+
+    """
+    comps = [Component(str(lb), float(c), tuple(float(v) for v in p))
+             for lb, c, p in components if c > 0]
+    bounds: dict = {}
+    for sym, base in _CORE.items():
+        p = (optimised or {}).get(sym)
+        if p is None or p.kind != 'upper_bound' or not p.value > 0:
+            continue
+        labels = [c.label for c in comps]
+        raised = list(comps)
+        if base == 'bias_instability':
+            if base not in labels:
+                continue        # no T_B to plan B with
+            i = labels.index(base)
+            coef = TERMS[base].to_coef(p.value, *comps[i].phi)
+            raised[i] = Component(base, max(coef, comps[i].coef), comps[i].phi)
+            bounds['B'] = bounds['T_B'] = raised
+            continue
+        coef = TERMS[base].to_coef(p.value)
+        if base in labels:
+            i = labels.index(base)
+            raised[i] = Component(base, max(coef, comps[i].coef), ())
+        else:
+            raised.append(Component(base, coef, ()))
+        bounds[sym] = raised
+    return comps, bounds
+
+
+def length_grid(duration_s: float) -> np.ndarray:
+    """
+    Record lengths to evaluate [s]: now, then 1, 3, 10, 30 ... 1000 h.
+
+    Without a record (``duration_s`` 0) the grid starts at 1, 5 and 15 min.  The widths
+    fall about as L^-1/2 between the points once a term is resolved, so a log-log
+    interpolation over these steps is close; :func:`plan_axes` stops early once every
+    target is met beyond 10 h.
+    """
+    long_h = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+    first = [duration_s] if duration_s > 0 else [60.0, 300.0, 900.0]
+    later = [h * 3600.0 for h in long_h if h * 3600.0 > first[-1] * 1.05]
+    return np.array(first + later)
+
+
+def _crossing(lengths: np.ndarray, widths: np.ndarray, target: float) -> float:
+    """First length where the width falls to ``target`` (log-log interpolation)."""
+    ok = widths <= target
+    if not ok.any():
+        return math.inf
+    j = int(np.argmax(ok))
+    if j == 0:
+        return float(lengths[0])
+    w0, w1 = widths[j - 1], widths[j]
+    if not math.isfinite(w0):
+        return float(lengths[j])
+    f = math.log(w0 / target) / math.log(w0 / w1)
+    return float(math.exp(math.log(lengths[j - 1]) + f * math.log(lengths[j] / lengths[j - 1])))
+
+
+def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
+              targets: Mapping[str, float] | None = None,
+              present: Mapping[str, Mapping] | None = None,
+              lengths_s: Sequence[float] | None = None) -> dict:
+    """
+    Plan every axis: width now, time to target, widths at 1, 3 and 10 h, separations.
+
+    Parameters
+    ----------
+    models : mapping of str to (list of Component, dict)
+        Per axis, :func:`planning_model`'s output.
+    rate_hz : float
+        Sample rate [Hz].
+    duration_s : float
+        Length of the record behind the models [s] (0 or less: a datasheet, no record).
+    targets : mapping of str to float, optional
+        Target relative 95 % half-widths by parameter name (or symbol).
+    present : mapping of str to mapping, optional
+        Per axis, the fit's reported parameters (Param): their intervals give the
+        present widths; without them the model's expected widths at ``duration_s``.
+    lengths_s : sequence of float, optional
+        Record lengths to evaluate instead of :func:`length_grid`.
+
+    Returns
+    -------
+    dict of str to AxisPlan
+
+    """
+    start = duration_s if duration_s > 0 else 60.0
+    grid = np.asarray(lengths_s if lengths_s is not None else length_grid(start), float)
+    # Per axis the point-estimate model and one model per parameter planned at a bound.
+    cms: dict = {}
+    for axis, (comps, bounds) in models.items():
+        variants = {'': comps}
+        variants.update({name: b for name, b in bounds.items() if b})
+        cms[axis] = {k: CurveModel(v, rate_hz) for k, v in variants.items() if v}
+    widths: dict = {(a, k): [] for a, v in cms.items() for k in v}
+    lams: dict = {a: [] for a in cms}
+    # Each axis stops once its targets are met beyond 10 h (per axis, so that a plan
+    # does not depend on which other axes are planned with it).
+    done: dict = {}
+    for i, length in enumerate(grid):
+        for axis in cms:
+            if axis not in done and length > max(REPORT_HOURS) * 3600.0 and _all_met(
+                    {k: v for k, v in widths.items() if k[0] == axis},
+                    {axis: lams[axis]}, targets):
+                done[axis] = i
+        if len(done) == len(cms):
+            break
+        n = max(int(round(length * rate_hz)), 8)
+        m, tau = fit_taus(rate_hz, n)
+        cov = _CurveCovariance(m, np.maximum(n + 1 - 2 * m, 1), 1.0 / rate_hz, n)
+        for axis, variants in cms.items():
+            if axis in done:
+                continue
+            for key, cm in variants.items():
+                avar = _avar(cm.comps, cm.theta, tau)
+                scale = float(np.max(avar))
+                sigma = cov.sigma([c.term for c in cm.comps],
+                                  np.array([c.coef / scale for c in cm.comps]),
+                                  [c.phi for c in cm.comps])
+                jac = _jacobian(cm.comps, cm.theta, tau) / scale
+                widths[(axis, key)].append(dict(zip(cm.names, expected_widths(jac, sigma))))
+                if key == '':
+                    lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau)
+                                       for q, r in rivals(cm.comps, float(tau.max()))})
+    out = {}
+    for axis, variants in cms.items():
+        columns, values = {}, {}
+        for key, cm in variants.items():
+            for j, name in enumerate(cm.names):
+                if (key == '' and name not in variants) or key == name:
+                    columns[name] = np.array([row[name] for row in widths[(axis, key)]])
+                    values[name] = [v for c in cm.comps for v in c.values()][j]
+        n_done = len(next(iter(widths[(axis, k)] for k in variants)))
+        out[axis] = _axis_plan(columns, values, set(variants) - {''}, grid[:n_done],
+                               lams[axis], duration_s, targets, (present or {}).get(axis))
+    return out
+
+
+def calibrated(widths: np.ndarray, expected_now: float, actual_now: float) -> np.ndarray:
+    """
+    Scale expected widths to the interval the fit reports now.
+
+    A real sensor's curve is rarely explained to its own precision: the fit then
+    widens its intervals by the dispersion J / dof (and its model may miss a slow
+    effect).  The log-scale sd of every expected width is multiplied by the ratio of
+    the present interval's sd to the expected one, asinh(actual) / asinh(expected) (the
+    widths are sinh(z sd)); the ratio is taken as it is (a lucky narrow interval now
+    shortens the plan as much as a wide one lengthens it).
+
+    Parameters
+    ----------
+    widths : np.ndarray
+        Shape (n,), expected relative half-widths on the length grid [-].
+    expected_now, actual_now : float
+        The expected and the reported relative half-width at the present length [-].
+
+    Returns
+    -------
+    np.ndarray
+        Shape (n,), the scaled widths; ``widths`` unchanged when either is not finite.
+
+    """
+    if not (math.isfinite(expected_now) and math.isfinite(actual_now) and expected_now > 0
+            and actual_now > 0):
+        return widths
+    ratio = math.asinh(actual_now) / math.asinh(expected_now)
+    return np.sinh(ratio * np.arcsinh(widths))
+
+
+def _all_met(widths: dict, lams: dict, targets) -> bool:
+    """Whether at the last length evaluated every target is met, every rival rejected."""
+    for rows in widths.values():
+        if not rows or any(w > target_of(n, targets) for n, w in rows[-1].items()):
+            return False
+    return all(v >= LAMBDA_SEPARATED for rows in lams.values() if rows for v in rows[-1].values())
+
+
+def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams: list,
+               duration_s: float, targets, present) -> AxisPlan:
+    """One axis' plan from the expected widths of its parameters on the length grid."""
+    params = []
+    for name, col in columns.items():
+        target = target_of(name, targets)
+        now = math.nan
+        if duration_s > 0:
+            p = (present or {}).get(name)
+            if p is not None and p.kind == 'estimate':
+                now = relative_width(p.value, p.ci95)
+            elif p is not None:
+                now = math.inf
+            else:
+                now = float(np.interp(math.log(duration_s), np.log(grid), col))
+            if name not in bounded:
+                col = calibrated(col, float(np.interp(math.log(duration_s), np.log(grid), col)),
+                                 now)
+        if math.isinf(target):
+            kind = 'pinned'             # no target: nothing to wait for
+        elif name in bounded:
+            kind = 'at_least'
+        elif duration_s > 0 and now <= target:
+            kind = 'pinned'
+        else:
+            kind = 'predicted'
+        when = _crossing(grid, col, target)
+        if kind == 'pinned':
+            when = duration_s
+        elif kind == 'at_least' and duration_s > 0 and when <= duration_s:
+            # At its bound the term would be resolved by now: it is smaller, by how
+            # much the record cannot say yet.
+            when = math.nan
+        elif duration_s > 0:
+            when = max(when, duration_s)
+        if math.isinf(when) and kind != 'at_least':
+            kind = 'beyond'
+        at = {h: float(col[int(np.argmin(np.abs(grid - h * 3600.0)))])
+              for h in REPORT_HOURS if np.isclose(grid, h * 3600.0).any()}
+        params.append(ParamPlan(name, float(values[name]), float(now), target, float(when), kind,
+                                at))
+    order = {'N': 0, 'B': 1, 'T_B': 2, 'K': 3}
+    params.sort(key=lambda p: (order.get(p.name, 4), p.name))
+    seps = []
+    questions = sorted({q for row in lams for q in row})
+    for q in questions:
+        lam = np.array([row.get(q, 0.0) for row in lams])
+        when = _crossing(grid, 1.0 / np.maximum(lam, 1e-300), 1.0 / LAMBDA_SEPARATED)
+        lam_now = (float(np.interp(math.log(duration_s), np.log(grid), lam))
+                   if duration_s > 0 else math.nan)
+        seps.append(Separation(q, lam_now, float(when),
+                               bool(duration_s > 0 and lam_now >= LAMBDA_SEPARATED)))
+    return AxisPlan(float(duration_s), tuple(params), tuple(seps))
+
+
+def noise_components(noise: AxisNoise) -> list:
+    """
+    Return the (label, coef, phi) components of an axis model (datasheet, parameter file).
+
+    Parameters
+    ----------
+    noise : AxisNoise
+        The model, SI.
+
+    Returns
+    -------
+    list of (str, float, tuple)
+        As ``AxisFit.components``.
+
+    """
+    out: list[tuple[str, float, tuple]] = []
+    if noise.Q:
+        out.append(('quantization', noise.Q ** 2, ()))
+    if noise.N:
+        out.append(('white', noise.N ** 2, ()))
+    if noise.B and noise.T_B:
+        out.append(('bias_instability', TERMS['bias_instability'].to_coef(noise.B, noise.T_B),
+                    (noise.T_B,)))
+    elif noise.B:
+        out.append(('flicker', noise.B ** 2, ()))
+    for i, gm in enumerate(g for g in noise.gauss_markov if g.B):
+        label = 'gauss_markov' if i == 0 else f'gauss_markov_{i + 1}'
+        out.append((label, TERMS['gauss_markov'].to_coef(gm.B, gm.T), (gm.T,)))
+    if noise.K:
+        out.append(('random_walk', noise.K ** 2, ()))
+    if noise.R:
+        out.append(('rate_ramp', noise.R ** 2, ()))
+    for i, s in enumerate(s for s in noise.sinusoids if s.A):
+        out.append(('sinusoid' if i == 0 else f'sinusoid_{i + 1}', s.A ** 2, (s.f0_hz,)))
+    return out
+
+
+def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
+              targets: Mapping[str, float] | None = None) -> dict:
+    """
+    Plan the axes of an analysis: per axis with a fit, its :class:`AxisPlan`.
+
+    Parameters
+    ----------
+    fits : mapping of str to AxisFit or None
+        The fits per axis.
+    rate_hz : float
+        Sample rate [Hz].
+    duration_s : float
+        Length of the analysed record [s].
+    targets : mapping of str to float, optional
+        Target relative half-widths by parameter (defaults :data:`DEFAULT_TARGETS`).
+
+    Returns
+    -------
+    dict of str to AxisPlan
+
+    """
+    models = {a: planning_model(f.components, f.optimised) for a, f in fits.items()
+              if f is not None and f.components}
+    present = {a: fits[a].optimised for a in models}
+    # One BLAS thread, as the fit: tiny matrices, and the same rounding in every process.
+    with _single_thread_blas():
+        return plan_axes(models, rate_hz, duration_s, targets, present)

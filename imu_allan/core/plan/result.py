@@ -1,0 +1,189 @@
+"""
+Result types of the planner: one parameter's precision plan, one axis' plan.
+
+Part of :mod:`imu_allan.core.plan`.
+"""
+
+import math
+from typing import NamedTuple
+
+from imu_allan.core.fit.result import json_num
+
+#: Kinds of a parameter's plan.
+PLAN_KINDS = ('pinned', 'predicted', 'at_least', 'beyond')
+
+
+def hours(t_s: float) -> str:
+    """Return a record length for people: '42 min', '3.1 h', '> 1000 h', '?'."""
+    if math.isnan(t_s):
+        return '?'
+    if math.isinf(t_s):
+        return '> 1000 h'
+    if t_s < 3600.0:
+        return f'{t_s / 60.0:.0f} min'
+    return f'{t_s / 3600.0:.2g} h' if t_s < 36000.0 else f'{t_s / 3600.0:.0f} h'
+
+
+def percent(w: float, tight: bool = False) -> str:
+    """
+    Return a relative half-width as '+-12 %' ('n/a' when not identified).
+
+    With ``tight`` (a target) an infinite width reads 'none' (no target).
+    """
+    if math.isnan(w):
+        return '-'
+    if math.isinf(w) and w > 0 and tight:
+        return 'none'
+    if math.isinf(w) or w > 10.0:
+        return 'n/a'
+    return f'+-{100.0 * w:.0f} %' if w >= 0.1 else f'+-{100.0 * w:.2g} %'
+
+
+class ParamPlan(NamedTuple):
+    """
+    The precision of one parameter, now and to come.
+
+    Attributes
+    ----------
+    name : str
+        Reported name (N, B, T_B, K, gauss_markov.T ...).
+    value : float
+        The value planned with [SI]; for an upper bound, the bound.
+    width_now : float
+        Present relative 95 % half-width (hi - lo) / (2 value) [-]; inf for a bound or
+        an unidentified parameter, NaN without a record.
+    target : float
+        Target relative half-width [-].
+    time_s : float
+        Record length at which the width reaches the target [s]; inf beyond 1000 h.
+    kind : str
+        'pinned' (target met now), 'predicted', 'at_least' (planned at an upper
+        bound: a smaller true value takes longer) or 'beyond' (not within 1000 h).
+    widths_at : dict of float to float
+        Expected relative half-width at record lengths of 1, 3 and 10 h [-].
+
+    """
+
+    name: str
+    value: float
+    width_now: float
+    target: float
+    time_s: float
+    kind: str
+    widths_at: dict
+
+    def to_json(self) -> dict:
+        """Return the JSON entry (None for NaN/inf)."""
+        return {'value': json_num(self.value), 'width_now': json_num(self.width_now),
+                'target': json_num(self.target), 'time_s': json_num(self.time_s),
+                'kind': self.kind,
+                'widths_at_h': {f'{h:g}': json_num(w) for h, w in self.widths_at.items()}}
+
+
+class Separation(NamedTuple):
+    """
+    Whether (and when) the record tells two explanations apart.
+
+    Attributes
+    ----------
+    question : str
+        'ramp or random walk' or 'one or two Gauss-Markov'.
+    lambda_now : float
+        Present non-centrality of the test against the rival [-].
+    time_s : float
+        Record length at which it reaches 10.5 (90 % power at 5 %) [s].
+    separated : bool
+        Whether the present record separates them.
+
+    """
+
+    question: str
+    lambda_now: float
+    time_s: float
+    separated: bool
+
+    def to_json(self) -> dict:
+        """Return the JSON entry."""
+        return {'lambda_now': json_num(self.lambda_now), 'time_s': json_num(self.time_s),
+                'separated': self.separated}
+
+
+class AxisPlan(NamedTuple):
+    """
+    The plan of one axis.
+
+    Attributes
+    ----------
+    duration_s : float
+        Length of the record the model came from [s] (0: a datasheet).
+    params : tuple of ParamPlan
+    separations : tuple of Separation
+
+    """
+
+    duration_s: float
+    params: tuple
+    separations: tuple
+
+    def remaining_s(self) -> float:
+        """
+        Further recording until every target is met [s].
+
+        inf when a target is beyond 1000 h; NaN when only an upper bound is known of a
+        parameter the record should already have resolved at that bound.  With a
+        parameter planned at a bound the time is a lower limit.
+        """
+        times = [p.time_s for p in self.params if p.kind != 'pinned']
+        if not times:
+            return 0.0
+        if any(math.isnan(t) for t in times):
+            return math.nan
+        return max(max(times) - self.duration_s, 0.0)
+
+    def all_pinned(self) -> bool:
+        """Whether every parameter meets its target now."""
+        return all(p.kind == 'pinned' for p in self.params)
+
+    def param(self, name: str) -> ParamPlan | None:
+        """Return the plan of one parameter, None when absent."""
+        return next((p for p in self.params if p.name == name), None)
+
+    def to_json(self) -> dict:
+        """Return the JSON entry of the axis."""
+        return {'duration_s': self.duration_s,
+                'params': {p.name: p.to_json() for p in self.params},
+                'separations': {s.question: s.to_json() for s in self.separations},
+                'remaining_s': json_num(self.remaining_s())}
+
+    def progress_line(self) -> str:
+        """One line: which parameters are pinned, and the time to each of the rest."""
+        pinned = [p.name for p in self.params if p.kind == 'pinned']
+        rest = []
+        for p in self.params:
+            if p.kind == 'pinned':
+                continue
+            if p.kind == 'at_least' and math.isnan(p.time_s):
+                rest.append(f'{p.name} only bounded yet')
+                continue
+            more = hours(max(p.time_s - self.duration_s, 0.0))
+            rest.append(f'{p.name} in {">= " if p.kind == "at_least" else ""}{more}')
+        text = f'pinned: {", ".join(pinned) or "none"}'
+        return text + ('; ' + ', '.join(rest) if rest else '')
+
+    def table_lines(self) -> list:
+        """Human table: parameter, width now, target, record length, widths at 1/3/10 h."""
+        lines = [f'  {"param":<18} {"now":>10} {"target":>8} {"needs":>12} '
+                 f'{"at 1 h":>10} {"at 3 h":>10} {"at 10 h":>10}']
+        for p in self.params:
+            need = hours(p.time_s)
+            need = {'pinned': 'met', 'at_least': '>= ' + need}.get(p.kind, need)
+            if p.kind == 'at_least' and math.isnan(p.time_s):
+                need = 'bound only'
+            cells = [percent(p.widths_at.get(h, math.nan)) for h in (1.0, 3.0, 10.0)]
+            lines.append(f'  {p.name:<18} {percent(p.width_now):>10} '
+                         f'{percent(p.target, tight=True):>8} {need:>12} ' + ' '.join(
+                             f'{c:>10}' for c in cells))
+        for s in self.separations:
+            state = 'separated now' if s.separated else f'needs {hours(s.time_s)}'
+            lines.append(f'  {s.question}: {state}')
+        return lines

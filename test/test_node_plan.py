@@ -1,0 +1,99 @@
+"""
+The node's precision plan with real rclpy: statuses, progress, and the self-stop.
+
+Uses the rig of test_node.py (a node and a peer on SingleThreadedExecutors in threads).
+"""
+
+import math
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from rclpy.parameter import Parameter
+from test_node import context, rig, statuses, T0_NS, wait  # noqa: F401 - fixtures
+
+from imu_allan.core.noise.params import parse_params
+from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.plan import plan_fits
+
+#: A strong bias instability with T_B under a second: 200 s at 200 Hz estimate N, B and
+#: T_B (K, with B this strong, stays a bound on most axes).
+FAST = parse_params({'name': 'fast IMU', 'axes': {
+    'gyro': {'N': 2e-3, 'B': 1e-2, 'T_B': 0.5, 'K': 1e-3},
+    'accel': {'N': 4e-3, 'B': 2e-2, 'T_B': 1.0, 'K': 2e-3},
+    'accel_z': {'bias': 9.80665}}})
+
+
+def _record(duration_s: float, seed: int = 3):
+    t_s, y = simulate_imu(FAST, 200.0, duration_s, seed=seed)
+    return T0_NS + np.round(t_s * 1e9).astype(np.int64), y
+
+
+def test_statuses_and_progress_carry_the_plan(rig):  # noqa: F811
+    r = rig(plan_period_s=0.001, progress_period_s=3600.0)
+    diag = []
+    r.peer.create_subscription(DiagnosticArray, '/diagnostics', diag.append, 10)
+    r.feed(*_record(200.0))
+    result = r.publish()
+    assert result.plans and set(result.plans) == {a for a, f in result.fits.items() if f}
+    st = statuses(r.last('noise_parameters'))
+    # The statuses carry the same plan as the analysis, and the offline planner gives it.
+    offline = plan_fits(result.fits, result.rate_hz, result.duration_s)
+    for axis, plan in result.plans.items():
+        kv = st[f'imu_allan: {axis}'][2]
+        for p in plan.params:
+            assert kv[f'{p.name}_plan'] == p.kind
+            assert _same(float(kv[f'{p.name}_time_to_target_s']), p.time_s)
+            assert _same(offline[axis].param(p.name).time_s, p.time_s)
+            # A parameter not pinned yet needs more than the present record (or is a bound).
+            assert p.kind == 'pinned' or not p.time_s < result.duration_s
+        assert kv['plan'] == plan.progress_line()
+        # N of this sensor is pinned to +-10 % within seconds.
+        assert kv['N_plan'] == 'pinned' and float(kv['N_width_now']) < 0.1
+    waiting = [a for a, p in result.plans.items() if not p.all_pinned()]
+    assert waiting                                # K, at least, is far from +-25 %
+    assert not r.node.collection_stopped          # stop_when_pinned is off by default
+    # The progress status says per axis what is pinned and how long the rest takes.
+    wait(lambda: any('imu_allan: progress' in statuses(a) and 'pinned: N' in
+                     statuses(a)['imu_allan: progress'][1] for a in list(diag)), 10,
+         'a progress status with the plan')
+    prog = [statuses(a)['imu_allan: progress'] for a in list(diag)
+            if 'pinned: N' in statuses(a).get('imu_allan: progress', (0, ''))[1]][-1]
+    for axis in waiting:
+        assert f'{axis} {result.plans[axis].progress_line()}' in prog[1]
+    for axis in result.plans:
+        assert 'N' in prog[2][f'{axis}_pinned'].split(',')
+
+
+def _same(a: float, b: float) -> bool:
+    """Equal to 1e-5, or both NaN, or both infinite."""
+    if math.isnan(a) or math.isnan(b):
+        return math.isnan(a) and math.isnan(b)
+    if math.isinf(a) or math.isinf(b):
+        return a == b
+    return abs(a / b - 1.0) < 1e-5
+
+
+def test_stop_when_pinned_stops_collecting_after_the_floor(rig):  # noqa: F811
+    loose = 'B=5,T_B=5,K=none'    # +-500 %: every estimate meets it; no target for K
+    r = rig(plan_period_s=0.001, stop_when_pinned=True, plan_targets=loose,
+            min_duration_s=1000.0)
+    t, y = _record(300.0)
+    r.feed(t[:40000], y[:40000])
+    result = r.publish()
+    # min_duration_s is a floor: 200 s of data, targets met or not, collection goes on.
+    assert not r.node.collection_stopped
+    r.node.set_parameters([Parameter('min_duration_s', value=100.0)])
+    result = r.publish()
+    assert all(p.all_pinned() for p in result.plans.values()), \
+        {a: p.progress_line() for a, p in result.plans.items()}
+    assert r.node.collection_stopped
+    n_used = r.node.session.stats.n_used
+    r.feed(t[40000:], y[40000:])                  # received, but no longer collected
+    r.node.live.process()
+    assert r.node.session.stats.n_used == n_used
+    level, message, kv = statuses(r.last('noise_parameters'))['imu_allan: gyro_x']
+    assert kv['plan'].startswith('pinned: ') and kv['plan_remaining_s'] == '0'
+    assert 'stopped collecting' in r.node._progress_status().message
+    # ~/reset starts over: collecting again.
+    r.node._on_reset(None, type('R', (), {})())
+    assert not r.node.collection_stopped

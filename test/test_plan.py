@@ -1,0 +1,162 @@
+"""
+The planner against fits of simulated records; its command and the analysis' table.
+
+Expected interval widths, times to targets, bounds, separations, targets, the plan
+command and the plan table of the analysis.
+
+Small seeded versions of bench/plan_validate.py (the full tables: docs/planning.md).
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from imu_allan import AXES
+from imu_allan.cli import main
+from imu_allan.core.allan import allan_curve
+from imu_allan.core.noise.model import avar_model
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov, load_params
+from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
+from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
+                                 planning_model)
+from imu_allan.core.plan.precision import _avar, CurveModel, relative_width
+from imu_allan.core.search import search_axis
+from imu_allan.errors import InputError
+from imu_allan.io.report import summary_text
+from imu_allan.pipeline.analysis import analyze
+from imu_allan.pipeline.session import Session, SessionConfig
+
+
+XSENS_GYRO = load_params(REPO / 'config' / 'xsens_mti7.yaml').axes['gyro_x']
+
+
+def _model(noise: AxisNoise, rate_hz: float) -> CurveModel:
+    return CurveModel(planning_model(noise_components(noise))[0], rate_hz)
+
+
+def test_components_reproduce_the_model_curve():
+    noise = AxisNoise(N=1e-4, B=5e-5, T_B=60.0, K=1e-6, Q=1e-6, R=1e-8)
+    cm = _model(noise, 100.0)
+    tau = np.geomspace(0.01, 1e4, 30)
+    assert_rel = np.abs(_avar(cm.comps, cm.theta, tau) / avar_model(tau, noise) - 1.0)
+    assert assert_rel.max() < 1e-12
+    assert cm.names == ['Q', 'N', 'B', 'T_B', 'K', 'R']
+
+
+def test_expected_widths_match_the_fits_of_simulated_records():
+    """Median width of 6 seeded 40-min records within 25 % of the prediction (N, B)."""
+    rate, length = 100.0, 2400.0
+    widths = {'N': [], 'B': []}
+    for seed in range(6):
+        y = simulate_axis(XSENS_GYRO, rate, int(rate * length), np.random.default_rng(seed))
+        c = allan_curve(y, rate, 'dense', confidence=0.95)
+        fit = search_axis(c.tau_s, c.avar[:, 0], c.edf[:, 0], rate, y.size,
+                          unit='rad/s').fit
+        for p in widths:
+            q = fit.optimised[p]
+            widths[p].append(relative_width(q.value, q.ci95) if q.kind == 'estimate'
+                             else math.inf)
+    predicted = dict(zip(_model(XSENS_GYRO, rate).names,
+                         _model(XSENS_GYRO, rate).widths(length)))
+    for p, w in widths.items():
+        # Tolerance: 6 seeds put the median's own spread at about 15 % for B.
+        assert abs(np.median(w) / predicted[p] - 1.0) < 0.25, (p, w, predicted[p])
+
+
+def test_time_to_target_is_where_the_expected_width_meets_it():
+    plans = plan_axes({'g': planning_model(noise_components(XSENS_GYRO))}, 100.0, 0.0)
+    cm = _model(XSENS_GYRO, 100.0)
+    for p in plans['g'].params:
+        assert p.kind == 'predicted' and math.isnan(p.width_now)
+        if p.name == 'N':
+            continue        # met at the first length (1 min)
+        w = dict(zip(cm.names, cm.widths(p.time_s)))[p.name]
+        # Tolerance: the log-log interpolation between grid lengths (3x apart).
+        assert abs(w / p.target - 1.0) < 0.1, (p, w)
+    # Widths fall with the record length; the defaults are 10 % for B, 25 % for T_B, K.
+    b = plans['g'].param('B')
+    assert b.widths_at[1.0] > b.widths_at[3.0] > b.widths_at[10.0]
+    assert (b.target, plans['g'].param('K').target) == (0.1, 0.25)
+    assert plans['g'].separations[0].question == 'ramp or random walk'
+    assert 3600.0 < plans['g'].separations[0].time_s < plans['g'].param('K').time_s * 2
+
+
+def test_a_bound_is_planned_at_its_bound_and_reads_at_least():
+    rate = 100.0
+    y = simulate_axis(XSENS_GYRO, rate, int(rate * 1200), np.random.default_rng(7))
+    c = allan_curve(y, rate, 'dense', confidence=0.95)
+    fit = search_axis(c.tau_s, c.avar[:, 0], c.edf[:, 0], rate, y.size, unit='rad/s').fit
+    assert fit.optimised['K'].kind == 'upper_bound'     # 20 min cannot resolve K
+    plan = plan_fits({'gyro_x': fit}, rate, 1200.0)['gyro_x']
+    k = plan.param('K')
+    assert k.kind == 'at_least' and math.isinf(k.width_now)
+    assert k.value == fit.optimised['K'].value
+    # N is pinned: its present width (the fit's interval) meets +-10 %.
+    n = plan.param('N')
+    assert n.kind == 'pinned' and n.time_s == 1200.0
+    assert n.width_now == relative_width(fit.optimised['N'].value, fit.optimised['N'].ci95)
+    assert 'K in >= ' in plan.progress_line() or 'K only bounded' in plan.progress_line()
+
+
+def test_a_weaker_second_gauss_markov_needs_a_longer_record():
+    def sep_time(b2: float) -> float:
+        noise = AxisNoise(N=1e-4, B=5e-5, T_B=10.0, gauss_markov=(GaussMarkov(b2, 300.0),))
+        plan = plan_axes({'a': planning_model(noise_components(noise))}, 50.0, 0.0)['a']
+        (sep,) = [s for s in plan.separations if s.question == 'one or two Gauss-Markov']
+        return sep.time_s
+    assert 600.0 < sep_time(4e-5) < sep_time(2e-5) < math.inf
+
+
+def test_targets_parse_and_refuse():
+    assert parse_targets('N=5%, K=0.3 T_B=none') == {'N': 0.05, 'K': 0.3, 'T_B': math.inf}
+    assert parse_targets(['B=0.2']) == {'B': 0.2}
+    for bad in ('N', 'N=0', 'N=abc', '=0.1'):
+        with pytest.raises(InputError, match='PARAM=WIDTH'):
+            parse_targets(bad)
+
+
+def test_plan_command_from_datasheet_numbers(capsys):
+    code = main(['plan', '--N', '0.041 deg/s/sqrt(Hz)', '--B', '0.011 deg/s', '--T_B', '60',
+                 '--K', '1e-3 deg/s/sqrt(s)', '--rate', '100', '--target', 'B=20%',
+                 '--format', 'json'])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0 and doc['targets'] == {'B': 0.2}
+    params = doc['axes']['gyro']['params']
+    assert set(params) == {'N', 'B', 'T_B', 'K'}
+    assert params['B']['target'] == 0.2 and params['B']['time_s'] > 3600.0
+    assert set(params['B']['widths_at_h']) == {'1', '3', '10'}
+    assert main(['plan', '--rate', '100']) == 2
+    assert 'nothing to plan from' in capsys.readouterr().err
+    assert main(['plan', '--N', '1e-4']) == 2
+    assert '--rate' in capsys.readouterr().err
+
+
+def test_analysis_plan_in_summary_json_and_plan_command(tmp_path, capsys):
+    spec = load_params(REPO / 'config' / 'ublox_c102_f9r.yaml')
+    t_s, y = simulate_imu(spec, 50.0, 600.0, seed=4)
+    stamps = 1_700_000_000 * 10 ** 9 + np.round(t_s * 1e9).astype(np.int64)
+    session = Session(SessionConfig())
+    session.add(stamps, y)
+    result = analyze(session, plan=True, plan_targets={'N': 0.05})
+    assert set(result.plans) == {a for a, f in result.fits.items() if f is not None}
+    doc = result.to_json()
+    plan = doc['axes']['gyro_x']['plan']
+    assert plan['params']['N']['target'] == 0.05 and plan['params']['N']['kind'] == 'pinned'
+    assert plan['params']['B']['kind'] in ('predicted', 'at_least', 'beyond')
+    text = summary_text(result)
+    assert 'record length to reach each target' in text
+    assert result.plans['gyro_x'].table_lines()[1] in text
+    # Without plan=True nothing changes: no plan in the JSON.
+    assert 'plan' not in analyze(session).to_json()['axes']['gyro_x']
+    # The plan command on the same record as a CSV prints the same tables.
+    from imu_allan.io.csv_io import write_csv
+    path = tmp_path / 'short.csv'
+    write_csv(path, t_s, y, AXES)
+    capsys.readouterr()
+    assert main(['plan', str(path), '--target', 'N=0.05']) == 0
+    out = capsys.readouterr().out
+    assert 'predicted from a record of 10.0 min at 50 Hz' in out
+    assert result.plans['gyro_x'].table_lines()[0] in out and 'gyro_x: pinned: N' in out
