@@ -23,7 +23,6 @@ from typing import TYPE_CHECKING
 
 from imu_allan import AXES
 from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
-from imu_allan.cli.plan import add_target_option
 from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import one_blas_thread, start_workers, worker_pool
@@ -61,6 +60,13 @@ def units_from_args(args) -> 'DeclaredUnits | None':
     from imu_allan.core.noise.unit_check import parse_units
     units = parse_units(args.units)
     return None if units.is_si else units
+
+
+def add_target_option(p: argparse.ArgumentParser) -> None:
+    """Add ``--target P=WIDTH`` (shared with ``plan``)."""
+    p.add_argument('--target', action='append', default=[], metavar='P=WIDTH',
+                   help='target relative 95 %% half-width of a parameter, e.g. N=0.05 or '
+                        'K=25%% (defaults: N and B 10 %%, K, T_B and other terms 25 %%)')
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

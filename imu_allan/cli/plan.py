@@ -20,16 +20,9 @@ from imu_allan.errors import InputError
 _FLAGS = {'N': 'N', 'B': 'B', 'T_B': 'T_B', 'K': 'K'}
 
 
-def add_target_option(p: argparse.ArgumentParser) -> None:
-    """Add ``--target P=WIDTH`` (shared with ``analyze``)."""
-    p.add_argument('--target', action='append', default=[], metavar='P=WIDTH',
-                   help='target relative 95 %% half-width of a parameter, e.g. N=0.05 or '
-                        'K=25%% (defaults: N and B 10 %%, K, T_B and other terms 25 %%)')
-
-
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the sub-command."""
-    from imu_allan.cli.analyze import add_input_options
+    from imu_allan.cli.analyze import add_input_options, add_target_option
     p = subparsers.add_parser(
         'plan', help='how long to record: expected interval widths and time to targets',
         description='Predict from a short record or from datasheet numbers how precise '

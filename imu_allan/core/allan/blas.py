@@ -47,7 +47,7 @@ _BLAS_STATE: dict = {'depth': 0, 'saved': []}
 
 
 @contextmanager
-def _single_thread_blas():
+def single_thread_blas():
     """
     Hold the OpenBLAS libraries to one thread (what threadpoolctl does; else a no-op).
 

@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 
-from imu_allan.core.allan.blas import _single_thread_blas
+from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.allan.noise_id import _fill_unknown
 from imu_allan.core.allan.sums import (_axis_work, _columns, _is_octave, _map_threads,
                                        _MAX_THREADS, _means, _workers)
@@ -35,7 +35,7 @@ def _curve_core(y2: np.ndarray, m: np.ndarray, method: str,
     ``_ALPHA_UNKNOWN`` where the record has too few clusters for a data-based test.
     """
     n, n_axes = y2.shape
-    with _single_thread_blas():
+    with single_thread_blas():
         if method == 'overlapping' and _is_octave(m) and m.size > 2:
             cols, means = _columns(y2)
         else:

@@ -7,9 +7,10 @@ and re-weights (IRLS) with the same :class:`Fitter`.  These names are the fit's
 interface for that; their bodies live in :mod:`.axis` and :mod:`.solver`.
 """
 
-from imu_allan.core.fit.axis import (_check_inputs, _filtered_start, _n_params, _slot, _thin,
-                                     filter_identified)
-from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter, _Slot, _Solution
+from imu_allan.core.fit.axis import (_check_inputs, _filtered_start, _n_params,
+                                     _profile_threshold, _slot, _thin, filter_identified)
+from imu_allan.core.fit.covariance import _CurveCovariance
+from imu_allan.core.fit.solver import _fit_fixed_w, _Fitter, _Fix, _Slot, _Solution
 
 #: ``check_curve(tau, avar, edf, rate_hz, n_samples) -> (tau, avar, edf)``: the usable
 #: points of a curve, sorted by tau (InputError for bad arrays, rate or length).
@@ -36,6 +37,14 @@ Fitter = _Fitter
 Slot = _Slot
 #: A fit at fixed weights: coefficients (scaled), nonlinear parameters, chi-square J.
 Solution = _Solution
+#: Nonlinear parameters held fixed in a fit at fixed weights.
+Fix = _Fix
+#: ``profile_threshold(...)``: the chi-square rise that bounds a profile interval.
+profile_threshold = _profile_threshold
+#: ``CurveCovariance(m, n_terms, dt, n_samples)``: the exact covariance of the Allan
+#: estimates of one curve geometry under a model (the planner scales it to longer records).
+CurveCovariance = _CurveCovariance
 
-__all__ = ['check_curve', 'filter_identified', 'filtered_start', 'fit_fixed_weights', 'Fitter',
-           'n_params', 'Slot', 'Solution', 'term_slot', 'thin']
+__all__ = ['check_curve', 'CurveCovariance', 'filter_identified', 'filtered_start', 'Fix',
+           'fit_fixed_weights', 'Fitter', 'n_params', 'profile_threshold', 'Slot', 'Solution',
+           'term_slot', 'thin']

@@ -12,7 +12,7 @@ from typing import Sequence
 import numpy as np
 
 from imu_allan.core.allan import AllanCurve
-from imu_allan.core.allan.blas import _single_thread_blas
+from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.fit.nominal import nominal_fit
 from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported
@@ -180,7 +180,7 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     """
     # The matrices are tiny (k ~ 20-30 taus): OpenBLAS threads only add overhead and
     # oversubscribe a busy machine (measured: 2-3x slower wall time with them).
-    with _single_thread_blas():
+    with single_thread_blas():
         return _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                          select, phi0, sigma0)
 

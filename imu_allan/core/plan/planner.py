@@ -16,8 +16,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from imu_allan.core.allan.blas import _single_thread_blas
-from imu_allan.core.fit.covariance import _CurveCovariance
+from imu_allan.core.allan.blas import single_thread_blas
+from imu_allan.core.fit.api import CurveCovariance
 from imu_allan.core.noise.model import TERMS
 from imu_allan.core.noise.params import AxisNoise
 from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
@@ -172,7 +172,7 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
             break
         n = max(int(round(length * rate_hz)), 8)
         m, tau = fit_taus(rate_hz, n)
-        cov = _CurveCovariance(m, np.maximum(n + 1 - 2 * m, 1), 1.0 / rate_hz, n)
+        cov = CurveCovariance(m, np.maximum(n + 1 - 2 * m, 1), 1.0 / rate_hz, n)
         for axis, variants in cms.items():
             if axis in done:
                 continue
@@ -357,5 +357,5 @@ def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
               if f is not None and f.components}
     present = {a: fits[a].optimised for a in models}
     # One BLAS thread, as the fit: tiny matrices, and the same rounding in every process.
-    with _single_thread_blas():
+    with single_thread_blas():
         return plan_axes(models, rate_hz, duration_s, targets, present)

@@ -22,8 +22,7 @@ import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.allan.taus import tau_grid
-from imu_allan.core.fit.axis import _PLAIN, _thin
-from imu_allan.core.fit.covariance import _CurveCovariance
+from imu_allan.core.fit.api import CurveCovariance, thin
 from imu_allan.core.noise.model import base_name, Term, TERMS
 
 #: Two-sided 95 % normal quantile.
@@ -62,7 +61,7 @@ class Component:
     def names(self) -> list:
         """Return the reported names of the term's symbols (N, B, T_B, gauss_markov.T ...)."""
         base = base_name(self.label)
-        return [sym if self.label == base and sym in _PLAIN.get(base, ()) else
+        return [sym if self.label == base and self.term.plain else
                 f'{self.label}.{sym}' for sym in self.term.symbols]
 
     def values(self) -> list:
@@ -121,7 +120,7 @@ def fit_taus(rate_hz: float, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
 
     """
     m = tau_grid(int(n_samples), 'dense')
-    m = m[_thin(m / rate_hz)]
+    m = m[thin(m / rate_hz)]
     return m, m / rate_hz
 
 
@@ -139,7 +138,7 @@ class CurveModel:
         n = max(int(round(duration_s * self.rate_hz)), 8)
         m, tau = fit_taus(self.rate_hz, n)
         n_terms = np.maximum(n + 1 - 2 * m, 1)
-        cov = _CurveCovariance(m, n_terms, 1.0 / self.rate_hz, n)
+        cov = CurveCovariance(m, n_terms, 1.0 / self.rate_hz, n)
         avar = _avar(self.comps, self.theta, tau)
         scale = float(np.max(avar))
         sigma = cov.sigma([c.term for c in self.comps],
@@ -157,7 +156,7 @@ def interval_threshold(dof: int) -> float:
     """
     Return the expected rise of the chi-square that bounds the fit's 95 % profile intervals.
 
-    The fit (:func:`imu_allan.core.fit.axis._profile_threshold`) uses chi2(0.95; 1) when
+    The fit (:func:`imu_allan.core.fit.api.profile_threshold`) uses chi2(0.95; 1) when
     its J_min <= dof and F(0.95; 1, dof) J_min / dof otherwise.  Under the model J_min
     ~ chi2_dof, so the threshold averages to F(0.95; 1, dof) E[max(1, X)], X =
     chi2_dof / dof, with E[max(1, X)] = P(chi2_dof <= dof) + P(chi2_{dof+2} > dof)

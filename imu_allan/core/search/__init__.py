@@ -37,7 +37,7 @@ release.  The model's own low-pass is the term ``filtered_white``.
 
 from typing import Sequence
 
-from imu_allan.core.allan.blas import _single_thread_blas
+from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.noise.terms import effect_name, effect_names, TERMS
 from imu_allan.core.search.choice import with_rivals
 from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN, MAX_STEPS,
@@ -97,7 +97,7 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
         if e not in TERMS or not TERMS[e].effect:
             raise InputError(f'unknown effect {e!r}; known: {", ".join(effect_names())}')
     # Tiny matrices: OpenBLAS threads only add overhead (see fit_axis).
-    with _single_thread_blas():
+    with single_thread_blas():
         return _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit,
                        effects, base_labels, keep_steps)
 

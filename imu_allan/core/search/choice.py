@@ -22,9 +22,8 @@ import re
 
 import numpy as np
 
-from imu_allan.core.fit.axis import _n_params, _profile_threshold
+from imu_allan.core.fit.api import fit_fixed_weights, Fix, n_params, profile_threshold
 from imu_allan.core.fit.result import AxisFit, Param
-from imu_allan.core.fit.solver import _fit_fixed_w, _Fix
 from imu_allan.core.search.rivals import _neg2_loglik
 from imu_allan.core.search.rules import _label_for
 
@@ -77,7 +76,7 @@ def structural_rivals(run) -> list:
     scale = run.fitter.data.scale
     slots = run.slots_of(run.labels)
     run.fitter.data.set_sigma(run.sigma)
-    mine = _neg2_loglik(run.fitter, run.sol, _n_params(slots), run.penalty)
+    mine = _neg2_loglik(run.fitter, run.sol, n_params(slots), run.penalty)
     for st in run.steps:
         got = _RIVAL.match(st.rival or '')
         if got is None or abs(st.chi2_drop - float(got.group(2))) > RIVAL_DELTA:
@@ -91,7 +90,7 @@ def structural_rivals(run) -> list:
         phi0 = [p for lb, p in zip(run.labels, run.sol.phi) if lb != st.label] + [
             tuple(math.sqrt(lo * hi) for lo, hi in r_slots[-1].bounds)]
         sol, _ = run.fitter.irls(r_slots, phi0=phi0)
-        value = _neg2_loglik(run.fitter, sol, _n_params(r_slots), run.penalty)
+        value = _neg2_loglik(run.fitter, sol, n_params(r_slots), run.penalty)
         run.fitter.data.set_sigma(run.sigma)
         if value - mine <= RIVAL_DELTA:
             i_b = _largest_gm(r_slots, sol, scale)
@@ -135,13 +134,13 @@ def rival_models(fitter, slots, sol, dof: int, i: int) -> list:
 
     """
     lo, hi = slots[i].bounds[0]
-    threshold = _profile_threshold(sol.j, dof)
+    threshold = profile_threshold(sol.j, dof)
     out = []
     best = sol.j
     for t_b in np.geomspace(lo * 1.05, hi / 1.05, GRID_POINTS):
         symbol = slots[i].term.nonlinear[0]
-        grid = _fit_fixed_w(fitter.data, slots, sol.phi, _Fix(i, symbol, float(t_b)),
-                            local=True)
+        grid = fit_fixed_weights(fitter.data, slots, sol.phi, Fix(i, symbol, float(t_b)),
+                                 local=True)
         best = min(best, grid.j)
         out.append((grid.j, _levels(slots, grid, fitter.data.scale, i)))
     return [(j - best, j - best <= threshold, lv) for j, lv in out]
@@ -163,7 +162,7 @@ def with_rivals(fit: AxisFit, run) -> AxisFit:
     if t_b is not None and t_b.kind == 'estimate':
         i = _bias_slot(slots, sol, t_b.value)
         if i is not None:
-            dof = run.fitter.data.tau.size - _n_params(slots)
+            dof = run.fitter.data.tau.size - n_params(slots)
             grid = rival_models(run.fitter, slots, sol, dof, i)
             own = np.array([t_b.ci95[0] <= g[2]['T_B'] <= t_b.ci95[1] for g in grid])
             inside = np.array([g[1] for g in grid]) | own
