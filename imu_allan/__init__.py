@@ -7,7 +7,7 @@ pipeline -> core (numpy/scipy only; no ROS import anywhere in the core).
 
 __version__ = '0.1.0'
 
-#: Axis names in contract order (DESIGN.md): rad/s for gyro, m/s^2 for accel.
+#: Axis names in contract order (docs/contracts.md): rad/s for gyro, m/s^2 for accel.
 AXES = ('gyro_x', 'gyro_y', 'gyro_z', 'accel_x', 'accel_y', 'accel_z')
 GYRO_AXES = AXES[:3]
 ACCEL_AXES = AXES[3:]

@@ -54,3 +54,35 @@ def test_link_check_can_fail(tmp_path):
     found = LINK.findall(page.read_text())
     assert found == ['missing.md', '#title', '#nope']
     assert 'title' in _anchors(page) and 'nope' not in _anchors(page)
+
+
+#: A path of the repository named in a doc: `imu_allan/...`, `bench/...` and the like.
+CODE_PATH = re.compile(r'(?<![\w./-])((?:imu_allan|bench|test|docs|config|launch|tools)'
+                       r'/[\w./-]*\w)')
+
+
+def _named_paths(text: str) -> set:
+    return {m.rstrip('.') for m in CODE_PATH.findall(text)}
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_every_code_path_a_doc_names_exists(page):
+    missing = sorted(p for p in _named_paths(page.read_text())
+                     if '*' not in p and not (REPO / p).exists())
+    assert not missing, missing
+
+
+def test_code_path_check_can_fail():
+    found = _named_paths('see `imu_allan/core/fit.py` and imu_allan/core/allan/, not '
+                         'x/imu_allan/y or ../shared/DESIGN.md.')
+    assert found == {'imu_allan/core/fit.py', 'imu_allan/core/allan/'} or \
+        found == {'imu_allan/core/fit.py', 'imu_allan/core/allan'}
+    assert not (REPO / 'imu_allan/core/fit.py').exists()
+
+
+def test_no_reference_outside_the_repository():
+    # A user's clone has no ../shared: neither docs nor code may send them there.
+    files = PAGES + sorted((REPO / 'imu_allan').rglob('*.py'))
+    bad = [str(f.relative_to(REPO)) for f in files
+           if 'DESIGN.md' in f.read_text()]
+    assert not bad, bad

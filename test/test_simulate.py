@@ -1,7 +1,7 @@
 """
 Tests of imu_allan.core.noise.simulate: every generator against its closed-form Allan variance.
 
-Closed forms (IEEE Std 952 annex C, DESIGN.md) are written out here so the test does not
+Closed forms (IEEE Std 952 annex C, docs/design.md) are written out here so the test does not
 depend on imu_allan.core.noise.model.  Statistical checks average the overlapping AVAR of R
 independent replicas and accept |mean - theory| < 4.5 standard errors of that mean
 (the standard error comes from the replicas' own spread, so it holds for every noise

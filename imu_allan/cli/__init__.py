@@ -2,7 +2,7 @@
 Command line interface ``imu-allan`` (also ``python -m imu_allan``).
 
 Each sub-command lives in its own ``cli_<name>.py`` module exposing
-``add_parser(subparsers)`` and ``run(args) -> int``.  Contract (DESIGN.md): with
+``add_parser(subparsers)`` and ``run(args) -> int``.  Contract (docs/contracts.md): with
 ``--format json`` stdout carries exactly one JSON document, logs go to stderr, and
 errors end with a non-zero exit and one clear line on stderr, never a traceback.
 """

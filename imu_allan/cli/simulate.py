@@ -10,7 +10,7 @@ start at the current time (whole seconds) unless ``--start`` is given, so that
 ``header.stamp`` looks like a real recording's.
 
 Also registers ``imu-allan csv-to-bag CSV BAG``: legacy CSV logs (the CSV contract of
-DESIGN.md) to the same bags, through :func:`imu_allan.io.bag_writer.csv_to_bag`.
+docs/contracts.md) to the same bags, through :func:`imu_allan.io.bag_writer.csv_to_bag`.
 """
 
 import argparse

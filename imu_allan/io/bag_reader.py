@@ -3,7 +3,7 @@ Read sensor_msgs/Imu from bags fast: rosbag2 (sqlite3 or MCAP), single files, RO
 
 Inputs: a rosbag2 directory (metadata.yaml of any version, or none: the storage
 files are read directly), a single ``.mcap`` or ``.db3`` file, or a ROS 1 ``.bag``.
-Time comes from ``header.stamp`` (DESIGN.md); the bag's receive time is kept too.
+Time comes from ``header.stamp`` (docs/contracts.md); the bag's receive time is kept too.
 
 Speed: decoding one message at a time in Python reaches about 27,000 msg/s, so a
 3-hour 400 Hz recording would take minutes.  Here raw serialised payloads are

@@ -411,7 +411,7 @@ def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
                columns: Sequence[str] | None = None, rate_hz: float | None = None,
                start_ns: int = 0, covariances: Sequence | None = None) -> int:
     """
-    Convert a CSV log (DESIGN.md CSV contract) into an Imu bag.
+    Convert a CSV log (docs/contracts.md CSV contract) into an Imu bag.
 
     Parameters
     ----------

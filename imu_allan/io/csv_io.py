@@ -1,7 +1,7 @@
 """
 Fast CSV input and output of IMU records.
 
-The contract format (DESIGN.md) is a header ``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,
+The contract format (docs/contracts.md) is a header ``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,
 accel_z`` (extra columns allowed and ignored unless asked for), t in seconds, samples in
 SI units (rad/s, m/s^2), optionally gzip-compressed (``.gz``).  Also read: any header
 with the columns named explicitly, and headerless numeric files (one or more columns,

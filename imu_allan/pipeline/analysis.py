@@ -4,7 +4,7 @@ From a pipeline session to the result every output is made of.
 :func:`analyze` fits each axis of the session's Allan curve and bundles the fits, the
 Kalman matrices, the Kalibr file and the Imu covariances in one frozen
 :class:`AnalysisResult`; its :meth:`AnalysisResult.to_json` is the result JSON of
-DESIGN.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
+docs/contracts.md.  B follows the paper's convention (Maia et al. eq. 8, see noise_params).
 """
 
 from dataclasses import asdict, dataclass, field, replace
@@ -272,7 +272,7 @@ class AnalysisResult:
         return [self.summary_line(a) for a in AXES]
 
     def to_json(self) -> dict:
-        """Return the result JSON of DESIGN.md (SI units; None for NaN/inf)."""
+        """Return the result JSON of docs/contracts.md (SI units; None for NaN/inf)."""
         axes = {}
         for j, axis in enumerate(AXES):
             fit = self.fits.get(axis)

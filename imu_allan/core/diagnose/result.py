@@ -23,7 +23,7 @@ class Finding(NamedTuple):
     effect : str
         One of :data:`EFFECTS` (a term name).
     params : dict of str to float
-        The effect's parameters in SI (DESIGN.md symbols), e.g. {'A': .., 'f0_hz': ..}.
+        The effect's parameters in SI (docs/contracts.md symbols), e.g. {'A': .., 'f0_hz': ..}.
     ci95 : dict of str to tuple
         95 % interval of each parameter (the fit's profile interval; for a frequency
         checked against the periodogram, the peak +- one frequency bin).
@@ -56,7 +56,7 @@ class Finding(NamedTuple):
     note: str = ''
 
     def to_json(self) -> dict:
-        """Return the DESIGN.md entry {effect, params, tau_range_s} plus details."""
+        """Return the docs/contracts.md entry {effect, params, tau_range_s} plus details."""
         return {'effect': self.effect, 'params': {k: json_num(v) for k, v in self.params.items()},
                 'ci95': {k: [json_num(v[0]), json_num(v[1])] for k, v in self.ci95.items()},
                 'units': dict(self.units),
@@ -139,7 +139,7 @@ class AxisDiagnosis:
         return self.gap_after <= GAP_OK
 
     def to_json(self) -> dict:
-        """Return the DESIGN.md axis entry (missing, gap_before, gap_after) plus details."""
+        """Return the axis entry of docs/contracts.md (missing, gap_before, gap_after) and more."""
         return {'missing': [f.to_json() for f in self.missing],
                 'gap_before': json_num(self.gap_before), 'gap_after': json_num(self.gap_after),
                 'gaps': [json_num(g) for g in self.gaps], 'consistent': bool(self.consistent),
@@ -213,7 +213,7 @@ class DiagnoseResult:
         return '\n'.join(rows) + '\n'
 
     def to_json(self) -> dict:
-        """Return the diagnose JSON of DESIGN.md."""
+        """Return the diagnose JSON of docs/contracts.md."""
         return {'source': self.source, 'sample_rate_hz': float(self.rate_hz),
                 'n_samples': int(self.n_samples), 'duration_s': float(self.duration_s),
                 'base_model': list(self.base_model), 'n_replicas': int(self.n_replicas),

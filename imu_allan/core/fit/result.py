@@ -203,7 +203,7 @@ class AxisFit:
         dict
             ``{'params': {P: {value, ci95, kind, unit}}, 'nominal': {...},
             'terms': [...], 'notes': [...], 'gof': {'chi2', 'dof', 'p_value'}}``;
-            ``params`` is the optimised fit (DESIGN.md result contract).
+            ``params`` is the optimised fit (docs/contracts.md result contract).
 
         """
         return {'params': {k: v.to_json() for k, v in self.optimised.items()},

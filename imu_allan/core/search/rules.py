@@ -32,7 +32,7 @@ class Step(NamedTuple):
     Attributes
     ----------
     effect : str
-        Effect name (DESIGN.md), e.g. 'sinusoid'.
+        Effect name (docs/contracts.md), e.g. 'sinusoid'.
     label : str
         Fit term label, e.g. 'sinusoid_2'.
     chi2_drop : float
