@@ -204,6 +204,7 @@ def test_published_parameters_match_the_truth_and_the_offline_mode(rig):
     offline = Session(SessionConfig())
     for k in range(0, t.size, 997):
         offline.add(t[k:k + 997], y[k:k + 997])
+    offline.flush()                             # the end of the recording: every row
     ref = analyze(offline)
     misses = []
     for axis in AXES:
@@ -681,11 +682,11 @@ def test_a_damaged_checkpoint_is_set_aside_and_the_node_starts_fresh(
     elif damage == 'garbage':
         ck.write_bytes(np.random.default_rng(4).bytes(5000))
     elif damage == 'rate_zero':
-        _rewrite_meta(ck, rate_hz=0.0)
+        _rewrite_meta(ck, clock__rate_hz=0.0)
     elif damage == 'negative_count':
         _rewrite_meta(ck, stats__n_used=-5)
     elif damage == 'string_stamp':
-        _rewrite_meta(ck, first_stamp_ns='yesterday')
+        _rewrite_meta(ck, clock__first_stamp_ns='yesterday')
     else:
         ck.unlink()
         ck.mkdir()

@@ -93,7 +93,7 @@ def test_stop_when_pinned_stops_collecting_after_the_floor(rig):  # noqa: F811
     assert r.node.session.stats.n_used == n_used
     level, message, kv = statuses(r.last('noise_parameters'))['imu_allan: gyro_x']
     assert kv['plan'].startswith('pinned: ') and kv['plan_remaining_s'] == '0'
-    assert 'stopped collecting' in r.node._progress_status().message
+    assert 'stopped collecting' in r.node.reports.progress_status().message
     # ~/reset starts over: collecting again.
-    r.node._on_reset(None, type('R', (), {})())
+    r.node.service_handlers.on_reset(None, type('R', (), {})())
     assert not r.node.collection_stopped

@@ -71,12 +71,17 @@ def test_each_wrong_unit_is_named_and_declaring_it_gives_the_si_numbers(tmp_path
     wrong = y.copy()
     wrong[:, :3] /= DEG                      # gyro in deg/s
     wrong[:, 3:] /= G0_M_S2                  # accelerometer in g
-    path = _csv(tmp_path, 'deg_g_ms.csv', t_s * 1e3, wrong)      # t in ms
-    doc, err = _analyze(tmp_path, path, capsys)
+    doc, err = _analyze(tmp_path, _csv(tmp_path, 'deg_g.csv', t_s, wrong), capsys)
     _named(doc, err, 'the gyro does not look like rad/s')
     _named(doc, err, 'the accelerometer looks like g (declare --units accel=g)')
-    _named(doc, err, 'the times look like ms read as seconds (the rate would be 100 Hz')
-    assert doc['sample_rate_hz'] == pytest.approx(RATE_HZ / 1e3, rel=1e-9)
+    path = _csv(tmp_path, 'deg_g_ms.csv', t_s * 1e3, wrong)      # and t in ms
+    # At the 0.1 Hz the stamps then claim, the record is refused or warned; either way
+    # the unit mistake is named.
+    code = main(['analyze', str(path), '--out', str(tmp_path / 'ms'), '--no-plot', '--jobs',
+                 '1', '--format', 'json'])
+    err = capsys.readouterr().err
+    assert code in (0, 3), err
+    assert 'the times look like ms read as seconds (the rate would be 100 Hz' in err, err
     fixed, _ = _analyze(tmp_path, path, capsys, '--units', 'gyro=deg/s,accel=g,time=ms')
     assert fixed['warnings'] == []
     assert fixed['sample_rate_hz'] == pytest.approx(RATE_HZ, rel=1e-9)
@@ -103,9 +108,12 @@ def test_bag_stamps_one_nanosecond_apart_are_named(tmp_path, still, capsys):
     stamps = 1_700_000_000 * 10 ** 9 + np.arange(y.shape[0], dtype=np.int64)   # a counter
     path = tmp_path / 'counter.mcap'
     write_imu_bag(path, stamps, y)
-    doc, err = _analyze(tmp_path, path, capsys)
-    _named(doc, err, 'the stamps are 1 ns apart')
-    assert len(doc['warnings']) == 1
+    # 1 ns apart, the record lasts microseconds: refused, and the error names the unit.
+    code = main(['analyze', str(path), '--out', str(tmp_path / 'o'), '--no-plot',
+                 '--jobs', '1', '--format', 'json'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3 and len(err) == 1, err
+    assert 'not enough still data' in err[0] and 'the stamps are 1 ns apart' in err[0], err
 
 
 @pytest.mark.parametrize('text, expect', [

@@ -62,6 +62,11 @@ class SampleGate:
             self._check_frozen(y_part)
             self.motion.take(*self.spikes.take(t_part, y_part), rate_hz)
 
+    def release(self) -> None:
+        """Pass the rows the spike filter holds on now (live: no wait for a chunk)."""
+        if self._rate_hz > 0:
+            self.motion.take(*self.spikes.release(), self._rate_hz)
+
     def end_segment(self) -> None:
         """End the segment here (a gap, NaN, saturation, a restart): no term spans it."""
         self.flush()

@@ -163,6 +163,10 @@ class StampClock:
             t = np.concatenate(([stamp], t))
             y = np.concatenate((row[None, :], y))
         far_ns = self.config.irregular_gap_s * NS
+        steps = np.diff(t)
+        steps = steps[steps > 0]
+        if steps.size > 1:      # far is also far against the record's own step
+            far_ns = max(far_ns, 100.0 * float(np.median(steps)))
         out: list = []
         restart = False
         pos, n = 0, t.size

@@ -21,6 +21,7 @@ from typing import Callable, Self
 import numpy as np
 
 from imu_allan.core.allan import AllanCurve
+from imu_allan.core.noise.unit_check import unit_warnings
 from imu_allan.errors import InputError, NotEnoughStillData
 from imu_allan.pipeline import session_state
 from imu_allan.pipeline.checks import SampleGate
@@ -92,6 +93,10 @@ class Session:
         spans the break.
         """
         self.gate.end_segment()
+
+    def release(self) -> None:
+        """Judge the rows the spike filter holds now (the live path, after each batch)."""
+        self.gate.release()
 
     def flush(self) -> None:
         """Accumulate samples still held back (call at the end of a recording)."""
@@ -180,7 +185,10 @@ class Session:
         # Motion first: vibration while driving also looks like spikes.
         problem = self.still_problem
         if problem is not None:
-            raise NotEnoughStillData(f'not enough still data: {problem}')
+            # Stamps in the wrong unit shrink or stretch the record: say so here too.
+            hints = unit_warnings(self.rate_hz, None, None) if self.rate_hz > 0 else []
+            raise NotEnoughStillData(f'not enough still data: {problem}'
+                                     + ''.join(f' ({h})' for h in hints))
         s = self.stats
         checked = max(s.n_received - s.n_nonfinite, 1)
         worst = max(s.spikes.items(), key=lambda kv: kv[1], default=None)

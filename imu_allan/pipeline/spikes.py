@@ -83,6 +83,20 @@ class SpikeFilter:
         self._held_t, self._held_y = t[k:].copy(), full[left + k:].copy()
         return t[:k], out
 
+    def release(self) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Judge the held rows now, with the context there is; return them (cleaned).
+
+        The live path calls this after each batch, so no row waits for a whole chunk;
+        the cleaned rows stay the left context of the next ones.
+        """
+        t, y = self._held_t, self._held_y
+        if self.sigma <= 0 or y.shape[0] == 0:
+            return t[:0], y[:0]
+        self._held_t, self._held_y = t[:0], y[:0]
+        left = self._left.shape[0]
+        return t, self._judge(np.concatenate((self._left, y)), left, y.shape[0])
+
     def flush(self) -> tuple[np.ndarray, np.ndarray]:
         """Judge the held rows with the context there is (end of a segment); return them."""
         t, y = self._held_t, self._held_y

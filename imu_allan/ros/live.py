@@ -153,6 +153,7 @@ class LiveInput:
                 stamp_ns, samples = self._check_resume(stamp_ns, samples)
             if stamp_ns.size:
                 self.session.add(stamp_ns, samples)
+                self.session.release()      # live: no row waits for a whole spike chunk
                 self._keep_raw(samples)
 
     def _decode(self, raws: list) -> tuple[np.ndarray, np.ndarray]:

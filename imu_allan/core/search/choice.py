@@ -189,7 +189,7 @@ def with_rivals(fit: AxisFit, run) -> AxisFit:
         lo, hi = min([p.ci95[0]] + values), max([p.ci95[1]] + values)
         if (lo, hi) != p.ci95:
             optimised[sym] = p._replace(ci95=(float(lo), float(hi)))
-    if flips:
+    if flips and t_b is not None:
         optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
         notes.append(f'T_B: flips between rival models that fit about as well ('
                      f'{t_b.value:.3g} s; {", ".join(flips)}): not identified')
