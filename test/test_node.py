@@ -984,3 +984,40 @@ def test_executable_without_data_shuts_down_cleanly_on_sigint(tmp_path):
     err = proc.stderr.read()         # not communicate(): readline() buffered the pipe
     assert proc.returncode == 0 and 'Traceback' not in err
     assert 'nothing written on shutdown: not enough data' in err, err
+
+
+@pytest.mark.parametrize('glitch', ['stamp_a_day_ahead', 'device_clock_restarted'])
+def test_a_glitched_stamp_or_a_restarted_clock_poisons_nothing_across_a_resume(
+        context, tmp_path, glitch):
+    # Before the resume: a stamp a day ahead is one dropped outlier, not a new clock,
+    # and is not saved as the newest stamp. After it: data from a device whose clock
+    # restarted (stamps an hour earlier) start a new segment and are used.
+    t, y = _record(200.0, 10.0)
+    if glitch == 'stamp_a_day_ahead':
+        t = t.copy()
+        t[1000] += 86_400 * 10 ** 9
+    first = Rig(context, tmp_path)
+    try:
+        first.feed(t, y)
+        assert _call(first, 'save').success
+        used = first.node.session.stats.n_used
+        assert used >= t.size - 1
+        assert first.node.session.stats.n_stamp_outliers == (glitch == 'stamp_a_day_ahead')
+    finally:
+        first.close()
+    if glitch == 'stamp_a_day_ahead':
+        t2, y2 = _record(200.0, 10.0, seed=2, t0_ns=int(t[-1]) + 5_000_000)
+    else:
+        t2, y2 = _record(200.0, 10.0, seed=2, t0_ns=T0_NS - 3600 * 10 ** 9)
+    second = Rig(context, tmp_path, resume=True)
+    try:
+        assert second.node.session.stats.n_used == used        # resumed, not refused
+        second.feed(t2, y2)
+        wait(lambda: (second.node.live.process() or True)
+             and second.node.session.stats.n_used >= used + t2.size - 1, 30,
+             'the new samples after the resume')
+        # The day-ahead stamp was not kept as the newest: the data go on, no restart.
+        assert second.node.session.stats.n_clock_restarts == (
+            glitch == 'device_clock_restarted')
+    finally:
+        second.close()
