@@ -31,7 +31,8 @@ from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.io import inputs
 from imu_allan.io.bag_writer import serialize_imu, write_imu_bag
 from imu_allan.io.csv_io import write_csv
-from imu_allan.io.inputs import open_input, Progress, stream_input
+from imu_allan.io.inputs import open_input, stream_input
+from imu_allan.io.progress import Progress
 from imu_allan.pipeline.session import SessionConfig
 
 REPO = Path(__file__).resolve().parents[1]

@@ -184,7 +184,7 @@ def _finite(obj):
 
 def _run_several(jobs: list, n_workers: int) -> list:
     """Analyse several inputs (in parallel when n_workers > 1), with a progress line."""
-    from imu_allan.io.inputs import Progress
+    from imu_allan.io.progress import Progress
     outcomes = [None] * len(jobs)
     if n_workers == 1:
         with Progress('inputs', len(jobs), unit='inputs') as bar:
@@ -237,7 +237,8 @@ def run(args) -> int:
 
 
 def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
-    from imu_allan.io.inputs import analyze_input, Progress
+    from imu_allan.io.inputs import analyze_input
+    from imu_allan.io.progress import Progress
     several = len(paths) > 1
     stems = _unique_stems(paths)
     outs = [(args.out / s) if several else args.out for s in stems]

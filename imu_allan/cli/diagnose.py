@@ -19,7 +19,8 @@ from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
 from imu_allan.core.diagnose import (base_terms, DEFAULT_BASE, diagnose_session, EFFECTS,
                                      N_REPLICAS)
 from imu_allan.errors import InputError
-from imu_allan.io.inputs import open_input, Progress, raw_tap, stream_input
+from imu_allan.io.inputs import open_input, raw_tap, stream_input
+from imu_allan.io.progress import Progress
 from imu_allan.pipeline.session import SessionConfig
 
 
