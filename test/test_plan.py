@@ -160,3 +160,29 @@ def test_analysis_plan_in_summary_json_and_plan_command(tmp_path, capsys):
     out = capsys.readouterr().out
     assert 'predicted from a record of 10.0 min at 50 Hz' in out
     assert result.plans['gyro_x'].table_lines()[0] in out and 'gyro_x: pinned: N' in out
+
+
+def test_a_plan_from_a_model_that_does_not_hold_says_so():
+    """White noise alone fitted to a Gauss-Markov curve: its plan carries a caveat."""
+    from imu_allan.core.fit import fit_axis
+    from imu_allan.core.fit.trust import judge_fit
+    from imu_allan.ros.plan_report import progress_report, targets_met
+    rate = 100.0
+    y = simulate_axis(XSENS_GYRO, rate, int(rate * 1800), np.random.default_rng(3))
+    c = allan_curve(y, rate, 'dense', confidence=0.95)
+    args = (c.tau_s, c.avar[:, 0], c.edf[:, 0], rate, y.size)
+    right = search_axis(*args, unit='rad/s').fit
+    wrong = judge_fit(fit_axis(*args, terms=('white',), unit='rad/s'))
+    assert right.model_consistent and not wrong.model_consistent
+    plans = plan_fits({'gyro_x': right, 'gyro_y': wrong}, rate, 1800.0, {'N': 0.5})
+    assert plans['gyro_x'].caveat == ''
+    assert 'does not' in plans['gyro_y'].caveat
+    assert plans['gyro_y'].to_json()['caveat'] == plans['gyro_y'].caveat
+    assert plans['gyro_y'].table_lines()[-1] == f'  caveat: {plans["gyro_y"].caveat}'
+    assert 'times may be short' in plans['gyro_y'].progress_line()
+    assert 'model does not hold on gyro_y' in progress_report(plans)[0]
+    # Every target met, but the model does not hold: no self-stop on it.
+    met = plans['gyro_x']._replace(params=tuple(
+        p._replace(kind='pinned') for p in plans['gyro_x'].params))
+    assert targets_met({'gyro_x': met}, 1)
+    assert not targets_met({'gyro_x': met._replace(caveat=plans['gyro_y'].caveat)}, 1)

@@ -23,8 +23,9 @@ def plan_values(plan: AxisPlan | None) -> list:
 
     Per parameter P: ``P_width_now`` and ``P_target`` (relative 95 % half-widths),
     ``P_time_to_target_s`` (record length at which the target is met) and ``P_plan``
-    (pinned, predicted, at_least or beyond); then ``plan_remaining_s`` and ``plan``
-    (one line).  Empty without a plan.
+    (pinned, predicted, at_least or beyond); then ``plan_remaining_s``, ``plan`` (one
+    line) and, where the model behind the plan does not hold, ``plan_caveat``.  Empty
+    without a plan.
     """
     if plan is None:
         return []
@@ -35,8 +36,8 @@ def plan_values(plan: AxisPlan | None) -> list:
     for s in plan.separations:
         key = s.question.replace(' ', '_')
         out.append((f'{key}_time_s', _num(s.time_s)))
-    return out + [('plan_remaining_s', _num(plan.remaining_s())),
-                  ('plan', plan.progress_line())]
+    out += [('plan_remaining_s', _num(plan.remaining_s())), ('plan', plan.progress_line())]
+    return out + ([('plan_caveat', plan.caveat)] if plan.caveat else [])
 
 
 def progress_report(plans: dict) -> tuple[str, list]:
@@ -52,7 +53,8 @@ def progress_report(plans: dict) -> tuple[str, list]:
     -------
     text : str
         '' without plans; else e.g. ' | gyro_x pinned: N; B, T_B in 2.1 h more | ...',
-        or ' | every target met' when all axes are pinned.
+        or ' | every target met' when all axes are pinned; the axes whose model does not
+        hold are named at the end.
     values : list of (str, str)
         ``<axis>_pinned`` (the pinned parameters), ``<axis>_remaining_s`` per axis and
         ``plan_remaining_s`` (the longest).
@@ -71,13 +73,21 @@ def progress_report(plans: dict) -> tuple[str, list]:
     remaining = [p.remaining_s() for p in plans.values()]
     longest = math.nan if any(math.isnan(r) for r in remaining) else max(remaining)
     values.append(('plan_remaining_s', _num(longest)))
+    caveats = [axis for axis, plan in plans.items() if plan.caveat]
+    tail = (f' | model does not hold on {", ".join(caveats)}: times may be short'
+            if caveats else '')
     if not parts:
-        return ' | every target met', values
+        return ' | every target met' + tail, values
     when = f'in {hours(longest)} more' if not math.isnan(longest) else 'later (bounds only)'
-    return f' | every target met {when} | ' + ' | '.join(parts), values
+    return f' | every target met {when} | ' + ' | '.join(parts) + tail, values
 
 
 def targets_met(plans: dict, n_axes_fitted: int) -> bool:
-    """Whether every fitted axis has a plan and meets every target now."""
+    """
+    Whether every fitted axis has a plan and meets every target now.
+
+    Not while the model of an axis does not hold (its plan's caveat): its widths assume
+    a model that a longer record will likely change.
+    """
     return bool(plans) and len(plans) >= n_axes_fitted and all(
-        p.all_pinned() for p in plans.values())
+        p.all_pinned() and not p.caveat for p in plans.values())

@@ -358,4 +358,35 @@ def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
     present = {a: fits[a].optimised for a in models}
     # One BLAS thread, as the fit: tiny matrices, and the same rounding in every process.
     with single_thread_blas():
-        return plan_axes(models, rate_hz, duration_s, targets, present)
+        plans = plan_axes(models, rate_hz, duration_s, targets, present)
+    return {a: plan._replace(caveat=plan_caveat(fits[a])) for a, plan in plans.items()}
+
+
+def plan_caveat(fit) -> str:
+    """
+    Say why a fit's plan may promise too short a record ('' when its model holds).
+
+    The planner extrapolates the fitted model: where that model does not explain its
+    own curve (an effect it lacks) or the fit is not trusted (conservative values
+    replaced it), a longer record will likely need more terms, whose parameters widen
+    the intervals, and the predicted times are then lower limits at best.
+
+    Parameters
+    ----------
+    fit : AxisFit
+        The fit the plan came from.
+
+    Returns
+    -------
+    str
+        The caveat, or ''.
+
+    """
+    if fit.trust:
+        return 'the fit is not trusted (' + '; '.join(fit.trust) + '): the times assume ' \
+            'its model, which does not hold'
+    if fit.model_consistent is False:
+        return (f'the model does not explain the curve (chi2 {fit.chi2:.0f} for {fit.dof} '
+                'dof): the times assume it does, and a record that needs more terms takes '
+                'longer')
+    return ''

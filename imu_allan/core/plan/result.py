@@ -118,12 +118,17 @@ class AxisPlan(NamedTuple):
         Length of the record the model came from [s] (0: a datasheet).
     params : tuple of ParamPlan
     separations : tuple of Separation
+    caveat : str
+        Why the times may be too short ('' when the model behind them is trusted): the
+        fitted model does not explain its curve, or the fit is not trusted.  The times
+        assume the model holds; a record that needs more terms takes longer.
 
     """
 
     duration_s: float
     params: tuple
     separations: tuple
+    caveat: str = ''
 
     def remaining_s(self) -> float:
         """
@@ -153,7 +158,7 @@ class AxisPlan(NamedTuple):
         return {'duration_s': self.duration_s,
                 'params': {p.name: p.to_json() for p in self.params},
                 'separations': {s.question: s.to_json() for s in self.separations},
-                'remaining_s': json_num(self.remaining_s())}
+                'remaining_s': json_num(self.remaining_s()), 'caveat': self.caveat}
 
     def progress_line(self) -> str:
         """One line: which parameters are pinned, and the time to each of the rest."""
@@ -168,7 +173,8 @@ class AxisPlan(NamedTuple):
             more = hours(max(p.time_s - self.duration_s, 0.0))
             rest.append(f'{p.name} in {">= " if p.kind == "at_least" else ""}{more}')
         text = f'pinned: {", ".join(pinned) or "none"}'
-        return text + ('; ' + ', '.join(rest) if rest else '')
+        text += '; ' + ', '.join(rest) if rest else ''
+        return text + (' (model does not hold: times may be short)' if self.caveat else '')
 
     def table_lines(self) -> list:
         """Human table: parameter, width now, target, record length, widths at 1/3/10 h."""
@@ -186,4 +192,6 @@ class AxisPlan(NamedTuple):
         for s in self.separations:
             state = 'separated now' if s.separated else f'needs {hours(s.time_s)}'
             lines.append(f'  {s.question}: {state}')
+        if self.caveat:
+            lines.append(f'  caveat: {self.caveat}')
         return lines
