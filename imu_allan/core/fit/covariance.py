@@ -42,26 +42,9 @@ class _LagQuadrature:
 
     def __init__(self, m: np.ndarray, n_terms: np.ndarray, reach: np.ndarray):
         k = m.size
-        pairs = [(p, q) for p in range(k) for q in range(p, k)]
-        # Each pair's nodes, in order: its exact lag ranges, then its graded pieces.  The
-        # pieces are listed per pair in plain Python; the nodes are made in one go.
-        lo_a: list = []     # a range's first lag, or a piece's lower edge
-        hi_b: list = []     # a range's length, or a piece's upper edge
-        piece: list = []
-        per_pair: list = []
-        for p, q in pairs:
-            zones, gaps = _pair_layout(int(m[p]), int(m[q]), int(n_terms[p]), int(n_terms[q]),
-                                       int(reach[p] + reach[q]))
-            before = len(lo_a)
-            for s, e in zones:
-                lo_a.append(float(s))
-                hi_b.append(float(e + 1 - s))
-            for edges in gaps:
-                lo_a.extend(edges[:-1])
-                hi_b.extend(edges[1:])
-            piece += [False] * len(zones) + [True] * (len(lo_a) - before - len(zones))
-            per_pair.append(len(lo_a) - before)
-        a, b, is_piece = np.array(lo_a), np.array(hi_b), np.array(piece)
+        self.pairs = np.array([(p, q) for p in range(k) for q in range(p, k)], dtype=np.int64)
+        # Each pair's items, in order: its exact lag ranges, then its graded pieces.
+        a, b, is_piece, per_pair = _layout(m, n_terms, reach, self.pairs)
         counts = np.where(is_piece, _GL_X.size, b).astype(np.int64)
         item = np.repeat(np.arange(a.size), counts)
         at = np.arange(item.size) - np.repeat(np.cumsum(counts) - counts, counts)
@@ -70,10 +53,10 @@ class _LagQuadrature:
         gl = np.minimum(at, _GL_X.size - 1)
         node_piece = is_piece[item]
         self.h = np.where(node_piece, mid[item] + half[item] * _GL_X[gl], a[item] + at)
-        self.pairs = np.array(pairs, dtype=np.int64)
-        nodes_per_pair = np.bincount(np.repeat(np.arange(len(pairs)), per_pair), weights=counts,
-                                     minlength=len(pairs)).astype(np.int64)
-        self.pair = np.repeat(np.arange(len(pairs)), nodes_per_pair)
+        n_pairs = len(self.pairs)
+        nodes_per_pair = np.bincount(np.repeat(np.arange(n_pairs), per_pair), weights=counts,
+                                     minlength=n_pairs).astype(np.int64)
+        self.pair = np.repeat(np.arange(n_pairs), nodes_per_pair)
         self.starts = np.cumsum(nodes_per_pair) - nodes_per_pair
         n1 = n_terms[self.pairs[self.pair, 0]].astype(np.float64)
         n2 = n_terms[self.pairs[self.pair, 1]].astype(np.float64)
@@ -160,43 +143,77 @@ def _lru_get(cache: dict, key, size: int, make):
     return value
 
 
-def _pair_layout(m1: int, m2: int, n1: int, n2: int, reach: int) -> tuple[list, list]:
+def _layout(m: np.ndarray, n_terms: np.ndarray, reach: np.ndarray,
+            pairs: np.ndarray) -> tuple:
     """
-    Lay out the lag axis of one pair of taus (m1, m2 samples; n1, n2 terms).
+    Lay out the lag axis of every pair of taus at once.
+
+    Per pair (m1, m2 samples; n1, n2 terms) the cuts are the stencil kinks
+    i m1 - j m2, the pair-count kinks 0 and n2 - n1, and the ends of the lag range;
+    lags within ``_EXACT`` of a cut form exact runs (merged where they touch), and the
+    gaps between runs are covered by pieces of ``_EXACT``, ``_GROWTH`` times that ...
+    from both ends of the gap.
+
+    Parameters
+    ----------
+    m, n_terms, reach : np.ndarray
+        Shape (k,): cluster sizes [samples], Allan terms, and the lag reach of each tau
+        beyond its kinks [lags].
+    pairs : np.ndarray
+        Shape (n_pairs, 2), int64: the tau indices (p, q) of each pair.
 
     Returns
     -------
-    zones : list of [int, int]
-        First and last lag of each run summed exactly (within ``_EXACT`` of a cut).
-    gaps : list of list of float
-        Between consecutive zones, the edges of the graded pieces [lags].
+    lo_a, hi_b : np.ndarray
+        Shape (n,): per item, an exact run's first lag and its length, or a piece's
+        lower and upper edge [lags].
+    is_piece : np.ndarray
+        Shape (n,), bool.
+    per_pair : np.ndarray
+        Shape (n_pairs,), int64: items per pair; each pair's items are its runs, then
+        its pieces, both in lag order.
 
     """
-    kinks = sorted({i * m1 - j * m2 for i in range(3) for j in range(3)})
-    lo = max(kinks[0] - reach, -(n1 - 1))
-    hi = min(kinks[-1] + reach, n2 - 1)
-    cuts = sorted({c for c in kinks + [0, n2 - n1, lo, hi] if lo <= c <= hi})
-    zones: list[list[int]] = []
-    for c in cuts:
-        s, e = max(lo, c - _EXACT), min(hi, c + _EXACT)
-        if zones and s <= zones[-1][1] + 1:
-            zones[-1][1] = max(zones[-1][1], e)
-        else:
-            zones.append([s, e])
-    gaps = [_graded(e0 + 0.5, s1 - 0.5, float(_EXACT))
-            for (_, e0), (s1, _) in zip(zones[:-1], zones[1:])]
-    return zones, gaps
-
-
-def _graded(a: float, b: float, first: float) -> list:
-    """Edges of pieces covering [a, b], sizes first, _GROWTH first ... from both ends."""
-    left, right = [a], [b]
-    size = first
-    while right[-1] - left[-1] > 2.0 * size:
-        left.append(left[-1] + size)
-        right.append(right[-1] - size)
-        size *= _GROWTH
-    return left + right[::-1]
+    p, q = pairs[:, 0], pairs[:, 1]
+    m1, m2 = m[p].astype(np.int64), m[q].astype(np.int64)
+    n1, n2 = n_terms[p].astype(np.int64), n_terms[q].astype(np.int64)
+    kinks = np.stack([i * m1 - j * m2 for i in range(3) for j in range(3)], axis=1)
+    lo = np.maximum(kinks.min(axis=1) - (reach[p] + reach[q]), -(n1 - 1))
+    hi = np.minimum(kinks.max(axis=1) + (reach[p] + reach[q]), n2 - 1)
+    cuts = np.column_stack([kinks, np.zeros_like(lo), n2 - n1, lo, hi])
+    inside = (cuts >= lo[:, None]) & (cuts <= hi[:, None])
+    cuts = np.sort(np.where(inside, cuts, np.iinfo(np.int64).max), axis=1)
+    row, col = np.nonzero(cuts != np.iinfo(np.int64).max)
+    c = cuts[row, col]
+    s, e = np.maximum(lo[row], c - _EXACT), np.minimum(hi[row], c + _EXACT)
+    # Runs of one pair that touch merge (s and e grow with the cut, so the run so far
+    # ends at the previous cut's e).
+    first = np.ones(c.size, bool)
+    first[1:] = (row[1:] != row[:-1]) | (s[1:] > e[:-1] + 1)
+    starts = np.flatnonzero(first)
+    ends = np.r_[starts[1:], c.size] - 1
+    run_s, run_e, run_row = s[starts], e[ends], row[starts]
+    # Gaps between consecutive runs of a pair, and their graded pieces: edge t of a gap
+    # lies steps[t] = x0 (G^t - 1) / (G - 1) from its end (x0 = _EXACT, G = _GROWTH), and a
+    # gap of L lags takes n steps from each end, n = #{t >= 0: L > 2 steps[t + 1]}.
+    gap = np.flatnonzero(run_row[1:] == run_row[:-1])
+    a, b = run_e[gap] + 0.5, run_s[gap + 1] - 0.5
+    steps = _EXACT * (_GROWTH ** np.arange(32) - 1.0) / (_GROWTH - 1.0)
+    n = np.searchsorted(2.0 * steps[1:], b - a, side='left')
+    n_edges = 2 * n + 2
+    gi = np.repeat(np.arange(gap.size), n_edges)
+    k = np.arange(gi.size) - np.repeat(np.cumsum(n_edges) - n_edges, n_edges)
+    edges = np.where(k <= n[gi], a[gi] + steps[k], b[gi] - steps[n_edges[gi] - 1 - k])
+    keep = np.ones(edges.size, bool)
+    keep[np.cumsum(n_edges) - 1] = False                # a piece per edge but the last
+    piece_lo, piece_hi = edges[keep], edges[np.flatnonzero(keep) + 1]
+    piece_row = run_row[gap][gi[keep]]
+    lo_a = np.concatenate([run_s.astype(float), piece_lo])
+    hi_b = np.concatenate([(run_e + 1 - run_s).astype(float), piece_hi])
+    is_piece = np.r_[np.zeros(run_s.size, bool), np.ones(piece_lo.size, bool)]
+    order = np.argsort(np.r_[run_row, piece_row] * 2 + is_piece, kind='stable')
+    per_pair = np.bincount(np.r_[run_row, piece_row], minlength=len(pairs))
+    return lo_a[order], hi_b[order], is_piece[order], per_pair
 
 
 class _CurveCovariance:
