@@ -33,3 +33,12 @@ def test_session_config_takes_the_matching_values():
     cfg = session_config({'on_motion': 'restart', 'motion_gyro_rad_s': 0.2,
                           'publish_period_s': 3.0})
     assert cfg.on_motion == 'restart' and cfg.motion_gyro_rad_s == 0.2
+    # The sample gate's settings (spikes, motion on the sensor's own noise scale, the
+    # still-data floor) are node parameters too, with the pipeline's defaults.
+    gate = ('spike_sigma', 'max_spike_share', 'motion_sigma', 'anchor_s', 'min_still_share',
+            'min_still_s')
+    defaults = session_config({})
+    for name in gate:
+        assert BY_NAME[name].default == getattr(defaults, name), name
+    cfg = session_config({'spike_sigma': 0.0, 'min_still_share': 0.5, 'anchor_s': 30.0})
+    assert (cfg.spike_sigma, cfg.min_still_share, cfg.anchor_s) == (0.0, 0.5, 30.0)
