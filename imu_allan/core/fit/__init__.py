@@ -37,7 +37,8 @@ Optimised (generalised least squares on the Allan variance, GMWM-style):
   at the plug-in Sigma(theta) of that solution (:meth:`_Fitter.irls`).
 * Term selection: every subset of the candidate terms is fitted with the weights of the
   full model; the subset minimising J + 2 p (AIC; J the GLS chi-square, p the number
-  of parameters) is what the data support (``AxisFit.terms``).
+  of parameters; the one selection rule and its penalties:
+  :mod:`imu_allan.core.fit.criterion`) is what the data support (``AxisFit.terms``).
 * Values and intervals come from the supported terms plus the paper's core terms
   (white, bias instability, random walk), so that a weak term still takes its share
   of the curve.  Each interval is a profile interval: the set of values v for which the
@@ -64,7 +65,7 @@ from typing import TYPE_CHECKING
 from imu_allan.core.fit.result import AxisFit, json_floats, json_num, KINDS, Param
 
 if TYPE_CHECKING:
-    from imu_allan.core.fit.axis import DEFAULT_TERMS, fit_axis, fit_curve, IC_PENALTY, Z95
+    from imu_allan.core.fit.axis import DEFAULT_TERMS, fit_axis, fit_curve, Z95
     from imu_allan.core.fit.covariance import _CurveCovariance
     from imu_allan.core.fit.nominal import nominal_fit
     from imu_allan.core.fit.params import CORE_PARAMS, Z95_ONE_SIDED
@@ -72,7 +73,7 @@ if TYPE_CHECKING:
 #: The fitting machinery (scipy.optimize) is imported on first use: a process that only
 #: reports fits made elsewhere (``imu-allan analyze``'s main process) never loads it.
 _LAZY = {'DEFAULT_TERMS': 'axis', 'fit_axis': 'axis', 'fit_curve': 'axis',
-         'IC_PENALTY': 'axis', 'Z95': 'axis', '_CurveCovariance': 'covariance',
+         'Z95': 'axis', '_CurveCovariance': 'covariance',
          'nominal_fit': 'nominal', 'CORE_PARAMS': 'params', 'Z95_ONE_SIDED': 'params'}
 
 
@@ -82,6 +83,6 @@ def __getattr__(name: str):
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['AxisFit', 'CORE_PARAMS', 'DEFAULT_TERMS', 'fit_axis', 'fit_curve', 'IC_PENALTY',
+__all__ = ['AxisFit', 'CORE_PARAMS', 'DEFAULT_TERMS', 'fit_axis', 'fit_curve',
            'json_floats', 'json_num', 'KINDS', 'nominal_fit', 'Param', 'Z95', 'Z95_ONE_SIDED',
            '_CurveCovariance']

@@ -14,6 +14,7 @@ import numpy as np
 from imu_allan.core.allan import AllanCurve
 from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
+from imu_allan.core.fit.criterion import criterion, KEEP_PENALTY
 from imu_allan.core.fit.nominal import nominal_fit
 from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported
 from imu_allan.core.fit.result import AxisFit
@@ -26,8 +27,6 @@ DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
 #: A filter time constant below this share of the shortest fitted tau is not identified
 #: (:func:`filter_identified`).
 FILTER_MIN_TAU_SHARE = 0.2
-#: Penalty per parameter of the information criterion (AIC).
-IC_PENALTY = 2.0
 Z95 = 1.959963984540054
 
 
@@ -282,7 +281,9 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
 
 def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple:
     """
-    Fit the full candidate model, then every subset at its weights; keep the best (AIC).
+    Fit the full candidate model, then every subset at its weights; keep the best.
+
+    The criterion keeps a base term at 2 per parameter (AIC: :mod:`.criterion`).
 
     Returns the full model's solution and covariance, its nonlinear parameters by label
     and the set of labels the data support (all positive terms when not ``select``).
@@ -306,7 +307,7 @@ def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple
             sol = _fit_fixed_w(fitter.data, slots, [phi_full[s.label] for s in slots])
             if np.any(sol.coef <= 0):
                 continue  # a zero term: the same fit as a smaller subset
-            ic = sol.j + IC_PENALTY * _n_params(slots)
+            ic = criterion(sol.j, _n_params(slots), KEEP_PENALTY)
             if best is None or ic < best[0]:
                 best = (ic, subset)
     if best is None:

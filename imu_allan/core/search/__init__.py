@@ -38,10 +38,11 @@ release.  The model's own low-pass is the term ``filtered_white``.
 from typing import Sequence
 
 from imu_allan.core.allan.blas import single_thread_blas
+from imu_allan.core.fit.criterion import DELTA_MIN
 from imu_allan.core.noise.terms import effect_name, effect_names, TERMS
 from imu_allan.core.search.choice import with_rivals
-from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, DELTA_MIN, MAX_STEPS,
-                                         Search, SEARCH_EFFECTS, Step)
+from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, MAX_STEPS, Search,
+                                         SEARCH_EFFECTS, Step)
 from imu_allan.core.search.run import _finish, _Run
 from imu_allan.errors import InputError
 

@@ -32,7 +32,7 @@ _RIVAL = re.compile(r'^(\w+) \(chi2 drop ([-\d.e+]+)\)$')
 GRID_POINTS = 8
 #: A rival structure (the runner-up effect of a step in its place) within this many
 #: units of -2 ln L + BIC of the chosen model fits about equally well: the search's own
-#: margin :data:`imu_allan.core.search.rules.DELTA_MIN` is what an effect must buy.
+#: margin :data:`imu_allan.core.fit.criterion.DELTA_MIN` is what an effect must buy.
 RIVAL_DELTA = 10.0
 #: Parameters whose intervals are widened by the rivals, with the term each comes from.
 _LEVELS = {'N': ('white', 'filtered_white'), 'B': ('bias_instability',),

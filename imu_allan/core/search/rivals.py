@@ -10,8 +10,9 @@ import math
 import numpy as np
 
 from imu_allan.core.fit.api import n_params
+from imu_allan.core.fit.criterion import criterion, DELTA_MIN
 from imu_allan.core.fit.judge import shows_quantization
-from imu_allan.core.search.rules import _label_for, DELTA_MIN
+from imu_allan.core.search.rules import _label_for
 
 #: Rival effects re-fitted (IRLS) and compared by their full likelihood at each step.
 N_RIVALS = 3
@@ -42,9 +43,9 @@ def _by_likelihood(fitter, slots_of, labels: list, ranked: list, penalty: float)
 
 
 def _neg2_loglik(fitter, sol, n_params: int, penalty: float) -> float:
-    """-2 ln L + BIC penalty of a solution at the fitter's current Sigma."""
+    """-2 ln L + BIC penalty of a solution at the fitter's current Sigma (:mod:`criterion`)."""
     logdet = 2.0 * float(np.sum(np.log(np.abs(np.diag(fitter.data.chol)))))
-    return sol.j + logdet + n_params * penalty
+    return criterion(sol.j + logdet, n_params, penalty)
 
 
 def _second_chance(fitter, slots_of, labels: list, sol, sigma, effects, penalty: float):

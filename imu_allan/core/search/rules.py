@@ -1,8 +1,10 @@
 """
 What the effect search may add, and when.
 
-Its constants (the effects, their fit terms, the margins), its result types and the
-rules an effect must pass: a label it can still take, periodogram evidence of a sinusoid.
+Its constants (the effects, their fit terms, the amplitude agreement), its result types
+and the rules an effect must pass: a label it can still take, periodogram evidence of a
+sinusoid.  The margin an effect must buy is the selection rule's
+(:data:`imu_allan.core.fit.criterion.DELTA_MIN`).
 """
 
 from typing import NamedTuple, Sequence
@@ -18,9 +20,6 @@ SEARCH_EFFECTS = search_effects()
 BASE_LABELS = ('white', 'bias_instability', 'random_walk')
 #: Most effects added per axis.
 MAX_STEPS = 4
-#: Drop of the GLS chi-square, beyond BIC's ln(k) per parameter, that an effect must buy
-#: (keeps clean axes clean: bench/search_power.py).
-DELTA_MIN = 10.0
 #: A sinusoid's amplitude from the curve and from the periodogram agree within this.
 AMPLITUDE_FACTOR = 3.0
 

@@ -14,14 +14,14 @@ from imu_allan.core.allan.quantiles import chi2_sf
 from imu_allan.core.fit import fit_axis
 from imu_allan.core.fit.api import (check_curve, filter_identified, filtered_start,
                                     fit_fixed_weights, Fitter, n_params, term_slot, thin)
+from imu_allan.core.fit.criterion import claim_penalty, DELTA_MIN, KEEP_PENALTY
 from imu_allan.core.fit.judge import P_CONSISTENT, shows_quantization
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.noise.model import base_name, TERMS
 from imu_allan.core.search.evidence import RAMP_LR_MIN, ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
-from imu_allan.core.search.rules import (_label_for, _sinusoid_evidence, DELTA_MIN, MAX_STEPS,
-                                         Step)
+from imu_allan.core.search.rules import _label_for, _sinusoid_evidence, MAX_STEPS, Step
 from imu_allan.errors import InputError
 
 
@@ -90,7 +90,7 @@ class _Run:
         self.fitter = Fitter(tau, y, e, m, n_terms, 1.0 / float(self.rate_hz),
                              self.n_samples, 'overlapping')
         self.k = tau.size
-        self.penalty = math.log(self.k)
+        self.penalty = claim_penalty(self.k)
 
     def slots_of(self, labels):
         """Return the slots of the labels, with narrowed sinusoid frequencies."""
@@ -286,7 +286,7 @@ class _Run:
             'gauss_markov', slots))
         drop = float(self.sol.j - new.j)
         need = 2 * self.penalty + DELTA_MIN
-        if new.coef[-1] > 0 and 2 * 2.0 < drop < need:
+        if new.coef[-1] > 0 and KEEP_PENALTY * 2 < drop < need:
             self.notes.append(cannot_tell('gauss_markov', 'one more Gauss-Markov process '
                                           'or none', drop, need, self.duration_s(),
                                           'chi2 drop'))
