@@ -1,14 +1,15 @@
 """
 No confident wrong number, over sizes: filtered and decimated sensors (issue 25).
 
-Usage: ``.venv/bin/python bench/trust_power.py [--seeds 5] [--hours 0.5,2,6]``.
-White noise, a Gauss-Markov process and a random walk (N 9.2e-4, B 3e-4 at T_B 50 s,
-K 1e-5) at 100 Hz, low-passed as drivers do (forward-backward Butterworth, one-pole)
-and decimated by 10.  Per case and size it counts the axes whose N is within 10 % of
+Usage: ``.venv/bin/python bench/trust_power.py [--seeds 5] [--hours 0.5,2,6]
+[--rate 10]``.  White noise, a Gauss-Markov process and a random walk (N 9.2e-4, B 3e-4
+at T_B 50 s, K 1e-5) at ten times ``--rate``, low-passed as drivers do (forward-backward
+Butterworth, one-pole; the cut-offs in the table are those of a 10 Hz output, scaled
+with the rate) and decimated by 10.  Per case and size it counts the axes whose N is within 10 % of
 the truth as a trusted estimate ("ok"), the axes marked not trusted whose conservative
 N covers the truth within 10 % or bounds it from above ("warned"), and the confident
-wrong numbers ("wrong": trusted, N off by more than 10 %).  Clean 10 Hz axes without a
-filter give the false alarms (marked not trusted).
+wrong numbers ("wrong": trusted, N off by more than 10 %).  Clean axes at the output
+rate without a filter give the false alarms (marked not trusted).
 """
 
 import argparse
@@ -26,15 +27,16 @@ CASES = (('none', 0.0), ('filtfilt', 4.0), ('filtfilt', 0.5), ('one_pole', 2.0),
          ('one_pole', 0.05))
 
 
-def one(kind: str, cutoff_hz: float, hours: float, seed: int) -> str:
+def one(kind: str, cutoff_hz: float, hours: float, seed: int, rate_hz: float = 10.0) -> str:
     """Return 'ok', 'warned', 'wrong' (or 'false_alarm' on an unfiltered axis)."""
     spec = NoiseSpec(name='t', axes={'gyro_x': TRUTH})
     if kind == 'none':
-        _, y = simulate_imu(spec, 10.0, hours * 3600.0, seed=seed)
-        y, rate = y[:, 0], 10.0
+        _, y = simulate_imu(spec, rate_hz, hours * 3600.0, seed=seed)
+        y, rate = y[:, 0], rate_hz
     else:
-        _, y = simulate_imu(spec, 100.0, hours * 3600.0, seed=seed)
-        y, rate = driver_filtered(y[:, 0], 100.0, kind, cutoff_hz, 10)
+        _, y = simulate_imu(spec, 10.0 * rate_hz, hours * 3600.0, seed=seed)
+        y, rate = driver_filtered(y[:, 0], 10.0 * rate_hz, kind, cutoff_hz * rate_hz / 10.0,
+                                  10)
     taus = 2.0 ** (np.arange(0, 40) / 2.0) / rate
     taus = taus[taus <= y.size / rate / 4.0]
     curve = allan_curve(y, rate, taus, confidence=0.95)
@@ -53,12 +55,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     ap.add_argument('--seeds', type=int, default=5)
     ap.add_argument('--hours', default='0.5,2,6')
+    ap.add_argument('--rate', type=float, default=10.0, help='output rate [Hz]')
     args = ap.parse_args()
+    print(f'output rate {args.rate:g} Hz (cut-offs of a 10 Hz output, scaled)')
     print('| filter | cut-off [Hz] | hours | ok | warned | wrong | false alarm |')
     print('|---|---|---|---|---|---|---|')
     for kind, cutoff in CASES:
         for hours in [float(h) for h in args.hours.split(',')]:
-            got = [one(kind, cutoff, hours, 100 + s) for s in range(args.seeds)]
+            got = [one(kind, cutoff, hours, 100 + s, args.rate) for s in range(args.seeds)]
             print(f'| {kind} | {cutoff:g} | {hours:g} | {got.count("ok")} | '
                   f'{got.count("warned")} | {got.count("wrong")} | '
                   f'{got.count("false_alarm")} |', flush=True)

@@ -18,10 +18,11 @@ from plan_adis import compare_run  # noqa: E402, I100
 def test_twenty_minutes_predict_the_full_run(shared_dir):
     rows = compare_run(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run2.csv.gz', 20.0)
     checked = 0
-    for run, axis, p, w_short, w_full, t_pred, t_full, kind in rows:
+    for run, axis, p, w_short, w_full, t_pred, t_full, kind, w_pred in rows:
         if axis not in ('gyro_x', 'gyro_y') or p != 'N':
             continue
         assert kind == 'predicted', (axis, p)
         assert 0.5 <= t_pred / t_full <= 2.0, (axis, p, w_short, w_full, t_pred / 3600)
+        assert 0.7 <= w_pred / w_full <= 1.4, (axis, p, w_pred, w_full)
         checked += 1
     assert checked == 2
