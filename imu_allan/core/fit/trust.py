@@ -73,8 +73,11 @@ def _white(fit: AxisFit, trusted_model: bool = True):
     """
     Return N and its range from the white region past the filter (None without one).
 
-    The region is where the model's white share is >= 0.8, else where the measured
-    ADEV falls with a slope of -1/2 +- 0.1.  With ``trusted_model`` False (the
+    The region is where the model's white share is >= 0.8, else the first run of at
+    least two consecutive steps (an octave at the fit's spacing) where the measured
+    ADEV falls with a slope of -1/2 +- 0.1: white noise carries the short end of a
+    curve, and a single white-like step further out is as likely a bump turning over.
+    With ``trusted_model`` False (the
     conservative value of a fit already judged untrusted) the filter-bent leading taus
     are left out even where the model holds the filter: its shares are the distorted
     fit's.
@@ -87,11 +90,18 @@ def _white(fit: AxisFit, trusted_model: bool = True):
     i = 0 if trusted_model and 'filtered_white' in fit.terms else _unfiltered(fit)
     tau, avar, edf = fit.tau_s[i:], fit.avar_meas[i:], fit.edf[i:]
     got = white_region(tau, avar, edf, share[i:])
-    if got is None and tau.size >= 2:
+    if got is None and tau.size >= 3:
         slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
-        white = np.zeros(tau.size)
-        white[:-1][np.abs(slope + 0.5) <= 0.1] = 1.0
-        got = white_region(tau, avar, edf, white)
+        steps = np.abs(slope + 0.5) <= 0.1
+        pairs = np.flatnonzero(steps[:-1] & steps[1:])
+        if pairs.size:
+            first = int(pairs[0])
+            last = first + 1
+            while last + 1 < steps.size and steps[last + 1]:
+                last += 1
+            white = np.zeros(tau.size)
+            white[first:last + 2] = 1.0
+            got = white_region(tau, avar, edf, white)
     return got
 
 
