@@ -31,7 +31,7 @@ import numpy as np
 from imu_allan.core.fit.api import fit_fixed_weights, Fix, n_params, profile_threshold
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.noise.model import GM_PEAK_TAU
-from imu_allan.core.search.rivals import _grid_slots, _neg2_loglik
+from imu_allan.core.search.rivals import _neg2_loglik
 from imu_allan.core.search.rules import _label_for
 
 _RIVAL = re.compile(r'^(\w+) \(chi2 drop ([-\d.e+]+)\)$')
@@ -253,9 +253,9 @@ def ambiguous_bias(fit: AxisFit) -> AxisFit:
                     'criterion_rise': 0.0, 'N': levels['N'], 'B': other.value,
                     'T_B': time.value, 'K': levels['K']} for label, other, time in tied)
     names = ', '.join(f'{label} (B {o.value:.3g}, T {t.value:.3g} s)' for label, o, t in tied)
-    note = (f'B, T_B: the bias instability (B {b.value:.3g}, T_B {t_b.value:.3g} s) and '
-            f'{names} have levels the data do not order: T_B not identified, the B '
-            'interval spans them')
+    own = f', T_B {t_b.value:.3g} s' if math.isfinite(t_b.value) else ''
+    note = (f'B, T_B: the bias instability (B {b.value:.3g}{own}) and {names} have levels '
+            'the data do not order: T_B not identified, the B interval spans them')
     return replace(fit, optimised=optimised, notes=fit.notes + (note,),
                    rivals=fit.rivals + listed)
 
@@ -284,11 +284,12 @@ def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
     is a different model only if every process of it turns over within the fitted
     taus (ADEV peak at 1.89 T, paper eq. 8, below the longest tau): a process peaking
     beyond is the random walk under another name, and K keeps its estimate (a clean
-    white + Gauss-Markov + random-walk record).  When its chi-square is within the
-    profile threshold of the
-    final model's minimum (:func:`imu_allan.core.fit.api.profile_threshold`, the same
-    rise that bounds every 95 % interval), K = 0 is in the confidence set of that
-    wider family: K is reported as an upper bound at its interval's upper end, and the
+    white + Gauss-Markov + random-walk record).  A time at an end of its range is no
+    rival either (the fit's own rule: not identified, the curve reshaped).  When its
+    chi-square is within the profile threshold of the final model's minimum
+    (:func:`imu_allan.core.fit.api.profile_threshold`, the same rise that bounds every
+    95 % interval), K = 0 is in the confidence set of that wider family: K is
+    reported as an upper bound at its interval's upper end, and the
     alternative model goes to the rivals (the ADIS16405 gyros: K from 6e-6 to 2.2e-5
     over six runs, the replaced models fitting as well on every axis).  B's interval
     spans the alternative's B; T_B is not identified when the alternative gives the
@@ -307,19 +308,22 @@ def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
     if n_params(alt) >= run.k:
         return fit
     phi0 = [sol.phi[i] for i in kept] + [tuple(math.sqrt(lo * hi) for lo, hi in alt[-1].bounds)]
-    new = fit_fixed_weights(run.fitter.data, alt, phi0, grid_slots=_grid_slots('gauss_markov',
-                                                                               alt))
+    # Only the new process is gridded; the others start where they are (the polish
+    # moves them).
+    new = fit_fixed_weights(run.fitter.data, alt, phi0, grid_slots=[len(alt) - 1])
     family = [i for i, s in enumerate(alt) if s.term.name in ('bias_instability', 'gauss_markov')]
     rise = float(new.j - sol.j)
     slowest = max(new.phi[i][0] for i in family)
-    if (np.any(new.coef[family] <= 0) or GM_PEAK_TAU * slowest > run.tau.max()
+    pinned = any(not alt[i].bounds[0][0] * 1.02 < new.phi[i][0] < alt[i].bounds[0][1] / 1.02
+                 for i in family)
+    if (np.any(new.coef[family] <= 0) or pinned or GM_PEAK_TAU * slowest > run.tau.max()
             or rise > profile_threshold(sol.j, run.k - n_params(slots))):
         return fit
     i_b = _largest_gm(alt, new, run.fitter.data.scale)
     levels = _levels(alt, new, run.fitter.data.scale, -1 if i_b is None else i_b)
     optimised = dict(fit.optimised)
     optimised['K'] = Param(k.ci95[1], (0.0, k.ci95[1]), 'upper_bound', k.unit)
-    notes = [f'K: a slower Gauss-Markov process (T {levels["T_B"]:.3g} s) instead of the '
+    notes = [f'K: a slower Gauss-Markov process (T {slowest:.3g} s) instead of the '
              f'random walk fits as well (chi-square {rise:+.1f}): 95 % upper bound']
     if b is not None and b.kind == 'estimate':
         optimised['B'] = b._replace(ci95=(min(b.ci95[0], levels['B']),
@@ -327,8 +331,8 @@ def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
     if t_b is not None and t_b.kind in ('estimate', 'lower_bound') and not (
             t_b.ci95[0] <= levels['T_B'] <= t_b.ci95[1]):
         optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
-        notes.append(f'T_B: {t_b.value:.3g} s with the random walk, {levels["T_B"]:.3g} s with '
-                     'the slower process instead: not identified')
+        notes.append(f'T_B: {t_b.value:.3g} s with the random walk, {levels["T_B"]:.3g} s '
+                     'with the slower process instead: not identified')
     listed = ({'model': 'a slower gauss_markov instead of random_walk',
                'criterion_rise': rise, **levels},)
     return replace(fit, optimised=optimised, notes=fit.notes + tuple(notes),
