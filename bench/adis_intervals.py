@@ -1,5 +1,5 @@
 """
-Intervals across the six ADIS16405 runs: does one value lie inside every run's interval?
+Intervals across the six ADIS16405 runs: one value inside every run's interval, per pair.
 
 Usage: ``.venv/bin/python bench/adis_intervals.py [--runs 1,2,3,4,5,6] [--cache DIR]``
 (needs ``../shared/realdata``).  Each run goes through the path of

@@ -261,7 +261,7 @@ def ambiguous_bias(fit: AxisFit) -> AxisFit:
 
 
 def _final_solution(run):
-    """The search's final labels, slots and solution at its final weights."""
+    """Return the search's final slots and solution at its final weights."""
     run.fitter.data.set_sigma(run.sigma)
     slots = run.slots_of(run.labels)
     sol = run.sol
