@@ -17,8 +17,9 @@ import pytest
 from imu_allan import AXES
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.diagnose.drivers import driver_filtered
+from imu_allan.core.fit.trust import curve_k_bound
 from imu_allan.core.noise.params import AxisNoise, NoiseSpec
-from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
 from imu_allan.core.outputs.kalman import kalman_model
 from imu_allan.core.search import search_axis
 from imu_allan.pipeline.analysis import AnalysisResult
@@ -90,6 +91,27 @@ def test_untrusted_axis_warns_and_comments_every_consumer_file():
     assert 'B_floor' in result.summary_line('gyro_x')
     # The noise model (simulation, noise_model.yaml) is the conservative one too.
     assert math.isclose(fit.model.N, fit.optimised['N'].value, rel_tol=1e-12)
+
+
+def test_the_curve_k_bound_covers_the_truth_and_ignores_an_edf_jump():
+    # White noise and a random walk, 1 h at 10 Hz: the measured AVAR at the longest
+    # taus (EDF of a few) lies below the truth about half the time, so the minimum of
+    # sqrt(3 AVAR / tau) itself is no 95 % bound; the chi-square limits are.
+    noise = AxisNoise(N=1e-3, K=1e-4)
+    hits = 0
+    for seed in range(20):
+        y = simulate_axis(noise, 10.0, 36000, np.random.default_rng(seed))
+        c = allan_curve(y, 10.0, 'octave')
+        ok = np.isfinite(c.avar[:, 0]) & (c.edf[:, 0] > 0)
+        hits += curve_k_bound(c.tau_s[ok], c.avar[ok, 0], c.edf[ok, 0]) >= noise.K
+    assert hits >= 18, hits
+    # A point's EDF above a shorter tau's (the slope-read noise type jumping) counts
+    # as that shorter tau's.
+    tau = np.array([10.0, 100.0, 1000.0])
+    avar = np.array([1e-6, 1e-7, 1e-9])
+    jump = curve_k_bound(tau, avar, np.array([50.0, 8.0, 120.0]))
+    assert jump == curve_k_bound(tau, avar, np.array([50.0, 8.0, 8.0]))
+    assert jump > math.sqrt(3.0 * 1e-9 / 1000.0)
 
 
 def test_adis_rival_models_lie_inside_the_reported_intervals(shared_dir):

@@ -13,7 +13,7 @@ distorted fit's:
 - B: the ADEV floor, B_floor = ADEV_min / 0.664 (IEEE Std 952-1997 annex C), as an
   upper bound (the floor holds every term's share, so B cannot exceed it);
 - K: the curve's own bound min sqrt(3 AVAR / tau) (IEEE Std 952 C.1 slope +1/2) as
-  an upper bound;
+  an upper bound, each AVAR at its upper chi-square limit (:func:`curve_k_bound`);
 - every other parameter (T_B, T_f, further processes): not identified.
 """
 
@@ -125,6 +125,42 @@ def b_floor(fit: AxisFit) -> Param | None:
                  fit.optimised['B'].unit)
 
 
+def curve_k_bound(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> float:
+    """
+    95 % upper bound of K from the curve alone: min over tau of sqrt(3 AVAR_hi / tau).
+
+    A random walk alone gives AVAR = K^2 tau / 3 (IEEE Std 952 C.1 slope +1/2) and every
+    other term only adds to it, so K^2 <= 3 AVAR(tau) / tau at every tau, for the true
+    AVAR.  The measured one scatters about it as chi-square with the point's EDF (NIST
+    SP 1065 sec. 5.3), most at the longest taus where the bound is decided (EDF of a
+    few): the measured value itself can lie far below the truth there, and its minimum
+    over the taus picks the lowest-lying point.  So each point's one-sided upper limit
+    AVAR edf / chi2_a(edf) is used, with a = 0.05 / k over the k taus (Bonferroni), and
+    the minimum holds at 95 %.  A point's EDF is taken as at most that of any shorter
+    tau: for every power-law noise the EDF falls as tau grows (NIST SP 1065 table 5),
+    and the curve's own EDF, from the noise type read off the local slope, can jump
+    at the longest taus where a low-lying point steepens that slope.
+
+    Parameters
+    ----------
+    tau : np.ndarray
+        Shape (k,), averaging times [s].
+    avar : np.ndarray
+        Shape (k,), measured AVAR [unit^2].
+    edf : np.ndarray
+        Shape (k,), equivalent degrees of freedom of each point.
+
+    Returns
+    -------
+    float
+        The bound [unit/s^0.5].
+
+    """
+    edf = np.minimum.accumulate(np.maximum(np.asarray(edf, dtype=np.float64), 1e-3))
+    avar_hi = avar * edf / chi2_ppf(0.05 / tau.size, edf)
+    return float(np.sqrt(np.min(3.0 * avar_hi / tau)))
+
+
 def conservative(fit: AxisFit, problems: list) -> AxisFit:
     """
     Return the fit with conservative values in ``optimised`` (see the module doc).
@@ -150,7 +186,7 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
     floor = b_floor(fit)
     b_value = floor.value if floor is not None else math.nan
     b_new = Param(b_value, (0.0, b_value), 'upper_bound', unit_b)
-    k_bound = float(np.sqrt(np.min(3.0 * avar / tau)))
+    k_bound = curve_k_bound(tau, avar, fit.edf)
     k_new = Param(k_bound, (0.0, k_bound), 'upper_bound', unit_k)
     new = {'N': n_new, 'B': b_new, 'K': k_new}
     replaced = {}

@@ -40,7 +40,7 @@ from typing import Sequence
 from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.fit.criterion import DELTA_MIN
 from imu_allan.core.noise.terms import effect_name, effect_names, TERMS
-from imu_allan.core.search.choice import with_rivals
+from imu_allan.core.search.choice import random_walk_or_slow_process, with_rivals
 from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, MAX_STEPS, Search,
                                          SEARCH_EFFECTS, Step)
 from imu_allan.core.search.run import _finish, _Run
@@ -113,7 +113,7 @@ def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effect
     run.backward()
     run.undecided()
     fit = run.final()
-    fit = with_rivals(fit, run)
+    fit = random_walk_or_slow_process(with_rivals(fit, run), run)
     steps = run.step_fits(fit) if keep_steps else run.steps
     return Search(_finish(fit, steps, run.notes, unit, tuple(run.problems)), run.base_fit,
                   tuple(steps))

@@ -14,6 +14,12 @@ model within the threshold of the best is a rival.  Then:
   profile rises above the threshold), is not identified: its value flips between
   rival models;
 - the rivals (their T_B, the rise of the chi-square and their B, K, N) go to the JSON.
+
+With several Gauss-Markov processes in one model the label "bias instability" goes to
+the one with the largest B; where the data do not order their levels,
+:func:`ambiguous_bias` reports T_B as not identified (see there).  Where a slower
+Gauss-Markov process can stand in for the random walk, K is only an upper bound
+(:func:`random_walk_or_slow_process`).
 """
 
 from dataclasses import replace
@@ -24,6 +30,7 @@ import numpy as np
 
 from imu_allan.core.fit.api import fit_fixed_weights, Fix, n_params, profile_threshold
 from imu_allan.core.fit.result import AxisFit, Param
+from imu_allan.core.noise.model import GM_PEAK_TAU
 from imu_allan.core.search.rivals import _neg2_loglik
 from imu_allan.core.search.rules import _label_for
 
@@ -201,3 +208,132 @@ def with_rivals(fit: AxisFit, run) -> AxisFit:
                  + ', '.join(r[0] for r in rivals))
     listed = tuple({'model': r[0], 'criterion_rise': r[1], **r[2]} for r in rivals)
     return replace(fit, optimised=optimised, notes=tuple(notes), rivals=listed)
+
+
+def ambiguous_bias(fit: AxisFit) -> AxisFit:
+    """
+    Report T_B as not identified where the data do not say which process is B's.
+
+    With several Gauss-Markov processes the label bias instability (B, T_B) goes to
+    the one with the largest B (:func:`imu_allan.core.fit.axis._dominant_bias_instability`).
+    When the 95 % interval of another process's B reaches the labelled one's, the
+    data do not exclude that the other is the larger: the label, and with it T_B,
+    could go to either (the ADIS16405 accelerometers: T_B 0.07 s in one run, 27 s in
+    another, both "estimates").  Without the joint covariance of the two levels,
+    overlapping intervals are the test of their difference at the least favourable
+    correlation, -1 (the two processes trade level on the curve, so their estimates
+    anti-correlate; half-widths then add).  Then
+    T_B is not identified, B keeps the largest level with an interval that spans the
+    candidates' intervals (B is the level of whichever is the bias instability), and
+    each candidate goes to the rivals with its B and T (criterion rise 0: the same
+    model, labelled otherwise).  Processes whose levels are ordered keep the label.
+    """
+    opt = fit.optimised
+    b, t_b = opt.get('B'), opt.get('T_B')
+    if b is None or t_b is None or b.kind != 'estimate' or 'bias_instability' not in fit.terms:
+        return fit
+    tied = []
+    for label in fit.terms:
+        other, time = opt.get(f'{label}.B'), opt.get(f'{label}.T')
+        if (not label.startswith('gauss_markov') or other is None or time is None
+                or other.kind != 'estimate'):
+            continue
+        if other.ci95[1] >= b.ci95[0]:
+            tied.append((label, other, time))
+    if not tied:
+        return fit
+    lo = min([b.ci95[0]] + [o.ci95[0] for _, o, _ in tied])
+    hi = max([b.ci95[1]] + [o.ci95[1] for _, o, _ in tied])
+    optimised = dict(opt)
+    optimised['B'] = b._replace(ci95=(float(lo), float(hi)))
+    optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
+    levels = {sym: opt[sym].value if opt[sym].kind == 'estimate' else math.nan
+              for sym in ('N', 'K')}
+    listed = tuple({'model': f'bias instability = {label} (T {time.value:.3g} s)',
+                    'criterion_rise': 0.0, 'N': levels['N'], 'B': other.value,
+                    'T_B': time.value, 'K': levels['K']} for label, other, time in tied)
+    names = ', '.join(f'{label} (B {o.value:.3g}, T {t.value:.3g} s)' for label, o, t in tied)
+    own = f', T_B {t_b.value:.3g} s' if math.isfinite(t_b.value) else ''
+    note = (f'B, T_B: the bias instability (B {b.value:.3g}{own}) and {names} have levels '
+            'the data do not order: T_B not identified, the B interval spans them')
+    return replace(fit, optimised=optimised, notes=fit.notes + (note,),
+                   rivals=fit.rivals + listed)
+
+
+def _final_solution(run):
+    """Return the search's final slots and solution at its final weights."""
+    run.fitter.data.set_sigma(run.sigma)
+    slots = run.slots_of(run.labels)
+    sol = run.sol
+    if len(sol.phi) != len(slots):
+        # final() dropped steps after the last IRLS: fit the kept labels at these weights.
+        sol = fit_fixed_weights(run.fitter.data, slots, [run.phi_of[lb] for lb in run.labels],
+                                local=True)
+    return slots, sol
+
+
+def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
+    """
+    Report K as an upper bound where a slower Gauss-Markov process does as well.
+
+    Below its correlation time a Gauss-Markov process rises on the Allan curve as a
+    random walk does (AVAR ~ tau), so within a record a slow process can stand in for
+    the random walk: a K estimate then says only that the curve rises, not that it
+    keeps rising.  The final model with the random walk replaced by one more
+    Gauss-Markov process (grid-searched) is fitted at the final model's weights.  It
+    is a different model only if every process of it turns over within the fitted
+    taus (ADEV peak at 1.89 T, paper eq. 8, below the longest tau): a process peaking
+    beyond is the random walk under another name, and K keeps its estimate (a clean
+    white + Gauss-Markov + random-walk record).  A time at an end of its range is no
+    rival either (the fit's own rule: not identified, the curve reshaped).  When its
+    chi-square is within the profile threshold of the final model's minimum
+    (:func:`imu_allan.core.fit.api.profile_threshold`, the same rise that bounds every
+    95 % interval), K = 0 is in the confidence set of that wider family: K is
+    reported as an upper bound at its interval's upper end, and the
+    alternative model goes to the rivals (the ADIS16405 gyros: K from 6e-6 to 2.2e-5
+    over six runs, the replaced models fitting as well on every axis).  B's interval
+    spans the alternative's B; T_B is not identified when the alternative gives the
+    label to a process whose time lies outside T_B's interval.
+    """
+    k, b, t_b = (fit.optimised.get(sym) for sym in ('K', 'B', 'T_B'))
+    if (k is None or k.kind != 'estimate' or 'random_walk' not in run.labels
+            or 'gauss_markov' not in run.effects):
+        return fit
+    label = _label_for('gauss_markov', run.labels)
+    if label is None:
+        return fit
+    slots, sol = _final_solution(run)
+    kept = [i for i, lb in enumerate(run.labels) if lb != 'random_walk']
+    alt = [slots[i] for i in kept] + run.slots_of([label])
+    if n_params(alt) >= run.k:
+        return fit
+    phi0 = [sol.phi[i] for i in kept] + [tuple(math.sqrt(lo * hi) for lo, hi in alt[-1].bounds)]
+    # Only the new process is gridded; the others start where they are (the polish
+    # moves them).
+    new = fit_fixed_weights(run.fitter.data, alt, phi0, grid_slots=[len(alt) - 1])
+    family = [i for i, s in enumerate(alt) if s.term.name in ('bias_instability', 'gauss_markov')]
+    rise = float(new.j - sol.j)
+    slowest = max(new.phi[i][0] for i in family)
+    pinned = any(not alt[i].bounds[0][0] * 1.02 < new.phi[i][0] < alt[i].bounds[0][1] / 1.02
+                 for i in family)
+    if (np.any(new.coef[family] <= 0) or pinned or GM_PEAK_TAU * slowest > run.tau.max()
+            or rise > profile_threshold(sol.j, run.k - n_params(slots))):
+        return fit
+    i_b = _largest_gm(alt, new, run.fitter.data.scale)
+    levels = _levels(alt, new, run.fitter.data.scale, -1 if i_b is None else i_b)
+    optimised = dict(fit.optimised)
+    optimised['K'] = Param(k.ci95[1], (0.0, k.ci95[1]), 'upper_bound', k.unit)
+    notes = [f'K: a slower Gauss-Markov process (T {slowest:.3g} s) instead of the '
+             f'random walk fits as well (chi-square {rise:+.1f}): 95 % upper bound']
+    if b is not None and b.kind == 'estimate':
+        optimised['B'] = b._replace(ci95=(min(b.ci95[0], levels['B']),
+                                          max(b.ci95[1], levels['B'])))
+    if t_b is not None and t_b.kind in ('estimate', 'lower_bound') and not (
+            t_b.ci95[0] <= levels['T_B'] <= t_b.ci95[1]):
+        optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
+        notes.append(f'T_B: {t_b.value:.3g} s with the random walk, {levels["T_B"]:.3g} s '
+                     'with the slower process instead: not identified')
+    listed = ({'model': 'a slower gauss_markov instead of random_walk',
+               'criterion_rise': rise, **levels},)
+    return replace(fit, optimised=optimised, notes=fit.notes + tuple(notes),
+                   rivals=fit.rivals + listed)

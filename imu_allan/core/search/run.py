@@ -19,6 +19,7 @@ from imu_allan.core.fit.judge import P_CONSISTENT, shows_quantization
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.noise.model import base_name, TERMS
+from imu_allan.core.search.choice import ambiguous_bias
 from imu_allan.core.search.evidence import RAMP_LR_MIN, ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
 from imu_allan.core.search.rules import _label_for, _sinusoid_evidence, MAX_STEPS, Step
@@ -388,4 +389,4 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str,
     effects = tuple({'effect': s.effect, 'term': s.label, 'chi2_drop': s.chi2_drop,
                      'rival': s.rival, 'evidence': s.evidence} for s in steps)
     fit = replace(fit, optimised=optimised, notes=tuple(notes), effects=effects)
-    return judge_fit(fit, problems)
+    return judge_fit(ambiguous_bias(fit), problems)
