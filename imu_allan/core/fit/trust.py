@@ -76,11 +76,10 @@ def _white(fit: AxisFit, trusted_model: bool = True):
     The region is where the model's white share is >= 0.8, else the first run of at
     least two consecutive steps (an octave at the fit's spacing) where the measured
     ADEV falls with a slope of -1/2 +- 0.1: white noise carries the short end of a
-    curve, and a single white-like step further out is as likely a bump turning over.
-    With ``trusted_model`` False (the
-    conservative value of a fit already judged untrusted) the filter-bent leading taus
-    are left out even where the model holds the filter: its shares are the distorted
-    fit's.
+    curve (before its first rise), and a single white-like step further out is as
+    likely a bump turning over.  With ``trusted_model`` False (the conservative value
+    of a fit already judged untrusted) the model's shares are the distorted fit's: the
+    region is read off the curve alone (the slope rule), past the filter-bent taus.
     """
     share = white_share(fit)
     if share is None or fit.tau_s.size < 2:
@@ -89,10 +88,14 @@ def _white(fit: AxisFit, trusted_model: bool = True):
     # the curve; with plain white noise the filter-bent leading taus are no region.
     i = 0 if trusted_model and 'filtered_white' in fit.terms else _unfiltered(fit)
     tau, avar, edf = fit.tau_s[i:], fit.avar_meas[i:], fit.edf[i:]
-    got = white_region(tau, avar, edf, share[i:])
+    got = white_region(tau, avar, edf, share[i:]) if trusted_model else None
     if got is None and tau.size >= 3:
         slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
+        # Only the curve's first descent: past its first rise a -1/2 step is a bump
+        # turning over, not white noise.
+        rise = np.flatnonzero(slope >= 0.0)
         steps = np.abs(slope + 0.5) <= 0.1
+        steps[rise[0] if rise.size else steps.size:] = False
         pairs = np.flatnonzero(steps[:-1] & steps[1:])
         if pairs.size:
             first = int(pairs[0])
