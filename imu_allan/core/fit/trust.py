@@ -78,8 +78,8 @@ def _white(fit: AxisFit, trusted_model: bool = True):
     ADEV falls with a slope of -1/2 +- 0.1: white noise carries the short end of a
     curve (before its first rise), and a single white-like step further out is as
     likely a bump turning over.  With ``trusted_model`` False (the conservative value
-    of a fit already judged untrusted) the model's shares are the distorted fit's: the
-    region is read off the curve alone (the slope rule), past the filter-bent taus.
+    of a fit already judged untrusted) the model's shares are the distorted fit's: they
+    count only in the curve's first descent, past the filter-bent taus.
     """
     share = white_share(fit)
     if share is None or fit.tau_s.size < 2:
@@ -88,23 +88,26 @@ def _white(fit: AxisFit, trusted_model: bool = True):
     # the curve; with plain white noise the filter-bent leading taus are no region.
     i = 0 if trusted_model and 'filtered_white' in fit.terms else _unfiltered(fit)
     tau, avar, edf = fit.tau_s[i:], fit.avar_meas[i:], fit.edf[i:]
-    got = white_region(tau, avar, edf, share[i:]) if trusted_model else None
-    if got is None and tau.size >= 3:
+    got = None
+    if tau.size >= 2:
         slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
-        # Only the curve's first descent: past its first rise a -1/2 step is a bump
-        # turning over, not white noise.
+        # White noise carries the curve's first descent: past its first rise a -1/2
+        # step is a bump turning over, and an untrusted model's shares there are the
+        # distorted fit's.
         rise = np.flatnonzero(slope >= 0.0)
-        steps = np.abs(slope + 0.5) <= 0.1
-        steps[rise[0] if rise.size else steps.size:] = False
-        pairs = np.flatnonzero(steps[:-1] & steps[1:])
-        if pairs.size:
-            first = int(pairs[0])
-            last = first + 1
-            while last + 1 < steps.size and steps[last + 1]:
-                last += 1
-            white = np.zeros(tau.size)
-            white[first:last + 2] = 1.0
-            got = white_region(tau, avar, edf, white)
+        descent = np.arange(tau.size) <= (rise[0] if rise.size else tau.size)
+        got = white_region(tau, avar, edf, share[i:] * (descent | trusted_model))
+        if got is None and tau.size >= 3:
+            steps = (np.abs(slope + 0.5) <= 0.1) & descent[:-1]
+            pairs = np.flatnonzero(steps[:-1] & steps[1:])
+            if pairs.size:
+                first = int(pairs[0])
+                last = first + 1
+                while last + 1 < steps.size and steps[last + 1]:
+                    last += 1
+                white = np.zeros(tau.size)
+                white[first:last + 2] = 1.0
+                got = white_region(tau, avar, edf, white)
     return got
 
 
