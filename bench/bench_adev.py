@@ -10,7 +10,7 @@ temporary file, then measures, in the same run:
 * ``np.loadtxt`` plus ``allantools.oadev`` at the same taus in one fresh Python
   process (its imports included), best of ``--repeat``.
 
-Prints both, their ratio (issue target: 5x) and the largest relative difference of
+Prints both, their ratio (guard of issue 28: at least 2x) and the largest relative difference of
 the two curves (target 1e-9).
 """
 
@@ -69,7 +69,7 @@ def main() -> None:
     diff = float(np.max(np.abs(mine / theirs - 1.0)))
     print(f'{args.samples:,} samples, {len(mine)} dense taus, best of {args.repeat}')
     print(f'imu-allan adev end to end: {ours:.2f} s; np.loadtxt + allantools.oadev: '
-          f'{base:.2f} s; ratio {base / ours:.2f}x (target 5x); curves agree to {diff:.1e}')
+          f'{base:.2f} s; ratio {base / ours:.2f}x (guard 2x); curves agree to {diff:.1e}')
 
 
 if __name__ == '__main__':
