@@ -28,7 +28,7 @@ TRUTH = AxisNoise(N=9.2e-4, B=3e-4, T_B=50.0, K=1e-5)
 
 
 def _phone_axis(kind: str, cutoff_hz: float, hours: float, seed: int, rate_hz: float = 10.0):
-    """The axis of a driver that filters at ``cutoff_hz`` and decimates by 10 to rate_hz."""
+    """Search the axis of a driver that filters at ``cutoff_hz``, decimates to rate_hz."""
     spec = NoiseSpec(name='t', axes={'gyro_x': TRUTH})
     _, y = simulate_imu(spec, 10.0 * rate_hz, hours * 3600.0, seed=seed)
     y, rate = driver_filtered(y[:, 0], 10.0 * rate_hz, kind, cutoff_hz, 10)
@@ -66,11 +66,12 @@ def test_decimated_phone_imu_gives_n_or_a_warning(kind, cutoff_hz):
 
 def test_a_heavy_filter_at_100_hz_gives_a_bound_not_a_wrong_estimate():
     """
-    One-pole at 0.5 Hz before decimation to 100 Hz: the filter bends the curve to ~3 s,
-    where the Gauss-Markov process already lifts it, so no stretch of the curve is
-    white.  The axis is not trusted, and N is an upper bound above the truth: a single
-    white-like step of the bump turning over (N 3-4x the truth as an "estimate" with a
-    narrow interval, before) is no white region.
+    One-pole at 0.5 Hz before decimation to 100 Hz: N a bound, not a wrong estimate.
+
+    The filter bends the curve to ~3 s, where the Gauss-Markov process already lifts
+    it, so no stretch of the curve is white.  The axis is not trusted, and N is an
+    upper bound above the truth: a single white-like step of the bump turning over (N
+    3-4x the truth as an "estimate" with a narrow interval, before) is no white region.
     """
     for seed in (100, 102):
         fit = _phone_axis('one_pole', 0.5, 2.0, seed, rate_hz=100.0)
