@@ -11,6 +11,11 @@ from pathlib import Path
 import tempfile
 from typing import Callable, IO
 
+# The process's umask, read once at import (os.umask sets it while reading it): a file
+# written here gets the mode a plain open() would give it, not mkstemp's 0600.
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+
 
 def write_atomic(path, write: Callable[[IO], object], mode: str = 'wb') -> Path:
     """
@@ -28,12 +33,18 @@ def write_atomic(path, write: Callable[[IO], object], mode: str = 'wb') -> Path:
     Returns
     -------
     Path
-        The target path.
+        The target path, with the mode it had, or else the one a plain ``open()`` gives
+        (0666 less the umask: readable by the consumers of a report).
 
     """
     path = Path(path)
+    try:
+        file_mode = path.stat().st_mode & 0o7777
+    except OSError:
+        file_mode = 0o666 & ~_UMASK
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix='.tmp')
     try:
+        os.fchmod(fd, file_mode)
         with os.fdopen(fd, mode) as f:
             write(f)
             f.flush()
