@@ -19,15 +19,14 @@ from pathlib import Path
 import sys
 
 import numpy as np
+from validate_adis import stream
 
 from imu_allan import AXES
 from imu_allan.core.plan import planning_model
 from imu_allan.core.plan.planner import _crossing, calibrated
 from imu_allan.core.plan.precision import CurveModel, relative_width
-from imu_allan.core.search.evidence import RawKeeper
 from imu_allan.io.csv_io import read_csv
 from imu_allan.pipeline.analysis import analyze
-from imu_allan.pipeline.session import Session, SessionConfig
 
 DATA = Path(__file__).resolve().parents[2] / 'shared' / 'realdata' / 'adis16405'
 PARAMS = ('N', 'B', 'T_B')
@@ -35,14 +34,7 @@ PARAMS = ('N', 'B', 'T_B')
 
 def analysis_of(stamps: np.ndarray, samples: np.ndarray):
     """Stream samples through a Session as the CLI does; return the AnalysisResult."""
-    session = Session(SessionConfig())
-    keeper = None
-    for i in range(0, samples.shape[0], 100_000):
-        session.add(stamps[i:i + 100_000], samples[i:i + 100_000])
-        if keeper is None and session.rate_hz > 0:
-            keeper = RawKeeper(session.rate_hz)
-        if keeper is not None:
-            keeper.add(samples[i:i + 100_000])
+    session, keeper = stream(stamps, samples)
     return analyze(session, raw=keeper)
 
 

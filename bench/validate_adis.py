@@ -28,19 +28,24 @@ DATA = Path(__file__).resolve().parents[2] / 'shared' / 'realdata' / 'adis16405'
 B_DATASHEET = 0.007 * math.pi / 180.0   # rad/s, in-run bias stability
 
 
-def curve_of(path: Path):
-    """Stream one run through a Session as the CLI does; return the curve and the raw copy."""
-    rec = read_csv(path)
+def stream(stamps: np.ndarray, samples: np.ndarray):
+    """Stream samples through a Session as the CLI does; return it and the raw copy."""
     session = Session(SessionConfig())
     keeper = None
-    stamps = np.round(np.asarray(rec.t_s) * 1e9).astype(np.int64)
-    samples = np.asarray(rec.samples, dtype=np.float64)
     for i in range(0, samples.shape[0], 100_000):
         session.add(stamps[i:i + 100_000], samples[i:i + 100_000])
         if keeper is None and session.rate_hz > 0:
             keeper = RawKeeper(session.rate_hz)
         if keeper is not None:
             keeper.add(samples[i:i + 100_000])
+    return session, keeper
+
+
+def curve_of(path: Path):
+    """Stream one run through a Session as the CLI does; return the curve and the raw copy."""
+    rec = read_csv(path)
+    stamps = np.round(np.asarray(rec.t_s) * 1e9).astype(np.int64)
+    session, keeper = stream(stamps, np.asarray(rec.samples, dtype=np.float64))
     return session.curve(confidence=0.95), int(session.stats.n_used), keeper
 
 

@@ -91,3 +91,25 @@ def test_vins_block_holds_the_worst_values_per_step():
     doc = _vins(text)
     assert 'gyr_w' not in doc and '# gyr_w: not available' in text
     assert all(v > 0 for v in doc.values())
+
+
+def test_the_curve_bound_of_k_holds_the_truth_at_95_percent():
+    """The last resort of a consumer file: K from the curve alone, a 95 % bound."""
+    import numpy as np
+    from imu_allan.core.allan import allan_curve
+    from imu_allan.core.fit.result import AxisFit
+    from imu_allan.core.noise.simulate import simulate_axis
+    from imu_allan.core.outputs.exports import sensor_value
+    truth = AxisNoise(N=1e-3, K=1e-4)
+    held = 0
+    for seed in range(10):
+        y = simulate_axis(truth, 100.0, 360_000, np.random.default_rng(seed))
+        c = allan_curve(y, 100.0, 'octave', confidence=0.95)
+        fit = AxisFit(terms=('white',), nominal={}, optimised={}, model=None, notes=(),
+                      tau_s=c.tau_s, avar_meas=c.avar[:, 0], edf=c.edf[:, 0])
+        got = sensor_value({a: fit for a in ('x', 'y', 'z')}, ('x', 'y', 'z'), 'K')
+        assert got.kind == 'curve_bound'
+        raw_min = math.sqrt(np.min(3.0 * c.avar[:, 0] / c.tau_s))
+        assert got.value >= raw_min
+        held += got.value >= truth.K
+    assert held >= 9

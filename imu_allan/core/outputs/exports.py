@@ -79,12 +79,19 @@ def _curve_bound(source, symbol: str) -> float:
 
     No term can exceed the whole measured AVAR at any tau: N^2 / tau <= AVAR(tau) and
     K^2 tau / 3 <= AVAR(tau) (IEEE Std 952 C.1 slopes), so N <= min sqrt(AVAR tau) and
-    K <= min sqrt(3 AVAR / tau) over the fitted taus.
+    K <= min sqrt(3 AVAR / tau) over the fitted taus.  K's minimum falls on the longest
+    taus, whose few degrees of freedom let a point lie far below the truth: with the
+    curve's EDF the bound is the fit's own 95 % one
+    (:func:`imu_allan.core.fit.trust.curve_k_bound`).
     """
     tau, avar = getattr(source, 'tau_s', None), getattr(source, 'avar_meas', None)
     if tau is None or avar is None or not np.size(tau):
         return 0.0
     tau, avar = np.asarray(tau, dtype=np.float64), np.asarray(avar, dtype=np.float64)
+    edf = getattr(source, 'edf', None)
+    if symbol == 'K' and edf is not None and np.size(edf) == tau.size:
+        from imu_allan.core.fit.trust import curve_k_bound   # scipy: only on this path
+        return curve_k_bound(tau, avar, np.asarray(edf, dtype=np.float64))
     level = avar * tau if symbol == 'N' else 3.0 * avar / tau
     return float(np.sqrt(np.min(level)))
 
