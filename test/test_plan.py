@@ -17,12 +17,15 @@ from conftest import REPO
 from imu_allan import AXES
 from imu_allan.cli import main
 from imu_allan.core.allan import allan_curve
-from imu_allan.core.noise.model import avar_model
+from imu_allan.core.fit.result import Param
+from imu_allan.core.noise.model import avar_model, GM_PEAK_TAU
 from imu_allan.core.noise.params import AxisNoise, GaussMarkov, load_params
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
 from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
                                  planning_model)
+from imu_allan.core.plan.planner import ORDERING
 from imu_allan.core.plan.precision import _avar, CurveModel, relative_width
+from imu_allan.core.plan.separation import LAMBDA_SEPARATED, rivals, SLOW_PROCESS
 from imu_allan.core.search import search_axis
 from imu_allan.errors import InputError
 from imu_allan.io.report import summary_text
@@ -108,6 +111,54 @@ def test_a_weaker_second_gauss_markov_needs_a_longer_record():
         (sep,) = [s for s in plan.separations if s.question == 'one or two Gauss-Markov']
         return sep.time_s
     assert 600.0 < sep_time(4e-5) < sep_time(2e-5) < math.inf
+
+
+def _tied_plan(b2: float, t_b_kind: str = 'not_identified'):
+    """Plan a bias instability and a second process whose present B intervals overlap."""
+    noise = AxisNoise(N=1e-4, B=5e-5, T_B=10.0, gauss_markov=(GaussMarkov(b2, 300.0),))
+    nan = math.nan
+    t_b = (Param(10.0, (5.0, 20.0), 'estimate', 's') if t_b_kind == 'estimate'
+           else Param(nan, (nan, nan), 'not_identified', 's'))
+    present = {'B': Param(5e-5, (2.5e-5, 9e-5), 'estimate', 'rad/s'), 'T_B': t_b,
+               'gauss_markov.B': Param(b2, (0.5 * b2, 1.5 * b2), 'estimate', 'rad/s')}
+    return plan_axes({'a': planning_model(noise_components(noise))}, 50.0, 1800.0,
+                     present={'a': present})['a']
+
+
+def test_t_b_of_tied_processes_waits_until_their_levels_are_ordered():
+    # The fit reports T_B not identified while another process's B interval reaches
+    # B's (ambiguous_bias): T_B is known once the levels are ordered, not before.
+    plan = _tied_plan(3e-5)
+    (order,) = [s for s in plan.separations if s.question == ORDERING]
+    assert not order.separated and 1800.0 < order.time_s < math.inf
+    assert plan.param('T_B').time_s >= order.time_s
+    # Levels about equal are never ordered: T_B is beyond any record.
+    even = _tied_plan(4.9e-5)
+    assert [s.time_s for s in even.separations if s.question == ORDERING] == [math.inf]
+    assert even.param('T_B').kind == 'beyond'
+    # A weaker second process is ordered sooner.
+    (weaker,) = [s for s in _tied_plan(2e-5).separations if s.question == ORDERING]
+    assert weaker.time_s < order.time_s
+    # With T_B identified there is no such question.
+    assert ORDERING not in {s.question for s in _tied_plan(3e-5, 'estimate').separations}
+
+
+def test_k_found_replaceable_by_a_slower_process_waits_for_their_separation():
+    noise = AxisNoise(N=1e-4, B=5e-5, T_B=10.0, K=2e-6)
+    comps, bounds = planning_model(noise_components(noise))
+    k = Param(3e-6, (0.0, 3e-6), 'upper_bound', 'rad/s/s^0.5')
+    args = ({'a': (comps, bounds)}, 50.0, 3600.0)
+    plain = plan_axes(*args, present={'a': {'K': k}})['a']
+    slow = plan_axes(*args, present={'a': {'K': k}}, slow_process={'a'})['a']
+    assert SLOW_PROCESS not in {s.question for s in plain.separations}
+    (sep,) = [s for s in slow.separations if s.question == SLOW_PROCESS]
+    assert not sep.separated and sep.lambda_now < LAMBDA_SEPARATED
+    assert slow.param('K').time_s >= sep.time_s
+    # The rival process turns over inside the record, as the fit's rule asks.
+    tau_max = 900.0
+    (rival,) = [r for q, r in rivals(comps, tau_max, slow_process=True) if q == SLOW_PROCESS]
+    assert 'random_walk' not in [c.label for c in rival]
+    assert GM_PEAK_TAU * rival[-1].phi[0] == pytest.approx(tau_max, rel=1e-12)
 
 
 def test_targets_parse_and_refuse():

@@ -12,7 +12,7 @@ the six axes, whose curves share their taus and so the quadrature of Sigma.
 """
 
 import math
-from typing import Mapping, Sequence
+from typing import Collection, Mapping, Sequence
 
 import numpy as np
 
@@ -21,9 +21,11 @@ from imu_allan.core.fit.api import CurveCovariance
 from imu_allan.core.noise.model import TERMS
 from imu_allan.core.noise.params import AxisNoise
 from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
-                                           expected_widths, fit_taus, relative_width)
+                                           expected_widths, fit_taus, relative_width, Z95)
 from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
-from imu_allan.core.plan.separation import LAMBDA_SEPARATED, mismatch, rivals, scaled
+from imu_allan.core.plan.separation import (LAMBDA_SEPARATED, mismatch, rivals, scaled,
+                                            SLOW_PROCESS)
+from imu_allan.core.search.choice import SLOWER_PROCESS_RIVAL
 
 #: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise).
 DEFAULT_TARGETS = {'N': 0.10, 'B': 0.10, 'K': 0.25, 'T_B': 0.25}
@@ -124,7 +126,8 @@ def _crossing(lengths: np.ndarray, widths: np.ndarray, target: float) -> float:
 def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
               targets: Mapping[str, float] | None = None,
               present: Mapping[str, Mapping] | None = None,
-              lengths_s: Sequence[float] | None = None) -> dict:
+              lengths_s: Sequence[float] | None = None,
+              slow_process: Collection[str] = ()) -> dict:
     """
     Plan every axis: width now, time to target, widths at 1, 3 and 10 h, separations.
 
@@ -143,6 +146,10 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         present widths; without them the model's expected widths at ``duration_s``.
     lengths_s : sequence of float, optional
         Record lengths to evaluate instead of :func:`length_grid`.
+    slow_process : collection of str
+        Axes whose fit found a slower Gauss-Markov process standing in for the random
+        walk (:func:`imu_allan.core.search.choice.random_walk_or_slow_process`): their
+        plans say how long until a record tells the two apart.
 
     Returns
     -------
@@ -158,15 +165,19 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         variants.update({name: b for name, b in bounds.items() if b})
         cms[axis] = {k: CurveModel(v, rate_hz) for k, v in variants.items() if v}
     widths: dict = {(a, k): [] for a, v in cms.items() for k in v}
+    # An axis whose T_B is not identified yet is followed over the whole grid.
+    open_t_b = {a for a in cms if getattr((present or {}).get(a, {}).get('T_B'), 'kind', '')
+                == 'not_identified'}
     lams: dict = {a: [] for a in cms}
     # Each axis stops once its targets are met beyond 10 h (per axis, so that a plan
     # does not depend on which other axes are planned with it).
     done: dict = {}
     for i, length in enumerate(grid):
         for axis in cms:
-            if axis not in done and length > max(REPORT_HOURS) * 3600.0 and _all_met(
-                    {k: v for k, v in widths.items() if k[0] == axis},
-                    {axis: lams[axis]}, targets):
+            if (axis not in done and axis not in open_t_b
+                    and length > max(REPORT_HOURS) * 3600.0 and _all_met(
+                        {k: v for k, v in widths.items() if k[0] == axis},
+                        {axis: lams[axis]}, targets)):
                 done[axis] = i
         if len(done) == len(cms):
             break
@@ -185,8 +196,9 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
                 jac = _jacobian(cm.comps, cm.theta, tau) / scale
                 widths[(axis, key)].append(dict(zip(cm.names, expected_widths(jac, sigma))))
                 if key == '':
-                    lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau)
-                                       for q, r in rivals(cm.comps, float(tau.max()))})
+                    lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau, q)
+                                       for q, r in rivals(cm.comps, float(tau.max()),
+                                                          axis in slow_process)})
     out = {}
     for axis, variants in cms.items():
         columns, values = {}, {}
@@ -243,12 +255,28 @@ def _all_met(widths: dict, lams: dict, targets) -> bool:
 def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams: list,
                duration_s: float, targets, present) -> AxisPlan:
     """One axis' plan from the expected widths of its parameters on the length grid."""
+    order_lam = _ordering(columns, values, present)
+    if order_lam is not None:
+        lams = [{**row, ORDERING: lam} for row, lam in zip(lams, order_lam)]
+    seps = []
+    for q in sorted({q for row in lams for q in row}):
+        lam = np.array([row.get(q, 0.0) for row in lams])
+        when = _crossing(grid, 1.0 / np.maximum(lam, 1e-300), 1.0 / LAMBDA_SEPARATED)
+        lam_now = (float(np.interp(math.log(duration_s), np.log(grid), lam))
+                   if duration_s > 0 else math.nan)
+        # The fit has the last word on the present record: it found the levels tied.
+        separated = bool(duration_s > 0 and lam_now >= LAMBDA_SEPARATED and q != ORDERING)
+        seps.append(Separation(q, lam_now, float(when) if not separated else duration_s,
+                               separated))
+    # A parameter the fit could not pin down for want of a separation waits for it.
+    waits = {s.question: s.time_s for s in seps if not s.separated}
+    waits = {name: [waits[q] for q in qs if q in waits] for name, qs in _WAITS.items()}
     params = []
     for name, col in columns.items():
         target = target_of(name, targets)
         now = math.nan
+        p = (present or {}).get(name)
         if duration_s > 0:
-            p = (present or {}).get(name)
             if p is not None and p.kind == 'estimate':
                 now = relative_width(p.value, p.ci95)
             elif p is not None:
@@ -275,6 +303,8 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
             when = math.nan
         elif duration_s > 0:
             when = max(when, duration_s)
+        if kind != 'pinned' and p is not None and p.kind != 'estimate' and waits.get(name):
+            when = max([w for w in [when] if not math.isnan(w)] + waits[name])
         if math.isinf(when) and kind != 'at_least':
             kind = 'beyond'
         at = {h: float(col[int(np.argmin(np.abs(grid - h * 3600.0)))])
@@ -283,16 +313,40 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
                                 at))
     order = {'N': 0, 'B': 1, 'T_B': 2, 'K': 3}
     params.sort(key=lambda p: (order.get(p.name, 4), p.name))
-    seps = []
-    questions = sorted({q for row in lams for q in row})
-    for q in questions:
-        lam = np.array([row.get(q, 0.0) for row in lams])
-        when = _crossing(grid, 1.0 / np.maximum(lam, 1e-300), 1.0 / LAMBDA_SEPARATED)
-        lam_now = (float(np.interp(math.log(duration_s), np.log(grid), lam))
-                   if duration_s > 0 else math.nan)
-        seps.append(Separation(q, lam_now, float(when),
-                               bool(duration_s > 0 and lam_now >= LAMBDA_SEPARATED)))
     return AxisPlan(float(duration_s), tuple(params), tuple(seps))
+
+
+#: Question of which Gauss-Markov process is the bias instability (:func:`_ordering`).
+ORDERING = 'which process is the bias instability'
+#: Parameters the fit leaves unidentified (or bounded) until a question is answered.
+_WAITS = {'T_B': (ORDERING, SLOW_PROCESS), 'K': (SLOW_PROCESS,)}
+
+
+def _ordering(columns: dict, values: dict, present) -> np.ndarray | None:
+    """
+    Non-centrality per length of the test that orders B against a tied process's B.
+
+    Where the fit reports T_B as not identified because another Gauss-Markov process's
+    B interval reaches B's (:func:`imu_allan.core.search.choice.ambiguous_bias`), T_B is
+    known once the two levels are ordered.  Their 95 % intervals are ln B +- asinh(w)
+    (w the relative half-width); they part when |ln(B / B_other)| exceeds the sum of
+    the two, the test at correlation -1 the fit uses.  As a non-centrality on the scale
+    of the other questions, lambda = (Z95 ln(B / B_other) / (asinh(w) + asinh(w_other)))^2
+    (3.84 where the intervals touch); the least over the tied processes.  None when
+    no process is tied.
+    """
+    b, t_b = (present or {}).get('B'), (present or {}).get('T_B')
+    if b is None or t_b is None or t_b.kind != 'not_identified' or 'B' not in columns:
+        return None
+    lams = []
+    for name, col in columns.items():
+        other = present.get(name)
+        if (not name.endswith('.B') or other is None or other.kind != 'estimate'
+                or other.ci95[1] < b.ci95[0]):
+            continue
+        gap = Z95 * abs(math.log(values['B'] / values[name]))
+        lams.append((gap / (np.arcsinh(columns['B']) + np.arcsinh(col))) ** 2)
+    return np.min(lams, axis=0) if lams else None
 
 
 def noise_components(noise: AxisNoise) -> list:
@@ -356,9 +410,11 @@ def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
     models = {a: planning_model(f.components, f.optimised) for a, f in fits.items()
               if f is not None and f.components}
     present = {a: fits[a].optimised for a in models}
+    slow = {a for a in models if any(r.get('model') == SLOWER_PROCESS_RIVAL
+                                     for r in fits[a].rivals)}
     # One BLAS thread, as the fit: tiny matrices, and the same rounding in every process.
     with single_thread_blas():
-        plans = plan_axes(models, rate_hz, duration_s, targets, present)
+        plans = plan_axes(models, rate_hz, duration_s, targets, present, slow_process=slow)
     return {a: plan._replace(caveat=plan_caveat(fits[a])) for a, plan in plans.items()}
 
 

@@ -171,7 +171,8 @@ class AxisPlan(NamedTuple):
                 rest.append(f'{p.name} only bounded yet')
                 continue
             more = hours(max(p.time_s - self.duration_s, 0.0))
-            rest.append(f'{p.name} in {">= " if p.kind == "at_least" else ""}{more}')
+            at_least = p.kind == 'at_least' and math.isfinite(p.time_s)
+            rest.append(f'{p.name} in {">= " if at_least else ""}{more}')
         text = f'pinned: {", ".join(pinned) or "none"}'
         text += '; ' + ', '.join(rest) if rest else ''
         return text + (' (model does not hold: times may be short)' if self.caveat else '')
@@ -182,7 +183,8 @@ class AxisPlan(NamedTuple):
                  f'{"at 1 h":>10} {"at 3 h":>10} {"at 10 h":>10}']
         for p in self.params:
             need = hours(p.time_s)
-            need = {'pinned': 'met', 'at_least': '>= ' + need}.get(p.kind, need)
+            if math.isfinite(p.time_s):
+                need = {'pinned': 'met', 'at_least': '>= ' + need}.get(p.kind, need)
             if p.kind == 'at_least' and math.isnan(p.time_s):
                 need = 'bound only'
             cells = [percent(p.widths_at.get(h, math.nan)) for h in (1.0, 3.0, 10.0)]

@@ -1,11 +1,14 @@
 """
 How long a record must be to tell two explanations of the long-tau curve apart.
 
-The rivals are a rate ramp against a random walk (both raise the curve at long tau)
-and one Gauss-Markov process against two.  For a record of a given length the curve
-the fitted model predicts is compared with the best rival curve (the rival model fitted
-to it by GLS at the model's own Sigma); the mismatch delta^T Sigma^-1 delta is the
-non-centrality lambda of the likelihood-ratio statistic that would reject the rival.
+The rivals are a rate ramp against a random walk (both raise the curve at long tau),
+one Gauss-Markov process against two, and, where the fit could not tell them apart
+(:func:`imu_allan.core.search.choice.random_walk_or_slow_process`), a random walk
+against a slower Gauss-Markov process that turns over inside the record.  For a record
+of a given length the curve the fitted model predicts is compared with the best rival
+curve (the rival model fitted to it by GLS at the model's own Sigma); the mismatch
+delta^T Sigma^-1 delta is the non-centrality lambda of the likelihood-ratio statistic
+that would reject the rival.
 The record separates the two when lambda >= 10.5, where a 5 % test on one degree of
 freedom has 90 % power ((1.96 + 1.28)^2; Cohen, Statistical power analysis, 1988).
 """
@@ -23,12 +26,22 @@ from imu_allan.core.plan.precision import _avar, _log_params, Component
 LAMBDA_SEPARATED = 10.5
 
 
-def rivals(comps: Sequence[Component], tau_max_s: float) -> list:
+#: Question of the random walk against a slower process (see :func:`rivals`).
+SLOW_PROCESS = 'random walk or slower process'
+#: Latest ADEV peak of a rival process, in units of the longest tau: 4 for the rivals
+#: of the model's own bumps; 1 for the process standing in for a random walk, which is
+#: a different model only if it turns over inside the record (the fit's rule).
+_PEAK_REACH = {SLOW_PROCESS: 1.0}
+
+
+def rivals(comps: Sequence[Component], tau_max_s: float, slow_process: bool = False) -> list:
     """
     Rival models of a fitted one: (question, rival components) pairs.
 
     A random walk is rivalled by a ramp (and a ramp by a random walk) matching it at
-    ``tau_max_s``; two Gauss-Markov processes by one (the one with the larger B).
+    ``tau_max_s``; two Gauss-Markov processes by one (the one with the larger B); with
+    ``slow_process`` (the fit found the random walk replaceable), the random walk by a
+    Gauss-Markov process matching it at ``tau_max_s``, its ADEV peak at ``tau_max_s``.
     """
     out = []
     bases = [base_name(c.label) for c in comps]
@@ -49,11 +62,23 @@ def rivals(comps: Sequence[Component], tau_max_s: float) -> list:
         one = [c if i != keep else Component('bias_instability', c.coef, c.phi)
                for i, c in enumerate(comps) if i != drop]
         out.append(('one or two Gauss-Markov', one))
+    if slow_process and 'random_walk' in bases:
+        gm = TERMS['gauss_markov']
+        t = tau_max_s / GM_PEAK_TAU
+        rw = comps[bases.index('random_walk')]
+        labels = {c.label for c in comps}
+        label = next(lb for lb in ['gauss_markov'] + [f'gauss_markov_{i}' for i in range(2, 9)]
+                     if lb not in labels)
+        # Matched to the random walk's AVAR at the longest tau.
+        coef = rw.coef * float(rw.term.shape(np.array([tau_max_s]))[0]
+                               / gm.shape(np.array([tau_max_s]), t)[0])
+        out.append((SLOW_PROCESS, [c for c, b in zip(comps, bases) if b != 'random_walk']
+                    + [Component(label, coef, (t,))]))
     return out
 
 
 def mismatch(true_avar: np.ndarray, sigma: np.ndarray, rival: Sequence[Component],
-             tau: np.ndarray) -> float:
+             tau: np.ndarray, question: str = '') -> float:
     """
     Smallest delta^T Sigma^-1 delta between a curve and a rival model's curves.
 
@@ -67,6 +92,8 @@ def mismatch(true_avar: np.ndarray, sigma: np.ndarray, rival: Sequence[Component
         The rival model, its starting point (coefficients in the same scale).
     tau : np.ndarray
         Shape (k,), averaging times [s].
+    question : str
+        The question of the rival (:func:`rivals`): how late its bumps may peak.
 
     Returns
     -------
@@ -83,7 +110,7 @@ def mismatch(true_avar: np.ndarray, sigma: np.ndarray, rival: Sequence[Component
         if c.term.nonlinear and base_name(c.label) in ('bias_instability', 'gauss_markov'):
             # The rival's bump must sit inside the record, as in the fit.
             lo[i + 1] = math.log(2.0 * tau.min())
-            hi[i + 1] = math.log(tau.max() / GM_PEAK_TAU * 4.0)
+            hi[i + 1] = math.log(tau.max() / GM_PEAK_TAU * _PEAK_REACH.get(question, 4.0))
             theta0[i + 1] = float(np.clip(theta0[i + 1], lo[i + 1] + 1e-9, hi[i + 1] - 1e-9))
         i += len(c.term.symbols)
 
@@ -99,4 +126,4 @@ def scaled(comps: Sequence[Component], scale: float) -> list:
     return [Component(c.label, c.coef / scale, c.phi) for c in comps]
 
 
-__all__ = ['LAMBDA_SEPARATED', 'mismatch', 'rivals', 'scaled', 'TERMS']
+__all__ = ['LAMBDA_SEPARATED', 'mismatch', 'rivals', 'scaled', 'SLOW_PROCESS', 'TERMS']

@@ -272,6 +272,10 @@ def _final_solution(run):
     return slots, sol
 
 
+#: The rivals' name of the model of :func:`random_walk_or_slow_process`.
+SLOWER_PROCESS_RIVAL = 'a slower gauss_markov instead of random_walk'
+
+
 def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
     """
     Report K as an upper bound where a slower Gauss-Markov process does as well.
@@ -333,7 +337,7 @@ def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
         optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
         notes.append(f'T_B: {t_b.value:.3g} s with the random walk, {levels["T_B"]:.3g} s '
                      'with the slower process instead: not identified')
-    listed = ({'model': 'a slower gauss_markov instead of random_walk',
+    listed = ({'model': SLOWER_PROCESS_RIVAL,
                'criterion_rise': rise, **levels},)
     return replace(fit, optimised=optimised, notes=fit.notes + tuple(notes),
                    rivals=fit.rivals + listed)
