@@ -589,6 +589,14 @@ def test_invalid_parameter_changes_are_refused_with_a_reason(rig):
     assert not res[1].successful and 'warn, pause, restart' in res[1].reason
     assert not res[2].successful and 'read-only' in res[2].reason
     assert res[3].successful and r.node.values['publish_period_s'] == 5.0
+    # An integer for a double (what `ros2 param set node min_duration_s 600` sends) is
+    # taken as that number; rclpy alone refuses it for its type.
+    (res,) = r.node.set_parameters([Parameter('publish_period_s', value=7)])
+    assert res.successful, res.reason
+    value = r.node.get_parameter('publish_period_s').value
+    assert value == 7.0 and isinstance(value, float) and r.node.values['publish_period_s'] == 7.0
+    (res,) = r.node.set_parameters([Parameter('publish_period_s', value='7')])
+    assert not res.successful
 
 
 # ----------------------------------------------------------------- services

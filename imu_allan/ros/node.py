@@ -76,6 +76,15 @@ def _descriptor(p) -> ParameterDescriptor:
     return d
 
 
+def _as_declared_types(params: list) -> list:
+    """Return the parameters to set, an integer for a double parameter made a float."""
+    out = []
+    for p in params:
+        value = as_declared_type(p.name, p.value)
+        out.append(p if value is p.value else Parameter(p.name, value=value))
+    return out
+
+
 def _result_qos() -> QoSProfile:
     # Late subscribers get the last result.
     return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -121,6 +130,9 @@ class ImuAllanNode(Node):
             if why:
                 self.destroy_node()
                 raise InputError(f'invalid parameter: {why}')
+        # `ros2 param set ... min_duration_s 600` sends an integer: converted before rclpy
+        # checks the type, as the start-up overrides above.
+        self.add_pre_set_parameters_callback(_as_declared_types)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # Statuses, files and checkpoints are named after the node, so two nodes (two
         # IMUs, two namespaces) never collide.
