@@ -62,7 +62,8 @@ class _Ros1Backend(_Backend):
         from rosbags.rosbag1.reader import Header, read_bytes, read_uint32, RecordType
 
         reader = self.reader
-        indexes = [reader.indexes[c.id] for c in reader.connections if c.topic == topic.name]
+        conn_ids = {c.id for c in reader.connections if c.topic == topic.name}
+        indexes = [reader.indexes[conn_id] for conn_id in sorted(conn_ids)]
         damaged: dict[int, str] = {}    # chunk_pos -> first line of its error
         n_skipped = 0
         chunk_pos, chunk = -1, BytesIO()
@@ -83,8 +84,9 @@ class _Ros1Backend(_Backend):
                 while header.get_uint8('op') == RecordType.CONNECTION:
                     chunk.seek(read_uint32(chunk), os.SEEK_CUR)
                     header = Header.read(chunk)
-                if header.get_uint8('op') != RecordType.MSGDATA or header.get_time('time') != entry.time:
-                    raise ValueError('no message record where the index points')
+                if (header.get_uint8('op') != RecordType.MSGDATA or header.get_time('time')
+                        != entry.time or header.get_uint32('conn') not in conn_ids):
+                    raise ValueError('no message record of the topic where the index points')
                 payloads.append(read_bytes(chunk, read_uint32(chunk)))
             except Exception as err:   # noqa: B902 - bz2, lz4, rosbags raise their own
                 text = str(err).strip()
