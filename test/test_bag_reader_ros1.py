@@ -142,3 +142,32 @@ def test_cli_analyses_the_rest_of_a_bag_with_a_damaged_chunk(tmp_path, capsys):
     assert any(line.startswith('imu-allan: warning: ') and 'damaged chunk' in line
                for line in err.splitlines()), err
     assert any('damaged chunk' in w for w in doc['warnings'])
+
+
+def test_a_record_of_another_connection_costs_the_rest_of_its_chunk(tmp_path):
+    rng = np.random.default_rng(13)
+    n = 300
+    stamps = T0_NS + np.arange(n, dtype=np.int64) * 2_500_000
+    samples = rng.normal(size=(n, 6))
+    bag = _write(tmp_path / 'c.bag', stamps, samples, 'none', chunk_bytes=4000)
+    with Ros1Reader(bag) as reader:
+        middle = sorted(reader.chunks)[len(reader.chunks) // 2]
+        datapos = reader.chunks[middle].datapos
+        conn = next(c for c in reader.connections if c.topic == '/imu')
+        entries = [e for e in reader.indexes[conn.id] if e.chunk_pos == middle]
+    # The 5th message of the chunk names connection 99 (no such connection): rosbags'
+    # reader raises KeyError there; the chunk's earlier messages are read, later not.
+    bad = entries[4]
+    data = bytearray(bag.read_bytes())
+    at = data.index(b'conn=', datapos + bad.offset) + len(b'conn=')
+    data[at:at + 4] = (99).to_bytes(4, 'little')
+    bag.write_bytes(bytes(data))
+    lost = np.array([e.time for e in entries[4:]], np.int64)
+    keep = ~np.isin(stamps + LATENCY_NS, lost)
+    with open_imu(bag) as source:
+        block = source.read_all()
+        assert_array_equal(block.stamp_ns, stamps[keep])
+        assert_array_equal(block.samples, samples[keep])
+        assert source.n_lost == lost.size > 0
+        assert any(w.startswith(f'{bag}: 1 damaged chunk(s)') and
+                   f'; {lost.size} messages of /imu' in w for w in source.warnings)
