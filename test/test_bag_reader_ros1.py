@@ -80,8 +80,7 @@ def _damage(path: Path, which: list[int], compression: str) -> np.ndarray:
 
 @pytest.mark.parametrize('compression', ['none', 'bz2', 'lz4'])
 @pytest.mark.parametrize('where', ['first', 'middle', 'last', 'first and middle'])
-def test_a_damaged_chunk_costs_its_own_messages_only(tmp_path, monkeypatch, compression,
-                                                       where):
+def test_a_damaged_chunk_costs_its_own_messages_only(tmp_path, monkeypatch, compression, where):
     rng = np.random.default_rng(11)
     n = 400
     stamps = T0_NS + np.arange(n, dtype=np.int64) * 2_500_000 + rng.integers(0, 1000, n)

@@ -62,6 +62,8 @@ class _Ros1Backend(_Backend):
         from rosbags.rosbag1.reader import Header, read_bytes, read_uint32, RecordType
 
         reader = self.reader
+        bio = reader.bio
+        assert bio is not None   # opened in __init__
         conn_ids = {c.id for c in reader.connections if c.topic == topic.name}
         indexes = [reader.indexes[conn_id] for conn_id in sorted(conn_ids)]
         damaged: dict[int, str] = {}    # chunk_pos -> first line of its error
@@ -76,9 +78,9 @@ class _Ros1Backend(_Backend):
             try:
                 if entry.chunk_pos != chunk_pos:
                     info = reader.chunks[entry.chunk_pos]
-                    reader.bio.seek(info.datapos)
+                    bio.seek(info.datapos)
                     chunk_pos, chunk = entry.chunk_pos, BytesIO(
-                        info.decompressor(read_bytes(reader.bio, info.datasize)))
+                        info.decompressor(read_bytes(bio, info.datasize)))
                 chunk.seek(entry.offset)
                 header = Header.read(chunk)
                 while header.get_uint8('op') == RecordType.CONNECTION:
