@@ -6,7 +6,7 @@ lz4, no compression and no chunks; sqlite3 by rosbags and by sqlite3 with 512-by
 pages; ROS 1 by rosbags; CSV by numpy), then mutated (truncations, byte flips,
 zeroed regions, bad record lengths, damaged indexes and pages; seeded).  Each mutated
 file is read by imu_allan and by the reference library (mcap with CRC validation,
-sqlite3 SQL row by row, rosbags, numpy), and the outcome is classed:
+sqlite3 SQL row by row, rosbags chunk by chunk, numpy), and the outcome is classed:
 
 * ``same``: the same samples as the reference library;
 * ``complete``: every sample of the intact file (the reference lost some);
@@ -258,13 +258,7 @@ def reference(kind: str, path: Path) -> Counter | None:
             finally:
                 conn.close()
         elif kind == 'ros1':
-            with Ros1Reader(path) as reader:
-                for conn, _, raw in reader.messages():
-                    if conn.topic == '/imu':
-                        try:
-                            got.append(_decoded(ROS1.deserialize_ros1(raw, IMU)))
-                        except Exception:   # noqa: B902 - not an Imu payload: not read
-                            pass
+            got = _ros1_reference(path)
         else:
             table = np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2)
             if table.shape[1] != 7 or not np.isfinite(table).all():
@@ -275,6 +269,30 @@ def reference(kind: str, path: Path) -> Counter | None:
             return None
     got = [g for g in got if g is not None]
     return _rows([g[0] for g in got], [g[1] for g in got]) if got else Counter()
+
+
+def _ros1_reference(path: Path) -> list:
+    """
+    Read with rosbags chunk by chunk: what it reads in each chunk's time window.
+
+    rosbags' reader stops at the first damaged chunk; the windows (from one chunk's
+    start time to the next's, the first and last open) let it read every chunk up to
+    that chunk's damage.
+    """
+    got: list = []
+    with Ros1Reader(path) as reader:
+        starts = sorted({info.start_time for info in reader.chunk_infos})
+        for start, stop in zip([None] + starts[1:], starts[1:] + [None]):
+            try:
+                for conn, _, raw in reader.messages(start=start, stop=stop):
+                    if conn.topic == '/imu':
+                        try:
+                            got.append(_decoded(ROS1.deserialize_ros1(raw, IMU)))
+                        except Exception:   # noqa: B902 - not an Imu payload: not read
+                            pass
+            except Exception:   # noqa: B902 - this chunk ends here
+                pass
+    return got
 
 
 def _mcap_reference(path: Path) -> list:
