@@ -152,13 +152,31 @@ def test_k_found_replaceable_by_a_slower_process_waits_for_their_separation():
     slow = plan_axes(*args, present={'a': {'K': k}}, slow_process={'a'})['a']
     assert SLOW_PROCESS not in {s.question for s in plain.separations}
     (sep,) = [s for s in slow.separations if s.question == SLOW_PROCESS]
+    # The rival turns over inside the present record; a longer one shows the curve
+    # still rising.
     assert not sep.separated and sep.lambda_now < LAMBDA_SEPARATED
+    assert 3600.0 < sep.time_s < math.inf
     assert slow.param('K').time_s >= sep.time_s
-    # The rival process turns over inside the record, as the fit's rule asks.
-    tau_max = 900.0
-    (rival,) = [r for q, r in rivals(comps, tau_max, slow_process=True) if q == SLOW_PROCESS]
+    (rival,) = [r for q, r in rivals(comps, 1e4, slow_peak_s=900.0) if q == SLOW_PROCESS]
     assert 'random_walk' not in [c.label for c in rival]
-    assert GM_PEAK_TAU * rival[-1].phi[0] == pytest.approx(tau_max, rel=1e-12)
+    assert GM_PEAK_TAU * rival[-1].phi[0] == pytest.approx(900.0, rel=1e-12)
+
+
+def test_a_time_does_not_depend_on_where_the_length_grid_stops():
+    # The plan reads the expected widths scaled to the present intervals; the grid
+    # must not stop where only the unscaled widths meet their targets (the time would
+    # read 'beyond 1000 h').
+    noise = AxisNoise(N=XSENS_GYRO.N, B=XSENS_GYRO.B, T_B=XSENS_GYRO.T_B)
+    b, t_b = noise.B, noise.T_B
+    present = {'B': Param(b, (b / 3.0, 3.0 * b), 'estimate', 'rad/s'),
+               'T_B': Param(t_b, (t_b / 2.0, 2.0 * t_b), 'estimate', 's')}
+    args = ({'a': planning_model(noise_components(noise))}, 100.0, 3600.0)
+    usual = plan_axes(*args, present={'a': present})['a']
+    # An N target no record meets keeps the grid going to 1000 h.
+    full = plan_axes(*args, targets={'N': 1e-9}, present={'a': present})['a']
+    for name in ('B', 'T_B'):
+        assert math.isfinite(full.param(name).time_s)
+        assert usual.param(name).time_s == pytest.approx(full.param(name).time_s, rel=1e-9)
 
 
 def test_targets_parse_and_refuse():

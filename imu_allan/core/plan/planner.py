@@ -165,7 +165,10 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         variants.update({name: b for name, b in bounds.items() if b})
         cms[axis] = {k: CurveModel(v, rate_hz) for k, v in variants.items() if v}
     widths: dict = {(a, k): [] for a, v in cms.items() for k in v}
-    # An axis whose T_B is not identified yet is followed over the whole grid.
+    # An axis whose T_B is not identified yet is followed over the whole grid.  The
+    # slower process the fit found instead of a random walk turns over inside the
+    # present record (its longest tau).
+    slow_peak_s = float(fit_taus(rate_hz, max(int(round(start * rate_hz)), 8))[1].max())
     open_t_b = {a for a in cms if getattr((present or {}).get(a, {}).get('T_B'), 'kind', '')
                 == 'not_identified'}
     lams: dict = {a: [] for a in cms}
@@ -176,8 +179,8 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         for axis in cms:
             if (axis not in done and axis not in open_t_b
                     and length > max(REPORT_HOURS) * 3600.0 and _all_met(
-                        {k: v for k, v in widths.items() if k[0] == axis},
-                        {axis: lams[axis]}, targets)):
+                        {k[1]: v for k, v in widths.items() if k[0] == axis}, lams[axis],
+                        targets, (present or {}).get(axis, {}) if duration_s > 0 else None)):
                 done[axis] = i
         if len(done) == len(cms):
             break
@@ -196,9 +199,10 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
                 jac = _jacobian(cm.comps, cm.theta, tau) / scale
                 widths[(axis, key)].append(dict(zip(cm.names, expected_widths(jac, sigma))))
                 if key == '':
-                    lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau, q)
-                                       for q, r in rivals(cm.comps, float(tau.max()),
-                                                          axis in slow_process)})
+                    peak = slow_peak_s if axis in slow_process else None
+                    lams[axis].append({q: mismatch(avar / scale, sigma, scaled(r, scale), tau,
+                                                   peak if q == SLOW_PROCESS else None)
+                                       for q, r in rivals(cm.comps, float(tau.max()), peak)})
     out = {}
     for axis, variants in cms.items():
         columns, values = {}, {}
@@ -244,12 +248,31 @@ def calibrated(widths: np.ndarray, expected_now: float, actual_now: float) -> np
     return np.sinh(ratio * np.arcsinh(widths))
 
 
-def _all_met(widths: dict, lams: dict, targets) -> bool:
-    """Whether at the last length evaluated every target is met, every rival rejected."""
-    for rows in widths.values():
-        if not rows or any(w > target_of(n, targets) for n, w in rows[-1].items()):
+def _present_width(p) -> float:
+    """Relative half-width of a reported parameter: inf unless an estimate, NaN if absent."""
+    if p is None:
+        return math.nan
+    return relative_width(p.value, p.ci95) if p.kind == 'estimate' else math.inf
+
+
+def _all_met(widths: dict, lams: list, targets, present) -> bool:
+    """
+    Whether at the last length evaluated every target is met, every rival rejected.
+
+    ``widths`` maps each variant ('' the point model) to its rows; with ``present`` (the
+    fit's parameters of a record) the point model's widths are scaled to the present
+    intervals first, as the plan reads them (:func:`calibrated`).
+    """
+    for key, rows in widths.items():
+        if not rows:
             return False
-    return all(v >= LAMBDA_SEPARATED for rows in lams.values() if rows for v in rows[-1].values())
+        for name, w in rows[-1].items():
+            if key == '' and present is not None:
+                w = float(calibrated(np.array([w]), rows[0][name],
+                                     _present_width(present.get(name)))[0])
+            if w > target_of(name, targets):
+                return False
+    return all(v >= LAMBDA_SEPARATED for v in (lams[-1].values() if lams else ()))
 
 
 def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams: list,
@@ -277,11 +300,8 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
         now = math.nan
         p = (present or {}).get(name)
         if duration_s > 0:
-            if p is not None and p.kind == 'estimate':
-                now = relative_width(p.value, p.ci95)
-            elif p is not None:
-                now = math.inf
-            else:
+            now = _present_width(p)
+            if p is None:
                 now = float(np.interp(math.log(duration_s), np.log(grid), col))
             if name not in bounded:
                 col = calibrated(col, float(np.interp(math.log(duration_s), np.log(grid), col)),

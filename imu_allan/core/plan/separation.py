@@ -28,20 +28,19 @@ LAMBDA_SEPARATED = 10.5
 
 #: Question of the random walk against a slower process (see :func:`rivals`).
 SLOW_PROCESS = 'random walk or slower process'
-#: Latest ADEV peak of a rival process, in units of the longest tau: 4 for the rivals
-#: of the model's own bumps; 1 for the process standing in for a random walk, which is
-#: a different model only if it turns over inside the record (the fit's rule).
-_PEAK_REACH = {SLOW_PROCESS: 1.0}
 
 
-def rivals(comps: Sequence[Component], tau_max_s: float, slow_process: bool = False) -> list:
+def rivals(comps: Sequence[Component], tau_max_s: float,
+           slow_peak_s: float | None = None) -> list:
     """
     Rival models of a fitted one: (question, rival components) pairs.
 
     A random walk is rivalled by a ramp (and a ramp by a random walk) matching it at
-    ``tau_max_s``; two Gauss-Markov processes by one (the one with the larger B); with
-    ``slow_process`` (the fit found the random walk replaceable), the random walk by a
-    Gauss-Markov process matching it at ``tau_max_s``, its ADEV peak at ``tau_max_s``.
+    ``tau_max_s``; two Gauss-Markov processes by one (the one with the larger B).  With
+    ``slow_peak_s`` (the fit found the random walk replaceable by a slower process that
+    turns over inside its record, whose longest tau that is), the random walk is
+    rivalled by a Gauss-Markov process peaking there and matching it at that tau: a
+    longer record tells whether the curve keeps rising.
     """
     out = []
     bases = [base_name(c.label) for c in comps]
@@ -62,23 +61,22 @@ def rivals(comps: Sequence[Component], tau_max_s: float, slow_process: bool = Fa
         one = [c if i != keep else Component('bias_instability', c.coef, c.phi)
                for i, c in enumerate(comps) if i != drop]
         out.append(('one or two Gauss-Markov', one))
-    if slow_process and 'random_walk' in bases:
+    if slow_peak_s is not None and 'random_walk' in bases:
         gm = TERMS['gauss_markov']
-        t = tau_max_s / GM_PEAK_TAU
+        t = slow_peak_s / GM_PEAK_TAU
         rw = comps[bases.index('random_walk')]
         labels = {c.label for c in comps}
         label = next(lb for lb in ['gauss_markov'] + [f'gauss_markov_{i}' for i in range(2, 9)]
                      if lb not in labels)
-        # Matched to the random walk's AVAR at the longest tau.
-        coef = rw.coef * float(rw.term.shape(np.array([tau_max_s]))[0]
-                               / gm.shape(np.array([tau_max_s]), t)[0])
+        at = np.array([slow_peak_s])
+        coef = rw.coef * float(rw.term.shape(at)[0] / gm.shape(at, t)[0])
         out.append((SLOW_PROCESS, [c for c, b in zip(comps, bases) if b != 'random_walk']
                     + [Component(label, coef, (t,))]))
     return out
 
 
 def mismatch(true_avar: np.ndarray, sigma: np.ndarray, rival: Sequence[Component],
-             tau: np.ndarray, question: str = '') -> float:
+             tau: np.ndarray, max_peak_s: float | None = None) -> float:
     """
     Smallest delta^T Sigma^-1 delta between a curve and a rival model's curves.
 
@@ -92,8 +90,9 @@ def mismatch(true_avar: np.ndarray, sigma: np.ndarray, rival: Sequence[Component
         The rival model, its starting point (coefficients in the same scale).
     tau : np.ndarray
         Shape (k,), averaging times [s].
-    question : str
-        The question of the rival (:func:`rivals`): how late its bumps may peak.
+    max_peak_s : float, optional
+        Latest ADEV peak of the rival's Gauss-Markov processes [s] (default four times
+        the longest tau: the rival's bumps sit about inside the record, as in the fit).
 
     Returns
     -------
@@ -110,7 +109,8 @@ def mismatch(true_avar: np.ndarray, sigma: np.ndarray, rival: Sequence[Component
         if c.term.nonlinear and base_name(c.label) in ('bias_instability', 'gauss_markov'):
             # The rival's bump must sit inside the record, as in the fit.
             lo[i + 1] = math.log(2.0 * tau.min())
-            hi[i + 1] = math.log(tau.max() / GM_PEAK_TAU * _PEAK_REACH.get(question, 4.0))
+            peak = 4.0 * tau.max() if max_peak_s is None else max_peak_s
+            hi[i + 1] = math.log(peak / GM_PEAK_TAU)
             theta0[i + 1] = float(np.clip(theta0[i + 1], lo[i + 1] + 1e-9, hi[i + 1] - 1e-9))
         i += len(c.term.symbols)
 
