@@ -334,6 +334,45 @@ def test_alpha_from_slope_power_laws():
     two = allan.alpha_from_slope(tau, np.stack([tau ** -1, tau ** 1], axis=1))
     assert two.shape == (13, 2) and np.all(two[:, 0] == 0) and np.all(two[:, 1] == -2)
     assert allan.alpha_from_slope(tau, tau ** 2.0, method='hadamard')[5] == -3
+    # Where few clusters fit in the record, a falling slope is not read as phase noise
+    # (whose EDF would make those points look exact): white FM at most.
+    clusters = np.geomspace(1000, 3, tau.size)
+    capped = allan.alpha_from_slope(tau, 3.0 * tau ** -2.0, n_clusters=clusters)
+    few = clusters < allan.MIN_ACF_POINTS
+    assert few.any() and not few.all()
+    assert np.all(capped[few] == 0) and np.all(capped[~few] == 2)
+    rising = allan.alpha_from_slope(tau, tau, n_clusters=clusters)
+    assert np.all(rising == -2)
+
+
+def test_no_phase_noise_edf_at_the_long_taus_of_a_streamed_curve():
+    # A random walk: its last points scatter with an EDF of 1-3, and a low-lying one
+    # made the local slope steep enough to read as phase noise, whose EDF (tens to
+    # thousands) made the point look exact and the 95 % K bound fall below the truth.
+    from imu_allan.core.allan.accumulator import AllanAccumulator
+    from imu_allan.core.fit.api import thin
+    from imu_allan.core.fit.trust import curve_k_bound
+    from imu_allan.core.noise.params import AxisNoise
+    from imu_allan.core.noise.simulate import simulate_axis
+
+    truth = AxisNoise(N=1e-3, B=1e-4, T_B=30.0, K=3e-5)
+    rate, n = 100.0, 180_000
+    held, total = 0, 0
+    for seed in range(12):
+        y = simulate_axis(truth, rate, n, np.random.default_rng(300 + seed))
+        acc = AllanAccumulator(1, rate)
+        acc.add(y[:, None])
+        c = acc.curve(confidence=0.95)
+        long = c.m > n // allan.MIN_ACF_POINTS
+        assert long.any() and np.all(c.alpha[long] <= 0)
+        # The EDF of a tau does not exceed white FM's there (10 %: the accumulator's
+        # decimated levels have EDFs of their own); phase noise gave tens to thousands.
+        white = allan.edf_overlapping(0, c.m[long], n)
+        assert np.all(c.edf[long, 0] <= 1.1 * white)
+        keep = thin(c.tau_s)
+        held += curve_k_bound(c.tau_s[keep], c.avar[keep, 0], c.edf[keep, 0]) >= truth.K
+        total += 1
+    assert held == total
 
 
 def test_identify_alpha_simulated_noise():

@@ -292,8 +292,9 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
         seps.append(Separation(q, lam_now, float(when) if not separated else duration_s,
                                separated))
     # A parameter the fit could not pin down for want of a separation waits for it.
-    waits = {s.question: s.time_s for s in seps if not s.separated}
-    waits = {name: [waits[q] for q in qs if q in waits] for name, qs in _WAITS.items()}
+    open_times = {s.question: s.time_s for s in seps if not s.separated}
+    waits = {name: [open_times[q] for q in qs if q in open_times]
+             for name, qs in _WAITS.items()}
     params = []
     for name, col in columns.items():
         target = target_of(name, targets)

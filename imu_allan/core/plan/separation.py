@@ -62,14 +62,14 @@ def rivals(comps: Sequence[Component], tau_max_s: float,
                for i, c in enumerate(comps) if i != drop]
         out.append(('one or two Gauss-Markov', one))
     if slow_peak_s is not None and 'random_walk' in bases:
-        gm = TERMS['gauss_markov']
+        gm_term = TERMS['gauss_markov']
         t = slow_peak_s / GM_PEAK_TAU
         rw = comps[bases.index('random_walk')]
         labels = {c.label for c in comps}
         label = next(lb for lb in ['gauss_markov'] + [f'gauss_markov_{i}' for i in range(2, 9)]
                      if lb not in labels)
         at = np.array([slow_peak_s])
-        coef = rw.coef * float(rw.term.shape(at)[0] / gm.shape(at, t)[0])
+        coef = rw.coef * float(rw.term.shape(at)[0] / gm_term.shape(at, t)[0])
         out.append((SLOW_PROCESS, [c for c, b in zip(comps, bases) if b != 'random_walk']
                     + [Component(label, coef, (t,))]))
     return out
