@@ -382,8 +382,10 @@ class AllanAccumulator(_Persistence):
             empty = np.zeros((0, a))
             return AllanCurve(tau_s, m, empty, n_terms, empty, np.zeros((0, a), np.int64),
                               empty, empty, float(confidence), 'overlapping', self.rate_hz)
+        m_eff = m // self._stride[sel]
+        n_eff = n_terms + 2 * m_eff - 1
         if alpha is None:
-            alpha = alpha_from_slope(tau_s, avar)
+            alpha = alpha_from_slope(tau_s, avar, n_clusters=n_eff // m_eff)
         try:
             alpha_f = np.broadcast_to(np.asarray(alpha, dtype=float), (k, a))
         except ValueError:
@@ -391,8 +393,6 @@ class AllanAccumulator(_Persistence):
         if not np.isin(alpha_f, (-2, -1, 0, 1, 2)).all():
             raise InputError('alpha must be an integer in -2..2 (S_y ~ f^alpha)')
         alpha_arr = alpha_f.astype(np.int64)
-        m_eff = m // self._stride[sel]
-        n_eff = n_terms + 2 * m_eff - 1
         edf = np.broadcast_to(np.asarray(edf_overlapping(alpha_arr, m_eff[:, None],
                                                          n_eff[:, None]), dtype=float),
                               (k, a)).copy()

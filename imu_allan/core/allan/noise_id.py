@@ -38,7 +38,8 @@ _ALPHA_UNKNOWN = -99
 _SLOPE_EDGES = np.array([-1.9, -1.35, -0.5, 0.5, 1.5, 2.5])
 
 
-def alpha_from_slope(tau_s, avar, method: str = 'overlapping') -> np.ndarray:
+def alpha_from_slope(tau_s, avar, method: str = 'overlapping',
+                     n_clusters=None) -> np.ndarray:
     """
     Integer noise exponent per point from the local log-log slope of the curve.
 
@@ -46,6 +47,13 @@ def alpha_from_slope(tau_s, avar, method: str = 'overlapping') -> np.ndarray:
     d ln tau from neighbouring points (one-sided at the ends), then alpha = -mu - 1
     with the boundaries of ``_SLOPE_EDGES`` (white and flicker PM both fall as
     tau^-2; the flicker log factor flattens its slope to -1.3 .. -1.9).
+
+    Where fewer than ``MIN_ACF_POINTS`` clusters fit in the record, the slope is that
+    of points with a few degrees of freedom: one low-lying point makes it steep enough
+    to read as phase noise, whose EDF is tens to thousands of times that of the
+    frequency noises (Greenhall), and the point then looks exact.  For rate data phase
+    noise means quantization, at the shortest taus; there the exponent is held at most
+    0 (white FM).
 
     Parameters
     ----------
@@ -55,6 +63,9 @@ def alpha_from_slope(tau_s, avar, method: str = 'overlapping') -> np.ndarray:
         Shape (k,) or (k, n_axes), variances [unit^2].
     method : str
         'hadamard' allows alpha down to -4, the Allan variances down to -2.
+    n_clusters : array_like, optional
+        Shape (k,) or broadcastable to ``avar``: non-overlapping clusters of each tau in
+        the record (M // m); unknown when not given (no cap).
 
     Returns
     -------
@@ -73,6 +84,9 @@ def alpha_from_slope(tau_s, avar, method: str = 'overlapping') -> np.ndarray:
         idx = np.searchsorted(_SLOPE_EDGES, np.nan_to_num(mu, nan=-1.0))
         alpha = np.where(np.isfinite(mu), labels[idx], 0)
     alpha = np.clip(alpha, _ALPHA_MIN[_check_method(method)], 2)
+    if n_clusters is not None:
+        few = np.asarray(n_clusters, dtype=np.float64).reshape(-1, 1) < MIN_ACF_POINTS
+        alpha = np.where(few, np.minimum(alpha, 0), alpha)
     return alpha[:, 0] if avar.ndim == 1 else alpha
 
 
@@ -202,8 +216,9 @@ def _identify_axis(cluster_means, m: np.ndarray, method: str, phase) -> np.ndarr
 
 def _fill_unknown(alpha: np.ndarray, tau_s: np.ndarray, var: np.ndarray,
                   method: str) -> np.ndarray:
-    """Replace ``_ALPHA_UNKNOWN`` entries by the local-slope estimate."""
+    """Replace ``_ALPHA_UNKNOWN`` entries (under 4 clusters) by the local-slope estimate."""
     unknown = alpha == _ALPHA_UNKNOWN
     if unknown.any():
-        alpha = np.where(unknown, alpha_from_slope(tau_s, var, method), alpha)
+        few = np.zeros(tau_s.size)      # every unknown point has fewer than 4 clusters
+        alpha = np.where(unknown, alpha_from_slope(tau_s, var, method, few), alpha)
     return alpha
