@@ -289,8 +289,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
                    if duration_s > 0 else math.nan)
         # The fit has the last word on the present record: it found the levels tied.
         separated = bool(duration_s > 0 and lam_now >= LAMBDA_SEPARATED and q != ORDERING)
-        seps.append(Separation(q, lam_now, float(when) if not separated else duration_s,
-                               separated))
+        seps.append(Separation(q, lam_now, float(when), separated))
     # A parameter the fit could not pin down for want of a separation waits for it.
     open_times = {s.question: s.time_s for s in seps if not s.separated}
     waits = {name: [open_times[q] for q in qs if q in open_times]
@@ -325,7 +324,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
         elif duration_s > 0:
             when = max(when, duration_s)
         if kind != 'pinned' and p is not None and p.kind != 'estimate' and waits.get(name):
-            when = max([w for w in [when] if not math.isnan(w)] + waits[name])
+            when = max(waits[name]) if math.isnan(when) else max(when, *waits[name])
         if math.isinf(when) and kind != 'at_least':
             kind = 'beyond'
         at = {h: float(col[int(np.argmin(np.abs(grid - h * 3600.0)))])
