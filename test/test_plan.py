@@ -11,6 +11,7 @@ import json
 import math
 
 import numpy as np
+from numpy.testing import assert_allclose
 import pytest
 
 from conftest import REPO
@@ -177,6 +178,24 @@ def test_a_time_does_not_depend_on_where_the_length_grid_stops():
     for name in ('B', 'T_B'):
         assert math.isfinite(full.param(name).time_s)
         assert usual.param(name).time_s == pytest.approx(full.param(name).time_s, rel=1e-9)
+
+
+def test_curve_covariance_of_a_1000_h_record_at_1_khz():
+    # The planner reaches 1000 h: 3.6e9 samples at 1 kHz, whose term counts multiplied
+    # overflowed int64 and made Sigma indefinite (a traceback from a 20 min record).
+    from imu_allan.core.fit.api import CurveCovariance
+    from imu_allan.core.noise.model import TERMS
+    from imu_allan.core.plan.precision import fit_taus
+
+    def first_variance(n: int) -> float:
+        m, _ = fit_taus(1000.0, n)
+        cov = CurveCovariance(m, np.maximum(n + 1 - 2 * m, 1), 1e-3, n)
+        sigma = cov.sigma([TERMS['white']], np.array([1.0]), [()])
+        assert np.all(np.diag(sigma) > 0)
+        return float(sigma[0, 0])
+    # White noise at the shortest tau: the variance falls as 1 / n (to 1e-6).
+    n = 3_600_000_000
+    assert_allclose(first_variance(n) * 16.0, first_variance(n // 16), rtol=1e-6)
 
 
 def test_targets_parse_and_refuse():

@@ -222,7 +222,9 @@ class _CurveCovariance:
     def __init__(self, m: np.ndarray, n_terms: np.ndarray, dt: float, n_samples: int):
         self.m, self.n_terms, self.dt = m, n_terms, dt
         tau = m * dt
-        self.scale = 2.0 / (4.0 * np.outer(tau ** 2, tau ** 2) * np.outer(n_terms, n_terms))
+        # float: the product of two term counts overflows int64 beyond 3e9 samples.
+        n_f = n_terms.astype(np.float64)
+        self.scale = 2.0 / (4.0 * np.outer(tau ** 2, tau ** 2) * np.outer(n_f, n_f))
         self.n_samples = n_samples
         self._quad: dict[int, _LagQuadrature] = {}
         self._gammas: dict = {}     # second-difference covariances at the nodes
