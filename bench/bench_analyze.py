@@ -22,6 +22,9 @@ skip the writing.  For each storage it prints, measured in the same run:
   output files with plots;
 * the plain rosbags loop (``rosbags.rosbag2.Reader`` plus ``deserialize_cdr`` per
   message) over the first ``--subset`` messages, as messages per second.
+* the wall time of each stage of the command as it runs (fresh process, its own
+  workers): reading with the checks and accumulation, the search, the plan and the
+  files; the last three cost the same for any record length.
 
 Guards (issue 28, 2 cores): at least 1 M messages/s end to end and at least 15x the plain
 rosbags loop, on both storages.
@@ -31,7 +34,9 @@ Usage: ``.venv/bin/python bench/bench_analyze.py [--hours H] [--rate HZ] [--subs
 """
 
 import argparse
+import contextlib
 import ctypes
+import io
 import json
 import os
 from pathlib import Path
@@ -172,6 +177,44 @@ def _split(bag: Path, out: Path) -> dict:
     return times
 
 
+def _stages(bag: Path, out: Path) -> dict:
+    """
+    Wall seconds of each stage of ``imu-allan analyze BAG`` as the command runs it.
+
+    The stages are timed around the functions that run them (reading with the checks
+    and accumulation, the axes' searches, the plan, the files), in this process, with
+    the command's own workers; the first three do the same work for any record length
+    but the first.
+    """
+    import imu_allan.io.inputs as inputs
+    import imu_allan.io.report as report
+    import imu_allan.pipeline.analysis as analysis
+    from imu_allan.cli import main as cli_main
+
+    wall: dict = {}
+
+    def timed(module, name: str, stage: str) -> None:
+        inner = getattr(module, name)
+
+        def wrapper(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                wall[stage] = wall.get(stage, 0.0) + time.perf_counter() - t0
+        setattr(module, name, wrapper)
+
+    timed(inputs, 'stream_input', 'stream')
+    timed(analysis, '_map_axes', 'search')
+    timed(analysis, '_plans', 'plan')
+    timed(report, 'write_outputs', 'files')
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):    # this process prints the times
+        assert cli_main(['analyze', str(bag), '--out', str(out), '--format', 'json']) == 0
+    wall['total'] = time.perf_counter() - t0
+    return wall
+
+
 def _rosbags_loop(bag: Path, subset: int) -> tuple:
     """Decode the first ``subset`` messages one by one with rosbags; return (n, seconds)."""
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -202,12 +245,15 @@ def main() -> None:
                         help='end-to-end runs per storage; the best one is reported')
     parser.add_argument('--split-only', type=Path, default=None, metavar='BAG',
                         help=argparse.SUPPRESS)
+    parser.add_argument('--stages-only', type=Path, default=None, metavar='BAG',
+                        help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if args.split_only is not None:
-        # Run in a fresh process, so that no cache of an earlier run helps the fit.
-        with tempfile.TemporaryDirectory(prefix='imu_allan_bench_out_') as tmp:
-            print(json.dumps(_split(args.split_only, Path(tmp))))
-        return
+    for bag, measure in ((args.split_only, _split), (args.stages_only, _stages)):
+        if bag is not None:
+            # Run in a fresh process, so that no cache of an earlier run helps the fit.
+            with tempfile.TemporaryDirectory(prefix='imu_allan_bench_out_') as tmp:
+                print(json.dumps(measure(bag, Path(tmp))))
+            return
     byte_compile()
     n = int(round(args.hours * 3600 * args.rate))
     print(f'{n:,} sensor_msgs/Imu messages ({args.hours:g} h at {args.rate:g} Hz), '
@@ -228,6 +274,9 @@ def main() -> None:
         proc = subprocess.run([sys.executable, __file__, '--split-only', str(bag)],
                               capture_output=True, text=True, check=True)
         split = json.loads(proc.stdout)
+        proc = subprocess.run([sys.executable, __file__, '--stages-only', str(bag)],
+                              capture_output=True, text=True, check=True)
+        stages = json.loads(proc.stdout)
         base_n, base_s = _rosbags_loop(bag, min(args.subset, n))
         read_rate = split['messages'] / split['read']
         rate = n / wall
@@ -261,6 +310,12 @@ def main() -> None:
         print(f'[{storage}]   phases, one thread each (sum {total:.2f} s; end to end overlaps '
               'reading with the rest): ' + ', '.join(
                   f'{k} {v:.2f} s ({100 * v / total:.0f} %)' for k, v in phases.items()))
+        fixed = stages['search'] + stages['plan'] + stages['files']
+        print(f'[{storage}]   wall by stage, as the command runs: reading with the checks and '
+              f'accumulation {stages["stream"]:.2f} s ({n / stages["stream"] / 1e6:.2f} M msg/s), '
+              f'search {stages["search"]:.2f} s, plan {stages["plan"]:.2f} s, files '
+              f'{stages["files"]:.2f} s (these three, {fixed:.2f} s, do not grow with the '
+              f'record), {stages["total"]:.2f} s in all')
         sys.stdout.flush()
 
 
