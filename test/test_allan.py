@@ -7,6 +7,11 @@ from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
 from imu_allan.core import allan
+from imu_allan.core.allan.accumulator import AllanAccumulator
+from imu_allan.core.fit.api import thin
+from imu_allan.core.fit.trust import curve_k_bound
+from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.simulate import simulate_axis
 from imu_allan.errors import InputError
 
 S32 = 'refdata/stable32_ocxo'
@@ -349,12 +354,6 @@ def test_no_phase_noise_edf_at_the_long_taus_of_a_streamed_curve():
     # A random walk: its last points scatter with an EDF of 1-3, and a low-lying one
     # made the local slope steep enough to read as phase noise, whose EDF (tens to
     # thousands) made the point look exact and the 95 % K bound fall below the truth.
-    from imu_allan.core.allan.accumulator import AllanAccumulator
-    from imu_allan.core.fit.api import thin
-    from imu_allan.core.fit.trust import curve_k_bound
-    from imu_allan.core.noise.params import AxisNoise
-    from imu_allan.core.noise.simulate import simulate_axis
-
     truth = AxisNoise(N=1e-3, B=1e-4, T_B=30.0, K=3e-5)
     rate, n = 100.0, 180_000
     held, total = 0, 0

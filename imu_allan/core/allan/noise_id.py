@@ -219,6 +219,6 @@ def _fill_unknown(alpha: np.ndarray, tau_s: np.ndarray, var: np.ndarray,
     """Replace ``_ALPHA_UNKNOWN`` entries (under 4 clusters) by the local-slope estimate."""
     unknown = alpha == _ALPHA_UNKNOWN
     if unknown.any():
-        few = np.zeros(tau_s.size)      # every unknown point has fewer than 4 clusters
-        alpha = np.where(unknown, alpha_from_slope(tau_s, var, method, few), alpha)
+        # Under 4 clusters: at most white FM, as alpha_from_slope holds it below 30.
+        alpha = np.where(unknown, np.minimum(alpha_from_slope(tau_s, var, method), 0), alpha)
     return alpha

@@ -65,9 +65,8 @@ def rivals(comps: Sequence[Component], tau_max_s: float,
         gm_term = TERMS['gauss_markov']
         t = slow_peak_s / GM_PEAK_TAU
         rw = comps[bases.index('random_walk')]
-        labels = {c.label for c in comps}
-        label = next(lb for lb in ['gauss_markov'] + [f'gauss_markov_{i}' for i in range(2, 9)]
-                     if lb not in labels)
+        used = bases.count('gauss_markov')
+        label = f'gauss_markov_{used + 1}' if used else 'gauss_markov'
         at = np.array([slow_peak_s])
         coef = rw.coef * float(rw.term.shape(at)[0] / gm_term.shape(at, t)[0])
         out.append((SLOW_PROCESS, [c for c, b in zip(comps, bases) if b != 'random_walk']
