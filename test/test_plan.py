@@ -24,7 +24,7 @@ from imu_allan.core.noise.params import AxisNoise, GaussMarkov, load_params
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
 from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
                                  planning_model)
-from imu_allan.core.plan.planner import ORDERING
+from imu_allan.core.plan.planner import as_read, inflated, inflation, ORDERING
 from imu_allan.core.plan.precision import _avar, CurveModel, relative_width
 from imu_allan.core.plan.separation import LAMBDA_SEPARATED, rivals, SLOW_PROCESS
 from imu_allan.core.search import search_axis
@@ -164,20 +164,63 @@ def test_k_found_replaceable_by_a_slower_process_waits_for_their_separation():
 
 
 def test_a_time_does_not_depend_on_where_the_length_grid_stops():
-    # The plan reads the expected widths scaled to the present intervals; the grid
-    # must not stop where only the unscaled widths meet their targets (the time would
+    # The plan reads the expected widths inflated by the fit's dispersion; the grid
+    # must not stop where only the plain widths meet their targets (the time would
     # read 'beyond 1000 h').
     noise = AxisNoise(N=XSENS_GYRO.N, B=XSENS_GYRO.B, T_B=XSENS_GYRO.T_B)
-    b, t_b = noise.B, noise.T_B
-    present = {'B': Param(b, (b / 3.0, 3.0 * b), 'estimate', 'rad/s'),
-               'T_B': Param(t_b, (t_b / 2.0, 2.0 * t_b), 'estimate', 's')}
     args = ({'a': planning_model(noise_components(noise))}, 100.0, 3600.0)
-    usual = plan_axes(*args, present={'a': present})['a']
+    usual = plan_axes(*args, inflations={'a': 1.7})['a']
     # An N target no record meets keeps the grid going to 1000 h.
-    full = plan_axes(*args, targets={'N': 1e-9}, present={'a': present})['a']
+    full = plan_axes(*args, targets={'N': 1e-9}, inflations={'a': 1.7})['a']
+    plain = plan_axes(*args)['a']
     for name in ('B', 'T_B'):
         assert math.isfinite(full.param(name).time_s)
         assert usual.param(name).time_s == pytest.approx(full.param(name).time_s, rel=1e-9)
+        # Widths ~ L^-1/2 once resolved: z 1.7x wider needs about 1.7^2 the record.
+        assert 2.0 < usual.param(name).time_s / plain.param(name).time_s < 4.0
+
+
+def test_the_plan_is_inflated_by_the_fits_dispersion_only():
+    # A fit as dispersed as its model allows keeps the expected widths; one with
+    # J / dof = 3 widens z by about sqrt(3) (the fit's profile threshold grows so).
+    assert inflation(40.0, 50) == 1.0
+    assert inflation(math.nan, 50) == inflation(10.0, 0) == 1.0
+    assert_allclose(inflation(150.0, 50), math.sqrt(3.0), rtol=0.06)   # F vs chi2 quantile
+    assert_allclose(inflated(np.array([0.1, 0.5]), 1.0), [0.1, 0.5], rtol=1e-12)
+
+
+def test_the_plan_starts_at_the_present_width_and_joins_the_expected_ones():
+    lengths = np.array([1.0, 4.0, 100.0, 1e4]) * 3600.0
+    expected = 0.2 * np.sqrt(lengths[0] / lengths)      # resolved: L^-1/2
+    for now in (0.35, 0.12):                            # wider, or luckily narrower
+        read = as_read(expected, lengths, 1.0, lengths[0], now)
+        assert read[0] == pytest.approx(now, rel=1e-12)
+        # The excess on the log scale shrinks as sd: (1 h / L)^(1/2).
+        excess = np.arcsinh(read) / np.arcsinh(expected) - 1.0
+        assert_allclose(excess, excess[0] * np.sqrt(lengths[0] / lengths), rtol=1e-9)
+    # No present width (a datasheet): the expected widths, inflated.
+    assert_allclose(as_read(expected, lengths, 1.5, 0.0, math.nan),
+                    inflated(expected, 1.5), rtol=1e-12)
+
+
+def test_the_plan_of_a_1_h_fit_agrees_with_the_plan_of_the_true_model():
+    """As analyze plans it: the median over 4 seeded 1 h records within 1.5x (B, T_B)."""
+    rate, targets = 100.0, {'B': 0.25, 'T_B': 0.5}
+    true = plan_axes({'a': planning_model(noise_components(XSENS_GYRO))}, rate, 0.0,
+                     targets)['a']
+    times: dict = {'B': [], 'T_B': []}
+    for seed in range(4):
+        y = simulate_axis(XSENS_GYRO, rate, int(rate * 3600), np.random.default_rng(seed))
+        c = allan_curve(y, rate, 'dense', confidence=0.95)
+        fit = search_axis(c.tau_s, c.avar[:, 0], c.edf[:, 0], rate, y.size,
+                          unit='rad/s').fit
+        plan = plan_fits({'a': fit}, rate, 3600.0, targets)['a']
+        for name in times:
+            assert plan.param(name).kind == 'predicted'
+            times[name].append(plan.param(name).time_s)
+    for name, t in times.items():
+        # The bench's factor (docs/planning.md).
+        assert 1 / 1.5 < np.median(t) / true.param(name).time_s < 1.5, (name, t)
 
 
 def test_curve_covariance_of_a_1000_h_record_at_1_khz():
