@@ -10,14 +10,14 @@ per parameter and length, the median relative 95 % half-width (hi - lo) / (2 val
 over the seeds; the length at which that median reaches a target (log-log
 interpolation) is "actual".  "Predicted" is the planner's length for the same target:
 from the true model, and from the fit of each record's first hour as ``imu-allan
-analyze`` and the node plan it (:func:`plan_fits`: scaled to the present intervals,
-waiting for the separations the fit left open).  A parameter the first hour only bounds
-is planned at its bound, a lower limit, which holds when it is at most 1.5x the actual
-length; as "actual" counts a seed without an estimate as not there yet, the median of
-the per-seed plans counts such a seed as not predicted short.  A row is judged on that
-median where most seeds give a point prediction, else on its lower limits.  Targets:
-every round width whose actual length lies inside the simulated lengths.  Prints one
-markdown table (docs/planning.md).
+analyze`` and the node plan it (:func:`plan_fits`: read against the fit's dispersion
+and present widths, waiting for the separations the fit left open).  A parameter the
+first hour only bounds is planned at its bound, a lower limit, which holds when it is
+at most 1.5x the actual length; as "actual" counts a seed without an estimate as not
+there yet, the median of the per-seed plans counts such a seed as not predicted short.
+A row is judged on that median where most seeds give a point prediction, else on its
+lower limits.  Targets: every round width whose actual length lies inside the simulated
+lengths.  Prints one markdown table (docs/planning.md).
 """
 
 import argparse
