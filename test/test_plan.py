@@ -20,7 +20,7 @@ from imu_allan.cli import main
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.fit.result import Param
 from imu_allan.core.noise.model import avar_model, GM_PEAK_TAU
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, load_params
+from imu_allan.core.noise.params import AxisNoise, GaussMarkov, load_params, Sinusoid
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
 from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
                                  planning_model)
@@ -32,6 +32,7 @@ from imu_allan.errors import InputError
 from imu_allan.io.report import summary_text
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.ros.plan_report import targets_met
 
 
 XSENS_GYRO = load_params(REPO / 'config' / 'xsens_mti7.yaml').axes['gyro_x']
@@ -103,6 +104,29 @@ def test_a_bound_is_planned_at_its_bound_and_reads_at_least():
     assert n.kind == 'pinned' and n.time_s == 1200.0
     assert n.width_now == relative_width(fit.optimised['N'].value, fit.optimised['N'].ci95)
     assert 'K in >= ' in plan.progress_line() or 'K only bounded' in plan.progress_line()
+
+
+def test_a_parameter_the_model_cannot_plan_is_still_to_come():
+    # 11 min of white noise and a 31 Hz line (the MPU-6050's gyro_z): the model has no
+    # bias-instability or random-walk term, B is only bounded and K unconstrained.  The
+    # plan once listed N and the line alone, read "every target met", and the node's
+    # stop_when_pinned would have stopped there.
+    rate, noise = 100.0, AxisNoise(N=1.7e-4, sinusoids=(Sinusoid(1.7e-3, 31.4),))
+    y = simulate_axis(noise, rate, int(rate * 660), np.random.default_rng(0))
+    c = allan_curve(y, rate, 'dense', confidence=0.95)
+    fit = search_axis(c.tau_s, c.avar[:, 0], c.edf[:, 0], rate, y.size, unit='rad/s').fit
+    assert fit.terms == ('white', 'sinusoid')
+    assert (fit.optimised['B'].kind, fit.optimised['K'].kind) == ('upper_bound',
+                                                                  'not_identified')
+    plan = plan_fits({'gyro_z': fit}, rate, 660.0)['gyro_z']
+    kinds = {p.name: p.kind for p in plan.params}
+    assert kinds == {'N': 'pinned', 'B': 'at_least', 'T_B': 'open', 'K': 'open',
+                     'sinusoid.A': 'pinned', 'sinusoid.f0_hz': 'pinned'}
+    assert [p.name for p in plan.params][:4] == ['N', 'B', 'T_B', 'K']
+    assert not plan.all_pinned() and not targets_met({'gyro_z': plan}, 1)
+    assert math.isnan(plan.remaining_s())
+    assert 'K not constrained yet' in plan.progress_line()
+    assert 'B only bounded yet' in plan.progress_line()
 
 
 def test_a_weaker_second_gauss_markov_needs_a_longer_record():

@@ -23,7 +23,7 @@ def plan_values(plan: AxisPlan | None) -> list:
 
     Per parameter P: ``P_width_now`` and ``P_target`` (relative 95 % half-widths),
     ``P_time_to_target_s`` (record length at which the target is met) and ``P_plan``
-    (pinned, predicted, at_least or beyond); then ``plan_remaining_s``, ``plan`` (one
+    (pinned, predicted, at_least, beyond or open); then ``plan_remaining_s``, ``plan`` (one
     line) and, where the model behind the plan does not hold, ``plan_caveat``.  Empty
     without a plan.
     """

@@ -40,6 +40,8 @@ HORIZON_S = 3.6e6
 REPORT_HOURS = (1.0, 3.0, 10.0)
 #: Symbols of the core terms and their term (for the bounds of unsupported terms).
 _CORE = {'N': 'white', 'B': 'bias_instability', 'K': 'random_walk'}
+#: The core parameters in the order a plan lists them (the extra terms follow).
+_CORE_ORDER = ('N', 'B', 'T_B', 'K')
 
 
 def target_of(name: str, targets: Mapping[str, float] | None) -> float:
@@ -385,8 +387,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
               for h in REPORT_HOURS if np.isclose(grid, h * 3600.0).any()}
         params.append(ParamPlan(name, float(values[name]), float(now), target, float(when), kind,
                                 at))
-    order = {'N': 0, 'B': 1, 'T_B': 2, 'K': 3}
-    params.sort(key=lambda p: (order.get(p.name, 4), p.name))
+    params.sort(key=_listed)
     return AxisPlan(float(duration_s), tuple(params), tuple(seps))
 
 
@@ -491,7 +492,35 @@ def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
     with single_thread_blas():
         plans = plan_axes(models, rate_hz, duration_s, targets, present, slow_process=slow,
                           inflations=factors)
-    return {a: plan._replace(caveat=plan_caveat(fits[a])) for a, plan in plans.items()}
+    return {a: plan._replace(params=tuple(sorted(
+        plan.params + _unplanned(plan, fits[a].optimised, targets), key=_listed)),
+        caveat=plan_caveat(fits[a])) for a, plan in plans.items()}
+
+
+def _listed(p: ParamPlan) -> tuple:
+    """Sort key of a plan's parameters: N, B, T_B, K, then the extra terms by name."""
+    core = list(_CORE_ORDER)
+    return (core.index(p.name) if p.name in core else len(core), p.name)
+
+
+def _unplanned(plan: AxisPlan, optimised: Mapping, targets) -> tuple:
+    """
+    Return the core parameters the fit reports but its model cannot plan, still to come.
+
+    A B only bounded by a curve without a bias-instability term, its T_B, or a K the
+    record cannot constrain have no term to extrapolate; left out, the plan would read
+    "every target met" while they are unknown.  A bound is 'at_least' with no time (its
+    time is unknown), the rest 'open'.
+    """
+    out = []
+    for name in _CORE_ORDER:
+        q = optimised.get(name)
+        if q is None or plan.param(name) is not None or q.kind == 'estimate':
+            continue
+        kind = 'at_least' if q.kind == 'upper_bound' else 'open'
+        out.append(ParamPlan(name, float(q.value), math.inf, target_of(name, targets),
+                             math.nan, kind, {}))
+    return tuple(out)
 
 
 def plan_caveat(fit) -> str:

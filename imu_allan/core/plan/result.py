@@ -10,7 +10,7 @@ from typing import NamedTuple
 from imu_allan.core.fit.result import json_num
 
 #: Kinds of a parameter's plan.
-PLAN_KINDS = ('pinned', 'predicted', 'at_least', 'beyond')
+PLAN_KINDS = ('pinned', 'predicted', 'at_least', 'beyond', 'open')
 
 
 def hours(t_s: float) -> str:
@@ -58,7 +58,9 @@ class ParamPlan(NamedTuple):
         Record length at which the width reaches the target [s]; inf beyond 1000 h.
     kind : str
         'pinned' (target met now), 'predicted', 'at_least' (planned at an upper
-        bound: a smaller true value takes longer) or 'beyond' (not within 1000 h).
+        bound: a smaller true value takes longer), 'beyond' (not within 1000 h) or
+        'open' (the fit reports it, but its model has no term to plan it with: K the
+        record cannot constrain, T_B of a bias instability only bounded).
     widths_at : dict of float to float
         Expected relative half-width at record lengths of 1, 3 and 10 h [-].
 
@@ -170,6 +172,9 @@ class AxisPlan(NamedTuple):
             if p.kind == 'at_least' and math.isnan(p.time_s):
                 rest.append(f'{p.name} only bounded yet')
                 continue
+            if p.kind == 'open':
+                rest.append(f'{p.name} not constrained yet')
+                continue
             more = hours(max(p.time_s - self.duration_s, 0.0))
             at_least = p.kind == 'at_least' and math.isfinite(p.time_s)
             rest.append(f'{p.name} in {">= " if at_least else ""}{more}')
@@ -187,6 +192,8 @@ class AxisPlan(NamedTuple):
                 need = {'pinned': 'met', 'at_least': '>= ' + need}.get(p.kind, need)
             if p.kind == 'at_least' and math.isnan(p.time_s):
                 need = 'bound only'
+            elif p.kind == 'open':
+                need = 'open'
             cells = [percent(p.widths_at.get(h, math.nan)) for h in (1.0, 3.0, 10.0)]
             lines.append(f'  {p.name:<18} {percent(p.width_now):>10} '
                          f'{percent(p.target, tight=True):>8} {need:>12} ' + ' '.join(
