@@ -492,15 +492,18 @@ def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
     with single_thread_blas():
         plans = plan_axes(models, rate_hz, duration_s, targets, present, slow_process=slow,
                           inflations=factors)
-    return {a: plan._replace(params=tuple(sorted(
-        plan.params + _unplanned(plan, fits[a].optimised, targets), key=_listed)),
-        caveat=plan_caveat(fits[a])) for a, plan in plans.items()}
+    out = {}
+    for axis, plan in plans.items():
+        params = plan.params + _unplanned(plan, fits[axis].optimised, targets)
+        out[axis] = plan._replace(params=tuple(sorted(params, key=_listed)),
+                                  caveat=plan_caveat(fits[axis]))
+    return out
 
 
 def _listed(p: ParamPlan) -> tuple:
     """Sort key of a plan's parameters: N, B, T_B, K, then the extra terms by name."""
-    core = list(_CORE_ORDER)
-    return (core.index(p.name) if p.name in core else len(core), p.name)
+    core = _CORE_ORDER.index(p.name) if p.name in _CORE_ORDER else len(_CORE_ORDER)
+    return core, p.name
 
 
 def _unplanned(plan: AxisPlan, optimised: Mapping, targets) -> tuple:
