@@ -354,14 +354,12 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
     params = []
     for name, col in columns.items():
         target = target_of(name, targets)
-        now = math.nan
         p = (present or {}).get(name)
+        now = _present_width(p) if duration_s > 0 else math.nan
         if name not in bounded:
-            col = as_read(col, grid, factor, duration_s, _present_width(p))
-        if duration_s > 0:
-            now = _present_width(p)
-            if p is None:
-                now = float(np.interp(math.log(duration_s), np.log(grid), col))
+            col = as_read(col, grid, factor, duration_s, now)
+        if duration_s > 0 and p is None:
+            now = float(np.interp(math.log(duration_s), np.log(grid), col))
         if math.isinf(target):
             kind = 'pinned'             # no target: nothing to wait for
         elif name in bounded:
