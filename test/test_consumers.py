@@ -103,10 +103,17 @@ def test_vins_file_loads_in_opencv_with_per_step_values(tmp_path):
     fs.release()
 
 
-def test_vins_file_without_covers_writes_the_fitted_pair_per_step(tmp_path):
+def test_vins_file_without_covers_makes_the_covering_pair_per_step(tmp_path):
+    # One rule for every random-walk consumer: without covers given, the file makes the
+    # covering pair over the default horizon (the sample period to 100 s).
+    covers = cover_axes(_sources(), HORIZON_S)
     fs = _load(tmp_path, 'vins_imu.yaml', vins_yaml(_sources(), RATE_HZ))
-    assert_allclose(fs.getNode('gyr_n').real(), 1.5e-4 * math.sqrt(2 * RATE_HZ), rtol=1e-6)
-    assert_allclose(fs.getNode('acc_w').real(), 1.2e-5 * math.sqrt(RATE_HZ), rtol=1e-6)
+    assert_allclose(fs.getNode('gyr_n').real(),
+                    max(covers[a].N_cover for a in GYRO_AXES) * math.sqrt(2 * RATE_HZ),
+                    rtol=1e-6)
+    assert_allclose(fs.getNode('acc_w').real(),
+                    max(covers[a].K_cover for a in ACCEL_AXES) * math.sqrt(RATE_HZ),
+                    rtol=1e-6)
     fs.release()
 
 
@@ -224,5 +231,12 @@ def test_kalibr_file_is_plain_yaml_with_its_keys_unchanged():
     assert set(doc) == {'accelerometer_noise_density', 'accelerometer_random_walk',
                         'gyroscope_noise_density', 'gyroscope_random_walk', 'rostopic',
                         'update_rate'}
-    assert_allclose(doc['gyroscope_noise_density'], 1.5e-4, rtol=1e-6)   # fitted, density
-    assert_allclose(doc['accelerometer_random_walk'], 1.2e-5, rtol=1e-6)
+    # The covering pair (continuous densities), as the VIO files: never below the
+    # reported worst axis.
+    covers = cover_axes(_sources(), HORIZON_S)
+    assert_allclose(doc['gyroscope_noise_density'],
+                    max(covers[a].N_cover for a in GYRO_AXES), rtol=1e-6)
+    assert_allclose(doc['accelerometer_random_walk'],
+                    max(covers[a].K_cover for a in ACCEL_AXES), rtol=1e-6)
+    assert doc['gyroscope_noise_density'] >= 1.1 * 1.5e-4 * (1 - 1e-9)
+    assert doc['accelerometer_random_walk'] >= 1.2e-5

@@ -10,7 +10,7 @@ from imu_allan.core.noise.model import avar_model
 from imu_allan.core.noise.params import AxisNoise, GaussMarkov, Sinusoid
 from imu_allan.core.noise.simulate import simulate_axis, white_noise
 from imu_allan.core.outputs.consistency import random_walk_filter
-from imu_allan.core.outputs.covering import cover_axis, horizon_taus
+from imu_allan.core.outputs.covering import cover_axis, horizon_taus, N_MARGIN
 from imu_allan.errors import InputError
 
 RATE_HZ = 100.0
@@ -23,10 +23,12 @@ def _pair_avar(tau, n, k):
     return n ** 2 / tau + k ** 2 * tau / 3.0
 
 
-def test_a_white_and_random_walk_model_is_its_own_cover():
+def test_a_white_and_random_walk_model_is_its_own_cover_plus_the_n_margin():
+    # The model covers itself exactly; N then gets the run-to-run margin.
     c = cover_axis(AxisNoise(N=2e-4, K=3e-6), HORIZON_S)
-    assert_allclose([c.N_cover, c.K_cover], [2e-4, 3e-6], rtol=1e-6)
-    assert_allclose([c.factor_N, c.factor_K, c.worst_ratio], 1.0, rtol=1e-6)
+    assert_allclose([c.N_cover, c.K_cover], [N_MARGIN * 2e-4, 3e-6], rtol=1e-6)
+    assert_allclose([c.factor_N, c.factor_K], [N_MARGIN, 1.0], rtol=1e-6)
+    assert 1.0 < c.worst_ratio <= N_MARGIN ** 2 * (1 + 1e-9)
 
 
 @pytest.mark.parametrize('model', [

@@ -8,6 +8,7 @@ import yaml
 
 from imu_allan import AXES
 from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.outputs.covering import cover_axes, default_horizon
 from imu_allan.core.outputs.exports import (driver_noise, driver_yaml, IMU0_CONFIG,
                                             robot_localization_yaml)
 from imu_allan.core.outputs.vio import vins_yaml
@@ -79,15 +80,28 @@ def _vins(text: str) -> dict:
     return yaml.safe_load(body)
 
 
-def test_vins_block_holds_the_worst_values_per_step():
+def test_vins_block_holds_the_worst_covering_values_per_step():
+    # Without covers given, the file makes them over the default horizon (one rule for
+    # every random-walk consumer); the worst axis, per step.
+    covers = cover_axes(_sources(), default_horizon(RATE_HZ))
     doc = _vins(vins_yaml(_sources(), RATE_HZ))
-    assert_allclose(doc['acc_n'], 8e-4 * math.sqrt(2 * RATE_HZ), rtol=1e-6)
-    assert_allclose(doc['gyr_n'], 1.5e-4 * math.sqrt(2 * RATE_HZ), rtol=1e-6)
-    assert_allclose(doc['acc_w'], 1.2e-5 * math.sqrt(RATE_HZ), rtol=1e-6)
-    assert_allclose(doc['gyr_w'], 3e-6 * math.sqrt(RATE_HZ), rtol=1e-6)
-    # A model without a random walk on any gyro axis: gyr_w is left out, never 0.
+    for key, axes, sym, scale in (('acc_n', AXES[3:], 'N_cover', math.sqrt(2 * RATE_HZ)),
+                                  ('gyr_n', AXES[:3], 'N_cover', math.sqrt(2 * RATE_HZ)),
+                                  ('acc_w', AXES[3:], 'K_cover', math.sqrt(RATE_HZ)),
+                                  ('gyr_w', AXES[:3], 'K_cover', math.sqrt(RATE_HZ))):
+        want = max(getattr(covers[a], sym) for a in axes) * scale
+        assert_allclose(doc[key], want, rtol=1e-6)
+    # Never below the worst reported values.
+    assert doc['acc_n'] >= 8e-4 * math.sqrt(2 * RATE_HZ)
+    assert doc['gyr_w'] >= 3e-6 * math.sqrt(RATE_HZ)
+    # A model without a random walk on any gyro axis: the pair's walk is what covers
+    # the model (next to nothing for white noise alone), never 0.
     no_k = {a: AxisNoise(N=N[a]) for a in ('gyro_x', 'gyro_y', 'gyro_z')}
-    text = vins_yaml(_sources(**no_k), RATE_HZ)
+    doc = _vins(vins_yaml(_sources(**no_k), RATE_HZ))
+    assert 0 < doc['gyr_w'] < 3e-6 * math.sqrt(RATE_HZ)
+    assert all(v > 0 for v in doc.values())
+    # No noise at all on the gyros (no term, no curve): the keys are left out, never 0.
+    text = vins_yaml(_sources(**{a: AxisNoise() for a in AXES[:3]}), RATE_HZ)
     doc = _vins(text)
     assert 'gyr_w' not in doc and '# gyr_w: not available' in text
     assert all(v > 0 for v in doc.values())

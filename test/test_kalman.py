@@ -14,12 +14,13 @@ import yaml
 
 from imu_allan import AXES
 from imu_allan.core.fit import AxisFit, Param
-from imu_allan.core.noise.model import avar_flicker, avar_gauss_markov, GM_PEAK_TAU
 from imu_allan.core.noise.params import AxisNoise, GaussMarkov
 from imu_allan.core.noise.simulate import state_space_matrices
+from imu_allan.core.outputs.covering import cover_axes, default_horizon
 from imu_allan.core.outputs.exports import kalibr_yaml
-from imu_allan.core.outputs.kalman import (axis_densities, axis_noise_from, AxisDensities,
-                                           discretise, imu_covariance, kalman_model, NOTES)
+from imu_allan.core.outputs.kalman import (axis_densities, AxisDensities, discretise,
+                                           imu_covariance, kalman_model, NOTES)
+from imu_allan.core.outputs.reported import report_axis
 from imu_allan.errors import InputError
 
 GYRO = AxisNoise(N=1.2e-4, B=5e-5, T_B=80.0, K=2e-6)
@@ -99,27 +100,31 @@ def test_flicker_b_gets_a_frozen_state_and_a_note():
     assert any('gyro_x' in n and 'frozen' in n for n in km.notes)
 
 
-def test_flicker_b_from_a_fit_becomes_a_gauss_markov_state():
-    # A fitted flicker B (no T_B) is a Gauss-Markov state of the same peak ADEV
-    # (0.664 B) centred on the fitted taus, not a frozen state.
+def test_a_b_without_t_b_has_no_state_and_is_named_never_invented():
+    # A fitted flicker B (T_B not identified) has no Gauss-Markov state: the model says
+    # it leaves B out instead of inventing a correlation time (the middle of the taus).
     tau = np.geomspace(0.1, 1000.0, 9)
     nan = Param(math.nan, (math.nan, math.nan), 'not_identified', 's')
     fit = AxisFit(nominal={}, optimised={
         'N': Param(1e-4, (0.9e-4, 1.1e-4), 'estimate', 'rad/s*s^0.5'),
         'B': Param(5e-5, (4e-5, 6e-5), 'estimate', 'rad/s'), 'T_B': nan,
         'K': Param(1e-6, (0.5e-6, 2e-6), 'estimate', 'rad/s/s^0.5')},
-        model=AxisNoise(), terms=('white', 'flicker', 'random_walk'), notes=(), tau_s=tau)
-    noise, notes = axis_noise_from(fit)
-    t_b = math.sqrt(0.1 * 1000.0) / GM_PEAK_TAU
-    assert noise.T_B == pytest.approx(t_b, rel=1e-12) and 'flicker' in notes[0]
+        model=AxisNoise(N=1e-4, B=5e-5, K=1e-6), terms=('white', 'flicker', 'random_walk'),
+        notes=(), tau_s=tau)
+    report = report_axis(fit, 'gyro_x')
+    assert report.gauss_markov is None
+    assert any('without an identified T_B' in x for x in report.left_out)
+    assert any(x.startswith('flicker') for x in report.left_out)
     km = kalman_model(_six(gyro=fit, accel=AxisNoise(N=1e-3)), rate_hz=50.0)
-    assert km.Phi[0, 0] == pytest.approx(math.exp(-1.0 / (50.0 * t_b)), rel=1e-12)
-    assert km.Qd[0, 0] > 0
-    # Its ADEV peak equals the flicker floor at the middle of the taus.
-    gm = GaussMarkov(5e-5, t_b)
-    mid = np.array([math.sqrt(0.1 * 1000.0)])
-    assert_allclose(np.sqrt(avar_gauss_markov(mid, gm.q, t_b)),
-                    np.sqrt(avar_flicker(mid, 5e-5)), rtol=2e-3)
+    assert km.Phi[0, 0] == 1.0 and km.Qd[0, 0] == 0.0 and km.F[0, 0] == 0.0
+    assert km.axes[0].T_B is None
+    assert any(x.startswith('flicker') for x in km.to_json()['left_out']['gyro_x'])
+    # The random-walk consumers cover it: the covering pair's Allan variance lies on or
+    # above the flicker floor over the horizon.
+    cover = cover_axes(_six(gyro=fit, accel=AxisNoise(N=1e-3)), (0.02, 100.0))['gyro_x']
+    taus = np.geomspace(0.02, 100.0, 50)
+    pair = cover.N_cover ** 2 / taus + cover.K_cover ** 2 * taus / 3.0
+    assert np.all(pair >= report.model_avar(taus) * (1 - 1e-9))
 
 
 def test_kalman_inputs_validated():
@@ -140,13 +145,12 @@ def _fit_with_k_bound(k_bound: float) -> AxisFit:
                    terms=('white', 'bias_instability'), notes=())
 
 
-def test_upper_bounds_are_used_at_their_bound_by_default():
+def test_upper_bounds_are_used_at_their_bound():
     fit = _fit_with_k_bound(3e-6)
-    noise, notes = axis_noise_from(fit)
-    assert noise.K == 3e-6 and noise.N == 1e-4 and noise.T_B == 50.0
-    assert notes == ('K used at its 95 % upper bound',)
-    lean, notes = axis_noise_from(fit, use_upper_bounds=False)
-    assert lean.K == 0.0 and notes == ()
+    report = report_axis(fit)
+    assert report.random_walk == (3e-6, 'upper_bound', 'K used at its 95 % upper bound')
+    assert report.white == (1e-4, 'estimate', '')
+    assert report.gauss_markov.T_B == 50.0 and report.gauss_markov.B == 4e-5
     km = kalman_model({a: fit for a in AXES}, rate_hz=100.0)
     assert_allclose(km.Qd[1, 1], 9e-12 * 0.01, rtol=1e-12)
     assert any('upper bound' in n for n in km.notes)
@@ -161,16 +165,18 @@ def test_kalibr_yaml_keys_units_and_worst_axis():
     assert set(doc) == {'accelerometer_noise_density', 'accelerometer_random_walk',
                         'gyroscope_noise_density', 'gyroscope_random_walk', 'rostopic',
                         'update_rate'}
-    # Continuous densities, worst axis: noise density = max N, random walk = max K.
-    assert_allclose(doc['gyroscope_noise_density'], 3e-4, rtol=1e-6)
-    assert_allclose(doc['gyroscope_random_walk'], 3e-6, rtol=1e-6)
-    assert_allclose(doc['accelerometer_noise_density'], 6.2e-4, rtol=1e-6)
-    assert_allclose(doc['accelerometer_random_walk'], 1e-5, rtol=1e-6)
+    # The covering pair (continuous densities), worst axis.  A white + random-walk model
+    # is its own cover, and N gets the run-to-run margin.
+    margin = 1.10
+    assert_allclose(doc['gyroscope_noise_density'], margin * 3e-4, rtol=1e-4)
+    assert_allclose(doc['gyroscope_random_walk'], 3e-6, rtol=1e-4)
+    assert_allclose(doc['accelerometer_noise_density'], margin * 6.2e-4, rtol=1e-4)
+    assert_allclose(doc['accelerometer_random_walk'], 1e-5, rtol=1e-4)
     assert doc['update_rate'] == 200.0
     assert 'rad/s/sqrt(Hz)' in text and 'm/s^3/sqrt(Hz)' in text
-    assert '#   gyro_y: N = 2.000000e-04' in text  # per-axis values as comments
+    assert '#   gyro_y: N = 2.000000e-04 -> 2.2000' in text  # per-axis values as comments
     mean = yaml.safe_load(kalibr_yaml(sources, rate_hz=200.0, reduce='mean'))
-    assert_allclose(mean['gyroscope_noise_density'], 2e-4, rtol=1e-6)
+    assert_allclose(mean['gyroscope_noise_density'], margin * 2e-4, rtol=1e-4)
     with pytest.raises(InputError):
         kalibr_yaml(sources, rate_hz=200.0, reduce='median')
 
@@ -183,34 +189,34 @@ def _fit(n, k, k_kind='estimate'):
                    terms=('white', 'bias_instability'), notes=())
 
 
-def test_kalibr_prefers_estimates_over_a_larger_bound():
-    # Accel K estimated on x and y (~8e-6) but only bounded on z (1.08e-4): 'max' must
-    # take the worst *estimate*, not the bound, and say why in a comment.
+def test_kalibr_takes_every_axis_a_larger_bound_included():
+    # Accel K estimated on x and y (~8e-6) but only bounded on z (1.08e-4): the bound is
+    # what the record allows on z, so the worst axis is z (an estimate-only reduction
+    # under-stated it by 13x).
     accels = [_fit(6e-4, 8.1e-6), _fit(6.1e-4, 7.9e-6), _fit(6.2e-4, 1.08e-4, 'upper_bound')]
     gyros = [_fit(1.2e-4, 2e-6, 'upper_bound'), _fit(1.3e-4, 3e-6, 'upper_bound'),
              _fit(1.1e-4, 2.5e-6, 'upper_bound')]
     text = kalibr_yaml(gyros + accels, rate_hz=100.0)
     doc = yaml.safe_load(text)
-    assert_allclose(doc['accelerometer_random_walk'], 8.1e-6, rtol=1e-6)
-    assert_allclose(doc['accelerometer_noise_density'], 6.2e-4, rtol=1e-6)
-    assert 'accelerometer_random_walk: from the 2 axes with an estimate' in text
+    covers = cover_axes(dict(zip(AXES, gyros + accels)), default_horizon(100.0))
+    assert_allclose(doc['accelerometer_random_walk'],
+                    max(covers[a].K_cover for a in AXES[3:]), rtol=1e-6)
+    assert doc['accelerometer_random_walk'] >= 1.08e-4
+    assert doc['gyroscope_random_walk'] >= 3e-6
+    assert doc['accelerometer_noise_density'] >= 1.1 * 6.2e-4 * (1 - 1e-9)
     assert '(95 % upper bound)' in text
-    # No gyro axis has a K estimate: the largest bound is used, and the file says so.
-    assert_allclose(doc['gyroscope_random_walk'], 3e-6, rtol=1e-6)
-    assert 'gyroscope_random_walk: no axis has an estimate' in text
-    # Without bounds no gyro axis gives K: the key is left out (Kalibr stops on it)
-    # rather than written as 0, which Kalibr's reader rejects.
-    text = kalibr_yaml(gyros + accels, rate_hz=100.0, use_upper_bounds=False)
+    # A sensor with no value on any axis (no term, no curve): its keys are left out
+    # (Kalibr stops on them) rather than written as 0, which Kalibr's reader rejects.
+    text = kalibr_yaml([AxisNoise()] * 3 + accels, rate_hz=100.0)
     lean = yaml.safe_load(text)
-    assert 'gyroscope_random_walk' not in lean
+    assert 'gyroscope_random_walk' not in lean and 'gyroscope_noise_density' not in lean
     assert 'gyroscope_random_walk: not available on any axis; left out' in text
-    assert_allclose(lean['accelerometer_random_walk'], 8.1e-6, rtol=1e-6)
     assert all(v > 0 for k, v in lean.items() if k.endswith(('density', 'walk')))
 
 
 def test_kalibr_falls_back_to_the_bound_the_curve_sets():
     # K not identified on any gyro axis (no estimate, no bound): the curve's own bound
-    # min sqrt(3 AVAR / tau) is written, never 0.
+    # min sqrt(3 AVAR / tau) is the reported K, and the written pair is never below it.
     tau = np.geomspace(0.01, 1000.0, 12)
     avar = 1e-8 / tau + 1e-12 * tau          # white N = 1e-4 plus a tiny walk
     gyros = []
@@ -218,14 +224,17 @@ def test_kalibr_falls_back_to_the_bound_the_curve_sets():
         fit = _fit(n, 1.0, 'not_identified')
         opt = dict(fit.optimised, K=Param(math.nan, (math.nan, math.nan), 'not_identified',
                                           'rad/s^2/sqrt(Hz)'))
-        gyros.append(AxisFit(nominal=opt, optimised=opt, model=fit.model, terms=fit.terms,
+        gyros.append(AxisFit(nominal=opt, optimised=opt,
+                             model=AxisNoise(N=n, B=3e-4, T_B=60.0), terms=fit.terms,
                              notes=(), tau_s=tau, avar_meas=avar))
     accels = [_fit(6e-4, 8e-6)] * 3
+    bound = np.sqrt(np.min(3.0 * avar / tau))
+    assert report_axis(gyros[0]).random_walk.kind == 'curve_bound'
+    assert_allclose(report_axis(gyros[0]).random_walk.value, bound, rtol=1e-12)
     text = kalibr_yaml(gyros + accels, rate_hz=100.0)
     doc = yaml.safe_load(text)
-    assert_allclose(doc['gyroscope_random_walk'], np.sqrt(np.min(3.0 * avar / tau)),
-                    rtol=1e-6)
-    assert 'gyroscope_random_walk: no axis has an estimate or a bound' in text
+    assert doc['gyroscope_random_walk'] >= bound
+    assert "(the curve's bound)" in text
     assert all(v > 0 for k, v in doc.items() if k.endswith(('density', 'walk')))
 
 

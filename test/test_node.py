@@ -828,7 +828,7 @@ def test_the_node_keeps_raw_samples_for_the_diagnosis_periodogram(rig):
     r.feed(t, y)
     r.node.live.process()
     view, raw = r.node.live.snapshot()
-    # All 4000 samples fit in the default 262144 rows: kept as they came.  The session
+    # All 4000 samples fit in the default 1048576 rows: kept as they came.  The session
     # itself holds back at most the spike filter's chunk and context and one window.
     assert raw.kept_rate_hz == 200.0
     assert 0 <= t.size - view.stats.n_used <= CHUNK + CONTEXT + 200

@@ -16,11 +16,10 @@ import pytest
 
 from imu_allan import AXES
 from imu_allan.core.allan import allan_curve
+from imu_allan.core.allan.edf import curve_k_bound
 from imu_allan.core.diagnose.drivers import driver_filtered
-from imu_allan.core.fit.trust import curve_k_bound
 from imu_allan.core.noise.params import AxisNoise, NoiseSpec
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
-from imu_allan.core.outputs.kalman import kalman_model
 from imu_allan.core.search import search_axis
 from imu_allan.pipeline.analysis import AnalysisResult
 
@@ -93,10 +92,8 @@ def test_untrusted_axis_warns_and_comments_every_consumer_file():
     assert not fit.trusted
     fits = dict.fromkeys(AXES)
     fits['gyro_x'] = fit
-    sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
     result = AnalysisResult(rate_hz=10.0, duration_s=7200.0, n_samples=72_000, warnings=(),
-                            hygiene={}, curve=None, fits=fits,
-                            kalman=kalman_model(sources, 10.0))
+                            hygiene={}, curve=None, fits=fits)
     (warning,) = result.trust_warnings()
     assert warning.startswith('gyro_x: the fitted model is not trusted')
     assert f'{fit.optimised["N"].value:.3g}' in warning

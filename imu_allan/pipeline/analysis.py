@@ -24,7 +24,8 @@ from imu_allan.core.noise.units import format_quoted, sensor_of
 from imu_allan.core.outputs.covering import cover_axes, default_horizon, DEFAULT_HORIZON_S
 from imu_allan.core.outputs.exports import driver_yaml, kalibr_yaml, robot_localization_yaml
 from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
-from imu_allan.core.outputs.vio import openvins_yaml, pair_comments, vins_yaml
+from imu_allan.core.outputs.reported import report_axes
+from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import worker_pool
 
@@ -63,8 +64,6 @@ class AnalysisResult:
         Measured curve of the six axes at 95 % confidence.
     fits : dict of str to AxisFit or None
         Fit per axis; None where the axis cannot be fitted (frozen, no noise).
-    kalman : KalmanModel
-        Six-axis bias model (paper eqs. 16-17) with continuous and discrete matrices.
     source : str
         What was analysed (file name, topic).
     topic : str
@@ -89,7 +88,6 @@ class AnalysisResult:
     hygiene: dict
     curve: AllanCurve
     fits: dict
-    kalman: KalmanModel
     source: str = ''
     topic: str = ''
     start_ns: int | None = None
@@ -101,8 +99,23 @@ class AnalysisResult:
         """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""
         return {a: (f.model if f is not None else AxisNoise()) for a, f in self.fits.items()}
 
+    @cached_property
+    def reports(self) -> dict:
+        """
+        What every output reports per axis (AxisReport): the one decision of the values.
+
+        :func:`imu_allan.core.outputs.reported.report_axes` of :attr:`fits`, made once;
+        every file, topic and summary line of this class only formats it.
+        """
+        return report_axes(self.fits)
+
+    @cached_property
+    def kalman(self) -> KalmanModel:
+        """Six-axis bias model (paper eqs. 16-17), continuous and discrete, of the reports."""
+        return kalman_model(self.reports, self.rate_hz)
+
     def _sources(self) -> dict:
-        return {a: (f if f is not None else AxisNoise()) for a, f in self.fits.items()}
+        return self.reports
 
     @property
     def covering_horizon_s(self) -> tuple:
@@ -115,13 +128,10 @@ class AnalysisResult:
         return cover_axes(self._sources(), self.covering_horizon_s)
 
     def kalibr_yaml(self, rostopic: str | None = None) -> str:
-        """Kalibr imu.yaml text (fitted pair); ``rostopic`` is the analysed topic unless given."""
-        text = kalibr_yaml(self._sources(), self.rate_hz,
-                           rostopic=rostopic or self.topic or '/imu/data')
-        note = ['# Written: the fitted pair (what the sensor showed).  A random-walk '
-                'estimator wants the covering pair:']
-        note += pair_comments(self._sources(), self.covers, self.covering_horizon_s)
-        return self.with_trust_comments('\n'.join(note) + '\n' + text)
+        """Kalibr imu.yaml (covering pair); ``rostopic`` is the analysed topic unless given."""
+        return self.with_trust_comments(kalibr_yaml(
+            self._sources(), self.rate_hz, rostopic=rostopic or self.topic or '/imu/data',
+            covers=self.covers, horizon_s=self.covering_horizon_s))
 
     def robot_localization_yaml(self, imu_topic: str | None = None,
                                 orientation: bool = True) -> str:
@@ -149,7 +159,8 @@ class AnalysisResult:
         """Summary lines: fitted and covering N, K per axis with the factors."""
         lo, hi = self.covering_horizon_s
         lines = [f'covering white + random-walk pair (bounds the whole model for tau in '
-                 f'[{lo:.3g}, {hi:.3g}] s; written to the VINS and OpenVINS files):']
+                 f'[{lo:.3g}, {hi:.3g}] s, never below the reported N and K; written to the '
+                 'Kalibr, VINS and OpenVINS files):']
         for axis in AXES:
             c = self.covers.get(axis)
             if c is None:
@@ -198,7 +209,7 @@ class AnalysisResult:
         if fit is None:
             return 'error', f'{axis}: no usable noise (frozen or constant axis)', base
         values = []
-        for sym, p in fit.optimised.items():
+        for sym, p in self.reports[axis].params.items():
             values += [(sym, _g(p.value)), (f'{sym}_ci95_lo', _g(p.ci95[0])),
                        (f'{sym}_ci95_hi', _g(p.ci95[1])), (f'{sym}_unit', p.unit),
                        (f'{sym}_kind', p.kind)]
@@ -223,8 +234,9 @@ class AnalysisResult:
             return f'{axis}: no usable noise (frozen or constant axis)'
         sensor = sensor_of(axis)
         parts = []
+        params = self.reports[axis].params
         for sym in _CORE:
-            p = fit.optimised.get(sym)
+            p = params.get(sym)
             if p is None or p.kind == 'not_identified':
                 parts.append(f'{sym} n/a')
                 continue
@@ -246,7 +258,7 @@ class AnalysisResult:
             used = ', '.join(f'{s} {"<= " if p.kind == "upper_bound" else ""}{p.value:.3g}'
                              + (f' [{p.ci95[0]:.3g}, {p.ci95[1]:.3g}]'
                                 if p.kind == 'estimate' else '')
-                             for s, p in fit.optimised.items()
+                             for s, p in self.reports[axis].params.items()
                              if s in ('N', 'B', 'K') and math.isfinite(p.value))
             fitted = ', '.join(f'{s} {p.value:.3g} ({p.kind})'
                                for s, p in fit.fit_values.items() if s in ('N', 'B'))
@@ -289,13 +301,14 @@ class AnalysisResult:
                               'notes': ['no usable noise (frozen or constant axis)']})
             else:
                 entry.update(fit.to_json())
+                entry['reported'] = self.reports[axis].to_json()
                 # The final model at every tau, and the range it was fitted on (beyond
                 # it, a plot of adev_model is an extrapolation).
                 entry['adev_model'] = json_floats(np.sqrt(fit.avar_at(self.curve.tau_s)))
                 entry['model_tau_range_s'] = json_floats([fit.tau_s.min(), fit.tau_s.max()])
                 entry['quoted'] = {
                     sym: format_quoted(sym, sensor_of(axis), p.value, digits=4)
-                    for sym, p in fit.optimised.items()
+                    for sym, p in self.reports[axis].params.items()
                     if sym in _CORE and p.kind in ('estimate', 'upper_bound')}
             cover = self.covers.get(axis)
             entry['covering'] = None if cover is None else cover.to_json()
@@ -403,7 +416,6 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         curve.avar, curve.edf, CONFIDENCE))
     fits.update(zip(jobs, found))
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
-    sources = {a: (f if f is not None else AxisNoise()) for a, f in fits.items()}
     plans = _plans(fits, float(session.rate_hz), float(session.duration_s), plan_targets,
                    workers) if plan else {}
     units = unit_warnings(session.rate_hz, None if samples is None else samples.mean(axis=0),
@@ -414,7 +426,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         # n_read / n_lost: what the input delivered and lost (a reader overrides them).
         hygiene={**asdict(session.stats), 'n_read': int(session.stats.n_received),
                  'n_lost': 0}, curve=curve, fits=fits,
-        kalman=kalman_model(sources, session.rate_hz), source=source, topic=topic,
+        source=source, topic=topic,
         covering_tau_max_s=float(covering_tau_max_s), plans=plans)
     # No confident wrong number: an axis whose fit is not trusted is a top-level warning.
     return replace(result, warnings=result.warnings + tuple(result.trust_warnings()))

@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 import sys
 
+from imu_allan.core.allan.raw import RAW_ROWS
 from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.pipeline.session import MOTION_POLICIES, SessionConfig
@@ -107,9 +108,10 @@ PARAMS: tuple[NodeParam, ...] = (
     NodeParam('initial_covariance_file', str, '', '', (),
               'result.json or imu_covariance.yaml of an earlier run: ~/imu_with_covariance'
               " starts from its covariances ('' starts from a large variance)"),
-    NodeParam('diagnose_raw_samples', int, 262144, 'samples', (0, 16777216),
-              'Rows kept for the ~/diagnose periodogram (pairs averaged as the record grows;'
-              ' 48 bytes each); 0 keeps none'),
+    NodeParam('diagnose_raw_samples', int, RAW_ROWS, 'samples', (0, 16777216),
+              'Rows kept for the effect search and ~/diagnose periodogram (pairs averaged'
+              ' as the record grows; 48 bytes each; the default is that of imu-allan'
+              ' analyze, so both give the same model); 0 keeps none'),
     NodeParam('gyro_range_rad_s', float, _S.gyro_range_rad_s, 'rad/s', (0.0, 1.0e4),
               'Gyro full scale for the saturation check; 0 disables it'),
     NodeParam('accel_range_m_s2', float, _S.accel_range_m_s2, 'm/s^2', (0.0, 1.0e5),

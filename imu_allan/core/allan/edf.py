@@ -296,3 +296,60 @@ def confidence_bounds(avar, edf, confidence: float) -> tuple[np.ndarray, np.ndar
         lo = np.sqrt(e * avar / chi_hi)
         hi = np.sqrt(e * avar / chi_lo)
     return np.where(ok, lo, np.nan), np.where(ok, hi, np.nan)
+
+
+def avar_upper(avar: np.ndarray, edf: np.ndarray) -> np.ndarray:
+    """
+    Each point's one-sided upper limit of the true AVAR, jointly at 95 % over the points.
+
+    The measured AVAR scatters about the true one as chi-square with the point's EDF
+    (NIST SP 1065 sec. 5.3), most at the longest taus (EDF of a few), so the minimum of
+    a curve picks its lowest-lying point, which can lie far below the truth.  A bound
+    read off a minimum (the random walk's, the floor's) therefore takes each point at
+    AVAR edf / chi2_a(edf) with a = 0.05 / k over the k points (Bonferroni).  A point's
+    EDF is taken as at most that of any shorter tau: for every power-law noise the EDF
+    falls as tau grows (NIST SP 1065 table 5), and the curve's own EDF, from the noise
+    type read off the local slope, can jump at the longest taus where a low-lying point
+    steepens that slope.
+
+    Parameters
+    ----------
+    avar : np.ndarray
+        Shape (k,), measured AVAR [unit^2], shortest tau first.
+    edf : np.ndarray
+        Shape (k,), equivalent degrees of freedom of each point.
+
+    Returns
+    -------
+    np.ndarray
+        Shape (k,), the upper limits [unit^2].
+
+    """
+    edf = np.minimum.accumulate(np.maximum(np.asarray(edf, dtype=np.float64), 1e-3))
+    return np.asarray(avar, dtype=np.float64) * edf / chi2_ppf(0.05 / max(edf.size, 1), edf)
+
+
+def curve_k_bound(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> float:
+    """
+    95 % upper bound of K from the curve alone: min over tau of sqrt(3 AVAR_hi / tau).
+
+    A random walk alone gives AVAR = K^2 tau / 3 (IEEE Std 952 C.1 slope +1/2) and every
+    other term only adds to it, so K^2 <= 3 AVAR(tau) / tau at every tau, for the true
+    AVAR; AVAR_hi is each point's joint upper limit (:func:`avar_upper`).
+
+    Parameters
+    ----------
+    tau : np.ndarray
+        Shape (k,), averaging times [s].
+    avar : np.ndarray
+        Shape (k,), measured AVAR [unit^2].
+    edf : np.ndarray
+        Shape (k,), equivalent degrees of freedom of each point.
+
+    Returns
+    -------
+    float
+        The bound [unit/s^0.5].
+
+    """
+    return float(np.sqrt(np.min(3.0 * avar_upper(avar, edf) / tau)))

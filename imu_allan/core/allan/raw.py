@@ -15,6 +15,13 @@ from imu_allan import AXES
 from imu_allan.core import native
 from imu_allan.errors import InputError
 
+#: Rows the raw copy keeps before it averages pairs: the one policy of the node and of
+#: ``imu-allan analyze`` (48 MB for six axes), so both search the same evidence.  A
+#: 2.8 h record at 100 Hz fits whole; a copy halved to 25 Hz (the node's former 262,144
+#: rows) could no longer confirm the ADIS16405's 20 Hz line, and the node then reported
+#: gyro_z as not trusted where ``analyze`` trusted it.
+RAW_ROWS = 1 << 20
+
 
 class RawKeeper:
     """
@@ -38,7 +45,7 @@ class RawKeeper:
     """
 
     def __init__(self, rate_hz: float | None, n_axes: int = len(AXES),
-                 max_samples: int = 1 << 20):
+                 max_samples: int = RAW_ROWS):
         if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
             raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
         self.rate_hz = None if rate_hz is None else float(rate_hz)

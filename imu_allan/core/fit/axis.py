@@ -14,19 +14,17 @@ import numpy as np
 from imu_allan.core.allan import AllanCurve
 from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
-from imu_allan.core.fit.criterion import criterion, KEEP_PENALTY
+from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.nominal import nominal_fit
 from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter, _Slot, _Solution
 from imu_allan.core.noise.model import base_name, noise_from_terms, TERMS
+from imu_allan.core.rules import FILTER_MIN_TAU_SHARE, KEEP_PENALTY, P_CONSISTENT
 from imu_allan.errors import InputError
 
 #: Candidate terms when ``terms`` is not given; the fit keeps those the data support.
 DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
-#: A filter time constant below this share of the shortest fitted tau is not identified
-#: (:func:`filter_identified`).
-FILTER_MIN_TAU_SHARE = 0.2
 Z95 = 1.959963984540054
 
 
@@ -258,7 +256,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
 
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
-    if dof > 0 and chi2_sf(chi2_value, dof) < 1e-3:
+    if dof > 0 and chi2_sf(chi2_value, dof) < P_CONSISTENT:
         notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
                      f'{dof} dof): a missing effect? (imu-allan diagnose)')
     order = ['N', 'B', 'T_B', 'K']

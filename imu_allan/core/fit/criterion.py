@@ -23,14 +23,11 @@ p the number of fitted parameters.  The penalty says what the choice claims:
 * **"Cannot tell"** (:meth:`imu_allan.core.search.run._Run.undecided`): an effect that
   would pass the keep criterion but not the claim criterion is reported as evidence
   the record cannot settle, with the record length that would.
+
+The thresholds (:data:`KEEP_PENALTY`, :data:`DELTA_MIN`) live in :mod:`imu_allan.core.rules`.
 """
 
 import math
-
-#: Penalty per parameter for keeping a term of the base model (AIC).
-KEEP_PENALTY = 2.0
-#: Drop of the criterion, beyond BIC's ln(k) per parameter, that an effect must buy.
-DELTA_MIN = 10.0
 
 
 def claim_penalty(n_taus: int) -> float:

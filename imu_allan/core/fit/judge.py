@@ -15,13 +15,7 @@ from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf
 from imu_allan.core.fit.axis import _slot
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design
-
-#: A model whose chi-square p-value is at least this explains the curve: no search.
-P_CONSISTENT = 1e-3
-#: ... or one inside the curve's 95 % band (or within 5 %) at this share of the taus.
-FOLLOW_SHARE = 0.85
-#: The shortest taus must fall at least this steeply (ADEV slope) for quantization.
-QUANTIZATION_SLOPE = -0.75
+from imu_allan.core.rules import FOLLOW_SHARE, P_CONSISTENT, QUANTIZATION_SLOPE
 
 
 def follows_curve(avar: np.ndarray, edf: np.ndarray, model: np.ndarray, chi2_value: float,

@@ -17,6 +17,7 @@ from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.result import _unit, Param
 from imu_allan.core.fit.solver import _design, _Fitter, _Slot, _Solution
 from imu_allan.core.noise.model import base_name, GM_PEAK_TAU, TERMS
+from imu_allan.core.rules import PIN_MARGIN
 
 #: Parameters always reported, with the term they belong to.
 CORE_PARAMS = {'N': 'white', 'B': 'bias_instability', 'T_B': 'bias_instability',
@@ -48,32 +49,35 @@ def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: f
         values[s.label] = params
         for sym, template in zip(s.term.symbols, s.term.units):
             v = params[sym]
-            kind = 'estimate'
+            kind, reason = 'estimate', ''
             if sym not in s.term.nonlinear:
                 ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold)
             else:
                 lo_b, hi_b = s.bounds[s.term.nonlinear.index(sym)]
                 ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold,
                                        (lo_b, hi_b))
-                if v <= lo_b * 1.02 or v >= hi_b / 1.02:
+                if v <= lo_b * PIN_MARGIN or v >= hi_b / PIN_MARGIN:
                     if pinned is not None:
                         pinned.append(symbols[(s.label, sym)])
-                    if v <= lo_b * 1.02:
+                    if v <= lo_b * PIN_MARGIN:
                         notes.append(f'{symbols[(s.label, sym)]}: pinned at the shortest '
                                      'value of its range; not identified by these taus')
                         optimised[symbols[(s.label, sym)]] = Param(
                             math.nan, (math.nan, math.nan), 'not_identified',
-                            _unit(template, unit))
+                            _unit(template, unit), 'fitted',
+                            'at the shortest value of its range: not identified')
                         continue
                 if ci[1] >= hi_b * 0.999:
                     kind, ci = 'lower_bound', (ci[0], math.inf)
+                    reason = 'may exceed the longest tau of the record: lower bound'
                     notes.append(f'{symbols[(s.label, sym)]}: may exceed the longest tau '
                                  'of the record; only a lower bound')
                 elif ci[0] <= lo_b * 1.001:
                     notes.append(f'{symbols[(s.label, sym)]}: may lie below the shortest '
                                  'tau; poorly identified')
             optimised[symbols[(s.label, sym)]] = Param(
-                float(v), (float(ci[0]), float(ci[1])), kind, _unit(template, unit))
+                float(v), (float(ci[0]), float(ci[1])), kind, _unit(template, unit), 'fitted',
+                reason)
     return optimised, values
 
 
@@ -101,17 +105,20 @@ def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported
         name = symbols[(s.label, lin_sym)]
         if math.isfinite(bound) and bound > 0:
             optimised[name] = Param(bound, (0.0, bound), 'upper_bound',
-                                    _unit(s.term.units[0], unit))
+                                    _unit(s.term.units[0], unit), 'fitted',
+                                    'not supported by the data: 95 % upper bound')
             notes.append(f'{name}: not supported by the data (too small or the record too '
                          'short); 95 % upper bound')
         else:
             # A degenerate bound (0 or inf): the record cannot constrain the term at all.
             optimised[name] = Param(math.nan, (math.nan, math.nan), 'not_identified',
-                                    _unit(s.term.units[0], unit))
+                                    _unit(s.term.units[0], unit), 'fitted',
+                                    'the record cannot constrain it')
             notes.append(f'{name}: the record cannot constrain it (too short); no bound')
         for sym, template in zip(s.term.symbols[1:], s.term.units[1:]):
             optimised[symbols[(s.label, sym)]] = Param(
-                math.nan, (math.nan, math.nan), 'not_identified', _unit(template, unit))
+                math.nan, (math.nan, math.nan), 'not_identified', _unit(template, unit),
+                'fitted', f'{name} not supported')
     for sym, base in CORE_PARAMS.items():
         if sym not in optimised:
             units = dict(zip(TERMS[base].symbols, TERMS[base].units))

@@ -33,6 +33,12 @@ class Param(NamedTuple):
         'estimate', 'upper_bound', 'lower_bound' or 'not_identified'.
     unit : str
         SI unit, e.g. 'rad/s*s^0.5'.
+    source : str
+        Where the value came from: 'fitted' (the GLS fit and its profile), 'curve'
+        (read off the measured curve: the conservative value of a fit not trusted) or
+        'model' (a bare noise model, not a fit).
+    reason : str
+        Why it is not a plain estimate, in a user's words ('' for an estimate).
 
     """
 
@@ -40,11 +46,14 @@ class Param(NamedTuple):
     ci95: tuple[float, float]
     kind: str
     unit: str
+    source: str = 'fitted'
+    reason: str = ''
 
     def to_json(self) -> dict:
-        """Return {'value', 'ci95', 'kind', 'unit'}; NaN and inf become None."""
+        """Return {'value', 'ci95', 'kind', 'unit', 'source', 'reason'}; NaN, inf: None."""
         return {'value': json_num(self.value), 'ci95': [json_num(v) for v in self.ci95],
-                'kind': self.kind, 'unit': self.unit}
+                'kind': self.kind, 'unit': self.unit, 'source': self.source,
+                'reason': self.reason}
 
 
 def json_num(x):

@@ -12,9 +12,11 @@ distorted fit's:
   region, the curve's own bound min sqrt(AVAR tau) as an upper bound;
 - B: the ADEV floor's 95 % upper limit over 0.664 (IEEE Std 952-1997 annex C) as an
   upper bound (the floor holds every term's share), each AVAR at its joint upper
-  limit (:func:`avar_upper`: the measured floor is its lowest-lying point);
+  limit (:func:`imu_allan.core.allan.edf.avar_upper`: the measured floor is its
+  lowest-lying point);
 - K: the curve's own bound min sqrt(3 AVAR / tau) (IEEE Std 952 C.1 slope +1/2) as
-  an upper bound, each AVAR at its upper chi-square limit (:func:`curve_k_bound`);
+  an upper bound, each AVAR at its upper chi-square limit
+  (:func:`imu_allan.core.allan.edf.curve_k_bound`);
 - every other parameter (T_B, T_f, further processes): not identified.
 """
 
@@ -23,6 +25,7 @@ import math
 
 import numpy as np
 
+from imu_allan.core.allan.edf import avar_upper, curve_k_bound
 from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.fit.axis import _filtered_start
 from imu_allan.core.fit.judge import follows_curve, white_region, white_share
@@ -132,70 +135,14 @@ def b_floor(fit: AxisFit) -> Param | None:
                  fit.optimised['B'].unit)
 
 
-def avar_upper(avar: np.ndarray, edf: np.ndarray) -> np.ndarray:
-    """
-    Each point's one-sided upper limit of the true AVAR, jointly at 95 % over the points.
-
-    The measured AVAR scatters about the true one as chi-square with the point's EDF
-    (NIST SP 1065 sec. 5.3), most at the longest taus (EDF of a few), so the minimum of
-    a curve picks its lowest-lying point, which can lie far below the truth.  A bound
-    read off a minimum (the random walk's, the floor's) therefore takes each point at
-    AVAR edf / chi2_a(edf) with a = 0.05 / k over the k points (Bonferroni).  A point's
-    EDF is taken as at most that of any shorter tau: for every power-law noise the EDF
-    falls as tau grows (NIST SP 1065 table 5), and the curve's own EDF, from the noise
-    type read off the local slope, can jump at the longest taus where a low-lying point
-    steepens that slope.
-
-    Parameters
-    ----------
-    avar : np.ndarray
-        Shape (k,), measured AVAR [unit^2], shortest tau first.
-    edf : np.ndarray
-        Shape (k,), equivalent degrees of freedom of each point.
-
-    Returns
-    -------
-    np.ndarray
-        Shape (k,), the upper limits [unit^2].
-
-    """
-    edf = np.minimum.accumulate(np.maximum(np.asarray(edf, dtype=np.float64), 1e-3))
-    return np.asarray(avar, dtype=np.float64) * edf / chi2_ppf(0.05 / max(edf.size, 1), edf)
-
-
-def curve_k_bound(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> float:
-    """
-    95 % upper bound of K from the curve alone: min over tau of sqrt(3 AVAR_hi / tau).
-
-    A random walk alone gives AVAR = K^2 tau / 3 (IEEE Std 952 C.1 slope +1/2) and every
-    other term only adds to it, so K^2 <= 3 AVAR(tau) / tau at every tau, for the true
-    AVAR; AVAR_hi is each point's joint upper limit (:func:`avar_upper`).
-
-    Parameters
-    ----------
-    tau : np.ndarray
-        Shape (k,), averaging times [s].
-    avar : np.ndarray
-        Shape (k,), measured AVAR [unit^2].
-    edf : np.ndarray
-        Shape (k,), equivalent degrees of freedom of each point.
-
-    Returns
-    -------
-    float
-        The bound [unit/s^0.5].
-
-    """
-    return float(np.sqrt(np.min(3.0 * avar_upper(avar, edf) / tau)))
-
-
 def _floor_bound(fit: AxisFit) -> float:
     """
     95 % upper bound of B from the floor: min sqrt(AVAR_hi) / 0.664 past the filter.
 
     The floor of the *measured* curve (:func:`b_floor`) is its lowest-lying point, on a
     long record often a last tau with an EDF of one or two; the bound takes every point
-    at its joint upper limit (:func:`avar_upper`).  NaN without a fitted curve.
+    at its joint upper limit (:func:`imu_allan.core.allan.edf.avar_upper`).  NaN without a
+    fitted curve.
     """
     if not fit.tau_s.size:
         return math.nan
@@ -216,19 +163,24 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
     unit_n, unit_b, unit_k = (opt[s].unit for s in ('N', 'B', 'K'))
     tau, avar = fit.tau_s, fit.avar_meas
     got = _white(fit, trusted_model=False)
+    why = 'fit not trusted: ' + '; '.join(problems)
     if got is not None:
-        n_new = Param(got[0], got[1], 'estimate', unit_n)
+        n_new = Param(got[0], got[1], 'estimate', unit_n, 'curve',
+                      f'{why}: the white region of the curve')
     else:
         # No white region: the descending part of the curve past the filter bounds N
         # from above (every other term only adds to AVAR tau there).
         i = _unfiltered(fit)
         j = i + int(np.argmin(avar[i:]))
         bound = float(np.sqrt(np.max(avar[i:j + 1] * tau[i:j + 1])))
-        n_new = Param(bound, (0.0, bound), 'upper_bound', unit_n)
+        n_new = Param(bound, (0.0, bound), 'upper_bound', unit_n, 'curve',
+                      f"{why}: the curve's own bound")
     b_value = _floor_bound(fit)
-    b_new = Param(b_value, (0.0, b_value), 'upper_bound', unit_b)
+    b_new = Param(b_value, (0.0, b_value), 'upper_bound', unit_b, 'curve',
+                  f'{why}: the ADEV floor')
     k_bound = curve_k_bound(tau, avar, fit.edf)
-    k_new = Param(k_bound, (0.0, k_bound), 'upper_bound', unit_k)
+    k_new = Param(k_bound, (0.0, k_bound), 'upper_bound', unit_k, 'curve',
+                  f"{why}: the curve's own bound")
     new = {'N': n_new, 'B': b_new, 'K': k_new}
     replaced = {}
     for sym, p in opt.items():
@@ -237,7 +189,8 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
             opt[sym] = new[sym]
         elif p.kind != 'not_identified':
             replaced[sym] = p
-            opt[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified', p.unit)
+            opt[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified', p.unit,
+                             'curve', why)
     model = AxisNoise(N=n_new.value, B=b_value if math.isfinite(b_value) else 0.0,
                       K=k_bound)
     notes = list(fit.notes) + [

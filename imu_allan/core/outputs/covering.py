@@ -20,9 +20,12 @@ among those pairs the one that over-states the model least in the worst case
 envelope is the model's running maximum over +-0.15 decade, which ignores the nulls of a
 sinusoid's AVAR; solved by a search on N_c^2, numpy only, so the process that writes the
 reports needs no scipy).  The
-model covered is every fitted term; a core term reported only as a 95 % upper bound
-(N or K on a record too short to see it) enters at that bound.  The factors N_c / N and
-K_c / K are the inflation, per axis, with the horizon that justifies them.
+model covered is every fitted term, with N and K at their reported values (the axis'
+report, :mod:`imu_allan.core.outputs.reported`: a 95 % bound at the bound).  The pair is
+never below the reported one: K_c >= K (on a short horizon the random walk hardly shows
+in the AVAR, and a pair fitted to the horizon alone would drop it) and
+N_c >= :data:`N_MARGIN` N (the spread of N between records of one sensor).  The factors
+N_c / N and K_c / K are the inflation, per axis, with the horizon that justifies them.
 
 A random-walk filter whose AVAR covers the sensor's is conservative on every averaging
 time within the horizon, which is what its bias covariance has to be over a VIO window
@@ -35,8 +38,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.noise.model import avar_model
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.outputs.reported import AxisReport, report_axis
 from imu_allan.errors import InputError
 
 #: Default upper end of the horizon [s]: a GNSS/INS outage or a long VIO drift.
@@ -51,6 +53,12 @@ ENVELOPE_DECADES = 0.15
 SEARCH_STEPS = 120
 #: Weight of the mean over-statement beside the worst one in the search (a tie-break).
 TIE_BREAK = 1e-3
+#: Least ratio of the covering N to the reported N: the spread of N between records of
+#: one sensor.  Across the six ADIS16405 runs N varies with a CV of 3.6-4.4 % per gyro
+#: axis (docs/offline.md), far beyond one record's interval (+-0.3 %); 1.10 is about
+#: two such standard deviations, so a filter tuned on one record stays consistent on
+#: the next (docs/outputs.md, the horizon table).
+N_MARGIN = 1.10
 
 
 class AxisCover(NamedTuple):
@@ -60,10 +68,11 @@ class AxisCover(NamedTuple):
     Attributes
     ----------
     N_fit, K_fit : float
-        The fitted N [unit*s^0.5] and K [unit/s^0.5] (either at its 95 % bound where it
-        is only a bound); 0.0 where the model has no such term.
+        The reported N [unit*s^0.5] and K [unit/s^0.5] the pair derives from (the axis'
+        report, :mod:`imu_allan.core.outputs.reported`: at the bound where only a
+        bound); 0.0 where the model has no such term.
     N_cover, K_cover : float
-        The covering pair, same units.
+        The covering pair, same units: N_cover >= N_MARGIN N_fit, K_cover >= K_fit.
     factor_N, factor_K : float or None
         N_cover / N_fit and K_cover / K_fit; None where the fitted value is 0.
     horizon_s : tuple of float
@@ -114,47 +123,29 @@ def horizon_taus(horizon_s: Sequence[float]) -> np.ndarray:
     return np.geomspace(lo, hi, n)
 
 
-def _fitted(source) -> tuple[float, float]:
-    """N and K of a source, at the 95 % bound where only a bound; 0.0 where absent."""
-    if isinstance(source, AxisNoise):
-        return float(source.N), float(source.K)
-    values = []
-    for sym in ('N', 'K'):
-        p = source.optimised.get(sym)
-        ok = (p is not None and math.isfinite(p.value)
-              and p.kind in ('estimate', 'upper_bound'))
-        values.append(float(p.value) if ok else 0.0)
-    return values[0], values[1]
+def _reported(report: AxisReport) -> tuple[float, float]:
+    """The reported white-noise and random-walk densities of an axis (0.0 where absent)."""
+    return float(report.white.value), float(report.random_walk.value)
 
 
 def model_avar(source, tau_s: np.ndarray) -> np.ndarray:
     """
-    Allan variance to cover: the whole fitted model, N and K at least at their bounds.
+    Allan variance to cover: the whole model, N and K at least at their reported values.
 
     Parameters
     ----------
-    source : AxisNoise or imu_allan.core.fit.AxisFit
-        A model, or a fit (every fitted term, :meth:`AxisFit.avar_at`).
+    source : AxisReport, AxisNoise or imu_allan.core.fit.AxisFit
+        The axis' report, or what it is made from (:func:`report_axis`).
     tau_s : np.ndarray
         Shape (k,), averaging times [s].
 
     Returns
     -------
     np.ndarray
-        Shape (k,), AVAR [unit^2].
+        Shape (k,), AVAR [unit^2] (:meth:`AxisReport.model_avar`).
 
     """
-    if isinstance(source, AxisNoise):
-        return avar_model(tau_s, source)
-    if not hasattr(source, 'avar_at'):
-        raise InputError(f'expected an AxisNoise or an AxisFit, got {type(source).__name__}')
-    avar = np.asarray(source.avar_at(tau_s), dtype=np.float64)
-    # The fit's own curve holds N and K at their point estimates; where either is only
-    # an upper bound, cover the bound (the record could not rule it out).
-    n_fit, k_fit = _fitted(source)
-    n_model, k_model = source.model.N, source.model.K
-    avar = avar + max(0.0, n_fit ** 2 - n_model ** 2) / tau_s
-    return avar + max(0.0, k_fit ** 2 - k_model ** 2) * tau_s / 3.0
+    return report_axis(source).model_avar(tau_s)
 
 
 def _envelope(values: np.ndarray) -> np.ndarray:
@@ -179,8 +170,8 @@ def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
 
     Parameters
     ----------
-    source : AxisNoise or imu_allan.core.fit.AxisFit
-        The axis model or fit.
+    source : AxisReport, AxisNoise or imu_allan.core.fit.AxisFit
+        The axis' report (or what it is made from).
     horizon_s : sequence of two floats
         (tau_min, tau_max) [s].
 
@@ -191,7 +182,8 @@ def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
 
     """
     tau = horizon_taus(horizon_s)
-    m = model_avar(source, tau)
+    report = report_axis(source)
+    m = report.model_avar(tau)
     if not np.all(np.isfinite(m)) or not np.all(m > 0):
         return None
     env = _envelope(m)
@@ -223,7 +215,10 @@ def cover_axis(source, horizon_s: Sequence[float]) -> AxisCover | None:
     short = float(np.max(1.0 / np.maximum(a * x + b * y, 1e-300)))
     x, y = x * max(short, 1.0), y * max(short, 1.0)
     n_c, k_c = math.sqrt(x * x0), math.sqrt(y * y0)
-    n_fit, k_fit = _fitted(source)
+    n_fit, k_fit = _reported(report)
+    # Never below the reported pair: on a short horizon a random walk hardly shows in
+    # the model's AVAR and the pair alone would drop K; N gets the run-to-run margin.
+    n_c, k_c = max(n_c, N_MARGIN * n_fit), max(k_c, k_fit)
     ratio = float(np.max((n_c ** 2 / tau + k_c ** 2 * tau / 3.0) / env))
     return AxisCover(N_fit=n_fit, K_fit=k_fit, N_cover=n_c, K_cover=k_c,
                      factor_N=(n_c / n_fit if n_fit > 0 else None),
@@ -262,7 +257,7 @@ def cover_axes(sources, horizon_s: Sequence[float]) -> dict:
 
     Parameters
     ----------
-    sources : mapping of str to AxisNoise or AxisFit
+    sources : mapping of str to AxisReport, AxisNoise or AxisFit
         Per axis name (AXES).
     horizon_s : sequence of two floats
         (tau_min, tau_max) [s].

@@ -2,10 +2,12 @@
 Outputs in the shapes their consumers read: robot_localization, IMU drivers, VIO configs.
 
 Each function takes the six per-axis sources of :func:`imu_allan.core.outputs.kalman.kalman_model`
-(AxisNoise or AxisFit) and returns YAML text whose keys are the consumer's own:
+(AxisReport, AxisNoise or AxisFit; every value is the axis' report,
+:mod:`imu_allan.core.outputs.reported`) and returns YAML text whose keys are the
+consumer's own:
 
-* :func:`kalibr_yaml`: Kalibr's imu.yaml (one noise density and random walk per sensor,
-  :func:`sensor_value`);
+* :func:`kalibr_yaml`: Kalibr's imu.yaml (one noise density and random walk per sensor:
+  the covering pair);
 * :func:`robot_localization_yaml`: an ``ekf.yaml`` fragment (robot_localization reads
   IMU noise from each message's covariance fields; the Allan result does not enter its
   ``process_noise_covariance``, which is a motion model without bias states);
@@ -25,8 +27,9 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.noise.values import AxisNoise
-from imu_allan.core.outputs.kalman import _param, _six, axis_densities, imu_covariance
+from imu_allan.core.outputs.covering import cover_axes, default_horizon
+from imu_allan.core.outputs.kalman import _six, imu_covariance
+from imu_allan.core.outputs.reported import CONSUMER_KINDS, report_axes, report_axis
 from imu_allan.errors import InputError
 
 #: robot_localization's imu0_config order (15 booleans): x y z, roll pitch yaw, vx vy vz,
@@ -49,53 +52,6 @@ def _reduce(values: Sequence[float], how: str) -> float:
     raise InputError(f"axis reduction must be 'max' or 'mean', got {how!r}")
 
 
-def _kinded(source, symbol: str, use_upper_bounds: bool) -> tuple[float, str]:
-    """
-    Value of N or K for one axis with its kind ('estimate', 'upper_bound', 'absent').
-
-    An AxisNoise carries estimates (0 means absent): N and K are the square roots of
-    the white and random-walk densities its terms add up to by their registry roles
-    (:func:`imu_allan.core.outputs.kalman.axis_densities`).  An AxisFit gives its
-    optimised parameter, an upper bound only when ``use_upper_bounds`` (otherwise it
-    counts as absent), plus what terms without a field of their own add by their roles.
-    """
-    if isinstance(source, AxisNoise):
-        d = axis_densities(source)
-        value = math.sqrt(d.S_N if symbol == 'N' else d.S_K)
-        return value, ('estimate' if value > 0 else 'absent')
-    value, kind = _param(source, symbol, use_upper_bounds)
-    if value is None or kind not in ('estimate', 'upper_bound') or value <= 0:
-        return 0.0, 'absent'
-    model = getattr(source, 'model', None)
-    if model is not None and model.extra:
-        d = axis_densities(AxisNoise(extra=model.extra))
-        value = math.sqrt(value ** 2 + (d.S_N if symbol == 'N' else d.S_K))
-    return value, kind
-
-
-def _curve_bound(source, symbol: str) -> float:
-    """
-    Bound of N or K that the measured curve itself sets, 0.0 without a curve.
-
-    No term can exceed the whole measured AVAR at any tau: N^2 / tau <= AVAR(tau) and
-    K^2 tau / 3 <= AVAR(tau) (IEEE Std 952 C.1 slopes), so N <= min sqrt(AVAR tau) and
-    K <= min sqrt(3 AVAR / tau) over the fitted taus.  K's minimum falls on the longest
-    taus, whose few degrees of freedom let a point lie far below the truth: with the
-    curve's EDF the bound is the fit's own 95 % one
-    (:func:`imu_allan.core.fit.trust.curve_k_bound`).
-    """
-    tau, avar = getattr(source, 'tau_s', None), getattr(source, 'avar_meas', None)
-    if tau is None or avar is None or not np.size(tau):
-        return 0.0
-    tau, avar = np.asarray(tau, dtype=np.float64), np.asarray(avar, dtype=np.float64)
-    edf = getattr(source, 'edf', None)
-    if symbol == 'K' and edf is not None and np.size(edf) == tau.size:
-        from imu_allan.core.fit.trust import curve_k_bound   # scipy: only on this path
-        return curve_k_bound(tau, avar, np.asarray(edf, dtype=np.float64))
-    level = avar * tau if symbol == 'N' else 3.0 * avar / tau
-    return float(np.sqrt(np.min(level)))
-
-
 class SensorValue(NamedTuple):
     """
     One value of N or K for a whole sensor (three axes), as Kalibr and VIO configs take.
@@ -105,8 +61,8 @@ class SensorValue(NamedTuple):
     value : float or None
         The value [unit of the symbol], None when no axis gives one.
     kind : str
-        'estimate', 'upper_bound' (the axes' 95 % bounds), 'curve_bound' (the measured
-        curve's own bound: the record cannot separate the term) or 'absent'.
+        The weakest kind among the axes that gave it (:data:`CONSUMER_KINDS`: 'estimate',
+        'upper_bound', 'curve_bound'), or 'absent'.
     per_axis : dict of str to tuple
         (value, kind) of each axis ('absent' with 0.0).
 
@@ -117,22 +73,18 @@ class SensorValue(NamedTuple):
     per_axis: dict
 
 
-def sensor_value(sources, axes: Sequence[str], symbol: str, reduce: str = 'max',
-                 use_upper_bounds: bool = True) -> SensorValue:
+def sensor_value(sources, axes: Sequence[str], symbol: str,
+                 reduce: str = 'max') -> SensorValue:
     """
-    Reduce N or K of three axes to one positive value for the sensor.
+    Reduce the reported N or K of three axes to one value for the sensor.
 
-    Only axes where the term was *estimated* enter the reduction: an upper bound (a term
-    the record was too short to see on that axis) can lie far above the values the other
-    axes measure (an accelerometer K bound of 1e-4 beside estimates of 8e-6), so it
-    would dominate 'max' without being a measurement.  Without any estimate (and with
-    ``use_upper_bounds``) the axes' 95 % bounds are used, then the bound the measured
-    curve sets (:func:`_curve_bound`); never 0, which Kalibr's and the VIO packages'
-    config readers reject.
+    Each axis gives its report's value (:mod:`imu_allan.core.outputs.reported`: an
+    estimate, a 95 % bound at its bound, or the curve's own bound); every axis with a
+    value enters the reduction, so a larger bound on one axis is never ignored.
 
     Parameters
     ----------
-    sources : mapping of str to AxisNoise or AxisFit
+    sources : mapping of str to AxisReport, AxisNoise or AxisFit
         Per axis name.
     axes : sequence of str
         The sensor's three axes.
@@ -140,51 +92,63 @@ def sensor_value(sources, axes: Sequence[str], symbol: str, reduce: str = 'max',
         'N' or 'K'.
     reduce : str
         'max' (worst axis) or 'mean'.
-    use_upper_bounds : bool
-        Fall back to bounds when no axis has an estimate (True) or give None.
 
     Returns
     -------
     SensorValue
 
     """
-    per = {a: _kinded(sources[a], symbol, use_upper_bounds) for a in axes}
-    for kind in ('estimate', 'upper_bound'):
-        got = [v for v, k in per.values() if k == kind]
-        if got:
-            return SensorValue(_reduce(got, reduce), kind, per)
-    if use_upper_bounds:
-        got = [b for b in (_curve_bound(sources[a], symbol) for a in axes) if b > 0]
-        if got:
-            return SensorValue(_reduce(got, reduce), 'curve_bound', per)
-    return SensorValue(None, 'absent', per)
+    per = {}
+    for a in axes:
+        report = report_axis(sources[a], a)
+        v = report.white if symbol == 'N' else report.random_walk
+        per[a] = (v.value, v.kind)
+    got = [(v, k) for v, k in per.values() if k != 'absent']
+    if not got:
+        return SensorValue(None, 'absent', per)
+    kind = max((k for _, k in got), key=CONSUMER_KINDS.index)
+    return SensorValue(_reduce([v for v, _ in got], reduce), kind, per)
+
+
+def _kalibr_pair(reports: dict, covers: dict, axes: Sequence[str], reduce: str) -> dict:
+    """The written N and K of one sensor: the covering pair, else the reported values."""
+    got = [covers[a] for a in axes if covers.get(a) is not None]
+    if got:
+        return {'N': _reduce([c.N_cover for c in got], reduce),
+                'K': _reduce([c.K_cover for c in got], reduce), 'pair': 'covering'}
+    return {'N': sensor_value(reports, axes, 'N', reduce).value,
+            'K': sensor_value(reports, axes, 'K', reduce).value, 'pair': 'reported'}
 
 
 def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/imu/data',
-                use_upper_bounds: bool = True) -> str:
+                covers: dict | None = None, horizon_s: Sequence[float] | None = None) -> str:
     """
-    Write a Kalibr imu.yaml (continuous densities: noise density = N, random walk = K).
+    Write a Kalibr imu.yaml: the covering pair (continuous densities), one per sensor.
 
-    Kalibr takes one value per sensor for all three axes (:func:`sensor_value`).
-    Default ``reduce='max'``: the worst axis, because under-stating any axis' noise
-    makes the calibration (and a filter tuned from it) over-confident on that axis,
-    while over-stating only down-weights it; ``'mean'`` gives the typical axis.
-    Per-axis values are written as comments.  Every value written is positive: a key
-    no axis can give (``use_upper_bounds`` False, or a model without that term) is left
-    out with a comment, so Kalibr stops on it instead of using 0.
+    Kalibr models each axis as white noise plus a bias random walk, as the VIO packages
+    do, so it gets the one pair every random-walk-only consumer gets: the covering pair
+    (:mod:`imu_allan.core.outputs.covering`), which bounds the whole fitted model over
+    the horizon and is never below the reported N and K.  One value per sensor: default
+    ``reduce='max'``, the worst axis (under-stating any axis' noise makes the
+    calibration over-confident on it, over-stating only down-weights it); ``'mean'``
+    gives the typical axis.  The reported and covering values per axis are comments.
+    A key no axis can give is left out with a comment (Kalibr stops on it; 0 it would
+    take).
 
     Parameters
     ----------
     sources : mapping or sequence
-        Six AxisNoise / AxisFit, see :func:`kalman_model`.
+        Six AxisReport / AxisNoise / AxisFit, see :func:`kalman_model`.
     rate_hz : float
         IMU message rate [Hz] (Kalibr's update_rate).
     reduce : str
         'max' (worst axis) or 'mean'.
     rostopic : str
         Value of Kalibr's rostopic key (the analysed topic).
-    use_upper_bounds : bool
-        Fall back to bounds when no axis has an estimate, see :func:`sensor_value`.
+    covers : dict of str to AxisCover, optional
+        The covering pairs (:func:`cover_axes`); made over ``horizon_s`` when not given.
+    horizon_s : sequence of two floats, optional
+        Their horizon [s]; default the sample period to 100 s.
 
     Returns
     -------
@@ -199,48 +163,41 @@ def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/
         raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
     how = {'max': 'worst (largest) axis', 'mean': 'mean of the three axes'}.get(reduce)
     _reduce([0.0], reduce)  # validates ``reduce``
-    srcs = dict(zip(AXES, _six(sources)))
-    lines = ['# IMU noise for Kalibr (imu_allan).  Continuous-time densities:',
-             '# noise_density = N (white noise), random_walk = K (bias random walk).',
-             f'# One value per sensor: the {how} of the per-axis estimates below',
-             '# (axes where a term is only an upper bound are left out of it).',
-             '# B and T_B (bias instability, Gauss-Markov) have no Kalibr key.']
-    keys, remarks = [], []
+    reports = report_axes(dict(zip(AXES, _six(sources))))
+    horizon_s = default_horizon(rate_hz) if horizon_s is None else horizon_s
+    covers = cover_axes(reports, horizon_s) if covers is None else covers
+    lines = ['# IMU noise for Kalibr (imu_allan).  Continuous-time densities of the covering',
+             '# pair: white noise + bias random walk whose Allan variance bounds the whole',
+             f'# fitted model for tau in [{horizon_s[0]:.3g}, {horizon_s[1]:.3g}] s, never '
+             'below the',
+             f'# reported N and K.  One value per sensor: the {how}.',
+             '# B and T_B (bias instability) have no Kalibr key; the pair covers them.']
+    keys = []
+    mark = {'estimate': '', 'upper_bound': ' (95 % upper bound)',
+            'curve_bound': " (the curve's bound)", 'absent': ' (not available)'}
     for sensor, axes, u_n, u_k in (('accelerometer', ACCEL_AXES, 'm/s^2/sqrt(Hz)',
                                     'm/s^3/sqrt(Hz)'),
                                    ('gyroscope', GYRO_AXES, 'rad/s/sqrt(Hz)',
                                     'rad/s^2/sqrt(Hz)')):
-        got = {sym: sensor_value(srcs, axes, sym, reduce, use_upper_bounds)
-               for sym in ('N', 'K')}
-        lines.append(f'# {sensor} per axis:')
+        lines.append(f'# {sensor} per axis, reported -> covering:')
         for a in axes:
+            r, c = reports[a], covers.get(a)
             text = []
-            for sym, u in (('N', u_n), ('K', u_k)):
-                value, kind = got[sym].per_axis[a]
-                mark = {'estimate': '', 'upper_bound': ' (95 % upper bound)',
-                        'absent': ' (not available)'}[kind]
-                text.append(f'{sym} = {value:.6e} {u}{mark}')
+            for sym, v, cov, u in (('N', r.white, c and c.N_cover, u_n),
+                                   ('K', r.random_walk, c and c.K_cover, u_k)):
+                to = 'n/a' if cov is None else f'{cov:.6e}'
+                text.append(f'{sym} = {v.value:.6e}{mark[v.kind]} -> {to} {u}')
             lines.append(f'#   {a}: ' + ', '.join(text))
+        pair = _kalibr_pair(reports, covers, axes, reduce)
         for sym, key, u in (('N', f'{sensor}_noise_density', u_n),
                             ('K', f'{sensor}_random_walk', u_k)):
-            sv = got[sym]
-            n_est = sum(k == 'estimate' for _, k in sv.per_axis.values())
-            if sv.kind == 'estimate' and n_est < len(axes):
-                remarks.append(f'# {key}: from the {n_est} axes with an estimate; '
-                               'the others only bound it')
-            elif sv.kind == 'upper_bound':
-                remarks.append(f'# {key}: no axis has an estimate; this is the '
-                               f'{reduce} of the 95 % upper bounds (the record is too '
-                               'short to measure it)')
-            elif sv.kind == 'curve_bound':
-                remarks.append(f'# {key}: no axis has an estimate or a bound; this is '
-                               'the bound the measured curve sets (conservative)')
-            elif sv.kind == 'absent':
-                remarks.append(f'# {key}: not available on any axis; left out (Kalibr '
-                               'needs a positive value: measure a longer record)')
-            keys.append((key, sv.value, u))
-    lines += remarks
-    lines += [f'{key}: {value:.6e}  # [{u}]' for key, value, u in keys if value is not None]
+            value = pair[sym]
+            if value is None or not value > 0:
+                lines.append(f'# {key}: not available on any axis; left out (Kalibr '
+                             'needs a positive value: measure a longer record)')
+            else:
+                keys.append((key, value, u))
+    lines += [f'{key}: {value:.6e}  # [{u}]' for key, value, u in keys]
     lines.append(f'rostopic: {rostopic}')
     lines.append(f'update_rate: {float(rate_hz):g}  # [Hz]')
     return '\n'.join(lines) + '\n'

@@ -24,25 +24,24 @@ the discrete (Phi, Qd, Rd) forms with their labels.
 Units: S_N [unit^2 s], S_B and S_K [unit^2/s], Qd [unit^2], R [unit^2], with unit
 rad/s (gyro) or m/s^2 (accel).
 
-An upper-bound parameter (a term the record was too short to see) is used at its bound
-by default: a filter that under-states a bias's wander becomes over-confident, one that
-over-states it only converges a little slower.  A B without T_B (flicker, or T_B not
-identified) has no finite-dimensional state: from a fit it becomes a Gauss-Markov state
-of the same peak ADEV centred on the fitted taus (:func:`flicker_time_s`); a bare model
-without taus keeps its b_GM state frozen (Phi = 1, Qd = 0) and a note says so.
+Every value is the axis' report (:mod:`imu_allan.core.outputs.reported`, the one place
+that decides them): an upper bound is used at its bound, a K the record could not
+constrain at the curve's own bound, and a B without an identified T_B (flicker, or T_B
+not identified) has no state (Phi = 1, Qd = 0): the model lists it, with every other
+term it does not hold, in ``left_out``, and never invents a correlation time.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Mapping
 
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.noise.model import GM_PEAK_TAU
 from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.outputs.consumers import NOTES  # noqa: F401
+from imu_allan.core.outputs.reported import AxisReport, report_axis
 from imu_allan.errors import InputError
 
 #: robot_localization ignores (clamps) variances below this [unit^2].
@@ -140,7 +139,12 @@ class KalmanModel:
     axes : tuple of AxisDensities
         The per-axis densities the matrices come from.
     notes : tuple of str
-        Choices made (upper bounds used, frozen Gauss-Markov states).
+        Choices made (upper bounds used, the curve's bound of K).
+    left_out : dict of str to list of str
+        Per axis, the terms of the fitted model this bias model does not hold (flicker,
+        a B without T_B, further Gauss-Markov processes, sinusoids ...): a random-walk
+        filter covers them with the covering pair
+        (:mod:`imu_allan.core.outputs.covering`).
 
     """
 
@@ -156,6 +160,7 @@ class KalmanModel:
     H: np.ndarray
     axes: tuple
     notes: tuple
+    left_out: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         """Return the matrices as nested lists with their labels (JSON-ready)."""
@@ -165,88 +170,33 @@ class KalmanModel:
                                'Rc': self.Rc.tolist()},
                 'discrete': {'Phi': self.Phi.tolist(), 'Qd': self.Qd.tolist(),
                              'Rd': self.Rd.tolist()},
-                'H': self.H.tolist(), 'notes': list(self.notes)}
+                'H': self.H.tolist(), 'notes': list(self.notes),
+                'left_out': {a: list(v) for a, v in self.left_out.items()}}
 
 
-def _param(fit, symbol: str, use_upper_bounds: bool):
-    """Value and kind of a fitted parameter, or (None, None) when absent."""
-    p = fit.optimised.get(symbol)
-    if p is None or not math.isfinite(p.value):
-        return None, None
-    if p.kind == 'upper_bound' and not use_upper_bounds:
-        return 0.0, p.kind
-    return float(p.value), p.kind
-
-
-def axis_noise_from(source, use_upper_bounds: bool = True) -> tuple[AxisNoise, tuple]:
+def report_densities(report: AxisReport) -> AxisDensities:
     """
-    Return the AxisNoise a Kalman filter should use, from an AxisNoise or an AxisFit.
+    Continuous densities of one axis as its report decides them (no value of its own).
+
+    S_N and S_K are the squares of the report's white-noise and random-walk values
+    (:mod:`imu_allan.core.outputs.reported`), S_B and T_B its Gauss-Markov state.
 
     Parameters
     ----------
-    source : AxisNoise or imu_allan.core.fit.AxisFit
-        A model, or a fit (its optimised parameters are used).
-    use_upper_bounds : bool
-        With a fit: use a parameter reported as an upper bound at its bound (True,
-        conservative) or drop it (False).
+    report : AxisReport
+        The axis' report.
 
     Returns
     -------
-    noise : AxisNoise
-        N, B, T_B, K in SI.
-    notes : tuple of str
-        What was substituted.
+    AxisDensities
+        S_B = 0 and T_B None where the report has no Gauss-Markov state.
 
     """
-    if isinstance(source, AxisNoise):
-        return source, ()
-    if not hasattr(source, 'optimised'):
-        raise InputError(f'expected an AxisNoise or an AxisFit, got {type(source).__name__}')
-    notes = []
-    values = {}
-    for sym in ('N', 'B', 'T_B', 'K'):
-        value, kind = _param(source, sym, use_upper_bounds)
-        values[sym] = value
-        if kind == 'upper_bound' and use_upper_bounds:
-            notes.append(f'{sym} used at its 95 % upper bound')
-    t_b = values['T_B'] if values['T_B'] else None
-    if values['B'] and t_b is None and getattr(source, 'tau_s', None) is not None:
-        t_b = flicker_time_s(source.tau_s)
-        notes.append(f'B is flicker (no T_B): modelled as a Gauss-Markov state of the same '
-                     f'peak ADEV with T_B = {t_b:.3g} s (peak at the middle of the fitted '
-                     'taus)')
-    # Terms without a field of their own (a newly registered term) enter through their
-    # registry role at the fit's values (see :func:`axis_densities`).
-    extra = getattr(source, 'model', AxisNoise()).extra
-    noise = AxisNoise(N=values['N'] or 0.0, B=values['B'] or 0.0, T_B=t_b, K=values['K'] or 0.0,
-                      extra=extra)
-    return noise, tuple(notes)
-
-
-def flicker_time_s(tau_s) -> float:
-    """
-    Correlation time of the Gauss-Markov state that stands in for flicker noise.
-
-    Flicker noise (ADEV 0.664 B at every tau) has no finite-dimensional state.  A
-    Gauss-Markov process with the same B (paper eq. 8: its ADEV peaks at 0.664 B, at
-    tau = 1.89 T) matches it at the geometric middle of the fitted taus, and falls
-    below it by 1.8 dB (ADEV) half a decade above, 5.9 dB a decade above
-    (closed forms of IEEE Std 952 C.1): the filter's bias state then wanders like the
-    sensor over the averaging times the record could see.
-
-    Parameters
-    ----------
-    tau_s : array_like
-        Shape (k,), the fitted averaging times [s].
-
-    Returns
-    -------
-    float
-        T_B [s].
-
-    """
-    tau = np.asarray(tau_s, dtype=np.float64)
-    return float(math.sqrt(tau.min() * tau.max()) / GM_PEAK_TAU)
+    gm = report.gauss_markov
+    return AxisDensities(axis=report.axis, S_N=report.white.value ** 2,
+                         S_B=0.0 if gm is None else gm.S_B,
+                         T_B=None if gm is None else gm.T_B,
+                         S_K=report.random_walk.value ** 2)
 
 
 def axis_densities(noise: AxisNoise, axis: str = '') -> AxisDensities:
@@ -329,18 +279,20 @@ def _six(sources) -> list:
     return sources
 
 
-def kalman_model(sources, rate_hz: float, use_upper_bounds: bool = True) -> KalmanModel:
+def kalman_model(sources, rate_hz: float) -> KalmanModel:
     """
     Q and R of the six-axis bias model (paper eqs. 16-17), continuous and discrete.
 
+    The values are the axes' reports (:func:`imu_allan.core.outputs.reported.report_axis`):
+    a bound is used at its bound, a B without an identified T_B has no state, and what
+    the model leaves out is listed per axis.
+
     Parameters
     ----------
-    sources : mapping of axis name to AxisNoise or AxisFit, or a sequence of six
-        One model (or fit) per axis of AXES.
+    sources : mapping of axis name to AxisReport, AxisNoise or AxisFit, or a sequence of six
+        One report (or model, or fit) per axis of AXES.
     rate_hz : float
         Sample rate [Hz]; dt = 1 / rate_hz.
-    use_upper_bounds : bool
-        See :func:`axis_noise_from`.
 
     Returns
     -------
@@ -360,12 +312,14 @@ def kalman_model(sources, rate_hz: float, use_upper_bounds: bool = True) -> Kalm
     Rd = np.zeros((n, n))
     H = np.zeros((n, 2 * n))
     labels, dens, notes = [], [], []
+    left_out = {}
     for i, (axis, src) in enumerate(zip(AXES, _six(sources))):
-        noise, sub = axis_noise_from(src, use_upper_bounds)
-        notes += [f'{axis}: {s}' for s in sub]
-        d = axis_densities(noise, axis)
-        if noise.B > 0 and d.T_B is None:
-            notes.append(f'{axis}: B without T_B has no Gauss-Markov state (b_gm frozen)')
+        report = report_axis(src, axis)
+        notes += [f'{axis}: {v.reason}' for v in (report.white, report.random_walk)
+                  if v.kind != 'estimate' and v.reason]
+        left_out[axis] = list(report.left_out)
+        notes += [f'{axis}: left out: {item}' for item in report.left_out]
+        d = report_densities(report)
         disc = discretise(d, dt)
         g, r = 2 * i, 2 * i + 1
         labels += [f'{axis}.b_gm', f'{axis}.b_rw']
@@ -378,7 +332,7 @@ def kalman_model(sources, rate_hz: float, use_upper_bounds: bool = True) -> Kalm
         dens.append(d)
     return KalmanModel(state_labels=tuple(labels), measurement_labels=tuple(AXES), dt=dt,
                        F=F, Qc=Qc, Rc=Rc, Phi=Phi, Qd=Qd, Rd=Rd, H=H, axes=tuple(dens),
-                       notes=tuple(notes))
+                       notes=tuple(notes), left_out=left_out)
 
 
 @dataclass(frozen=True)
@@ -437,10 +391,10 @@ def imu_covariance(sources, rate_hz: float) -> ImuCovariance:
     """
     if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
-    noises = {a: axis_noise_from(s)[0] for a, s in zip(AXES, _six(sources))}
+    reports = {a: report_axis(s, a) for a, s in zip(AXES, _six(sources))}
     var, clamped, unknown = {}, [], []
     for a in AXES:
-        s_n = axis_densities(noises[a]).S_N
+        s_n = reports[a].white.value ** 2
         v = s_n * float(rate_hz)
         if not s_n > 0:
             unknown.append(a)

@@ -20,19 +20,21 @@ IMU noise files for visual-inertial estimators that read OpenCV FileStorage YAML
   R_IMUtoGYRO, Ta, R_IMUtoACC, Tg (ov_msckf/src/core/VioManagerOptions.h and
   state/StateOptions.h, rpng/open_vins at 69488123, read each of these under imu0).
 
-Both write the *covering* pair of :mod:`imu_allan.core.outputs.covering` by default:
-these estimators model the bias as a pure random walk, and the covering pair is the
-white + random-walk model whose Allan variance bounds the fitted one over the stated
-horizon.  The fitted pair and the factor are written as comments.
+Both write the *covering* pair of :mod:`imu_allan.core.outputs.covering`, as Kalibr's
+imu.yaml does: these estimators model the bias as a pure random walk, and the covering
+pair is the white + random-walk model whose Allan variance bounds the fitted one over
+the stated horizon, never below the reported N and K.  The reported pair and the factor
+are written as comments.
 """
 
 import math
 from typing import Sequence
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.outputs.covering import sensor_cover
+from imu_allan.core.outputs.covering import cover_axes, default_horizon, sensor_cover
 from imu_allan.core.outputs.exports import sensor_value
 from imu_allan.core.outputs.kalman import _six
+from imu_allan.core.outputs.reported import report_axes
 
 #: Identity and zero 3x3 matrices in the block-sequence form OpenVINS' examples use.
 _EYE = ('    - [1.0, 0.0, 0.0]', '    - [0.0, 1.0, 0.0]', '    - [0.0, 0.0, 1.0]')
@@ -44,12 +46,19 @@ _SENSORS = (('accelerometer', 'acc', ACCEL_AXES, 'm/s^2', 'm/s^3'),
             ('gyroscope', 'gyr', GYRO_AXES, 'rad/s', 'rad/s^2'))
 
 
+def _covered(sources, rate_hz: float, covers, horizon_s) -> tuple:
+    """The six reports, their covering pairs and the horizon (made here when not given)."""
+    reports = report_axes(dict(zip(AXES, _six(sources))))
+    horizon_s = default_horizon(rate_hz) if horizon_s is None else tuple(horizon_s)
+    return reports, (cover_axes(reports, horizon_s) if covers is None else covers), horizon_s
+
+
 def _pairs(sources, covers, axes: Sequence[str]) -> dict:
     """
-    Fitted and covering N, K of one sensor and which pair is written.
+    Reported and covering N, K of one sensor and which pair is written.
 
     Returns {'N_fit', 'K_fit', 'N_cov', 'K_cov', 'N', 'K', 'pair'}; the written values are
-    the covering ones when there are covers, otherwise the fitted ones (None: absent).
+    the covering ones, or the reported ones where no axis has a pair (None: absent).
     """
     n_fit = sensor_value(sources, axes, 'N').value
     k_fit = sensor_value(sources, axes, 'K').value
@@ -58,7 +67,7 @@ def _pairs(sources, covers, axes: Sequence[str]) -> dict:
         return {'N_fit': n_fit, 'K_fit': k_fit, 'N_cov': n_cov, 'K_cov': k_cov,
                 'N': n_cov, 'K': k_cov, 'pair': 'covering'}
     return {'N_fit': n_fit, 'K_fit': k_fit, 'N_cov': None, 'K_cov': None,
-            'N': n_fit, 'K': k_fit, 'pair': 'fitted'}
+            'N': n_fit, 'K': k_fit, 'pair': 'reported'}
 
 
 def _g(value) -> str:
@@ -75,7 +84,7 @@ def pair_comments(sources, covers, horizon_s) -> list:
 
     Parameters
     ----------
-    sources : mapping of str to AxisNoise or AxisFit
+    sources : mapping of str to AxisReport, AxisNoise or AxisFit
         Per axis.
     covers : dict of str to AxisCover or None, or None
         :func:`imu_allan.core.outputs.covering.cover_axes`.
@@ -96,14 +105,14 @@ def pair_comments(sources, covers, horizon_s) -> list:
                      f'[{horizon_s[0]:.3g}, {horizon_s[1]:.3g}] s.')
     for sensor, _, axes, u, uw in _SENSORS:
         p = _pairs(sources, covers, axes)
-        lines.append(f'# {sensor}: fitted N {_g(p["N_fit"])} {u}/sqrt(Hz), K {_g(p["K_fit"])} '
+        lines.append(f'# {sensor}: reported N {_g(p["N_fit"])} {u}/sqrt(Hz), K {_g(p["K_fit"])} '
                      f'{uw}/sqrt(Hz); covering N {_g(p["N_cov"])}, K {_g(p["K_cov"])} '
                      f'(factor N {_factor(p["N_cov"], p["N_fit"])}, '
                      f'K {_factor(p["K_cov"], p["K_fit"])})')
     return lines
 
 
-def vins_values(sources, rate_hz: float, covers=None) -> dict:
+def vins_values(sources, rate_hz: float, covers=None, horizon_s=None) -> dict:
     """
     VINS' four keys, per-step standard deviations at ``rate_hz`` (module docstring).
 
@@ -114,7 +123,9 @@ def vins_values(sources, rate_hz: float, covers=None) -> dict:
     rate_hz : float
         The IMU rate VINS will integrate at [Hz].
     covers : dict of str to AxisCover, optional
-        Covering pairs per axis (written when given), else the fitted values.
+        Covering pairs per axis; made over ``horizon_s`` when not given.
+    horizon_s : sequence of two floats, optional
+        Their horizon [s]; default the sample period to 100 s.
 
     Returns
     -------
@@ -123,7 +134,7 @@ def vins_values(sources, rate_hz: float, covers=None) -> dict:
         K sqrt(rate); None where the value is unknown.
 
     """
-    srcs = dict(zip(AXES, _six(sources)))
+    srcs, covers, _ = _covered(sources, rate_hz, covers, horizon_s)
     out = {}
     for _, short, axes, _, _ in _SENSORS:
         p = _pairs(srcs, covers, axes)
@@ -143,9 +154,9 @@ def vins_yaml(sources, rate_hz: float, covers=None, horizon_s=None) -> str:
     rate_hz : float
         IMU rate VINS integrates at [Hz]; the values hold at this rate only.
     covers : dict of str to AxisCover, optional
-        Covering pairs (written when given).
+        Covering pairs; made over ``horizon_s`` when not given.
     horizon_s : sequence of two floats, optional
-        Their horizon [s], for the comment.
+        Their horizon [s]; default the sample period to 100 s.
 
     Returns
     -------
@@ -155,7 +166,7 @@ def vins_yaml(sources, rate_hz: float, covers=None, horizon_s=None) -> str:
         without a value is left out with a comment.
 
     """
-    srcs = dict(zip(AXES, _six(sources)))
+    srcs, covers, horizon_s = _covered(sources, rate_hz, covers, horizon_s)
     values = vins_values(srcs, rate_hz, covers)
     pair = _pairs(srcs, covers, GYRO_AXES)['pair']
     lines = ['%YAML:1.0',
@@ -190,9 +201,9 @@ def openvins_yaml(sources, rate_hz: float, rostopic: str = '/imu/data', covers=N
     rostopic : str
         The IMU topic.
     covers : dict of str to AxisCover, optional
-        Covering pairs (written when given).
+        Covering pairs; made over ``horizon_s`` when not given.
     horizon_s : sequence of two floats, optional
-        Their horizon [s], for the comment.
+        Their horizon [s]; default the sample period to 100 s.
 
     Returns
     -------
@@ -204,7 +215,7 @@ def openvins_yaml(sources, rate_hz: float, rostopic: str = '/imu/data', covers=N
         model "kalibr" and identity intrinsics (Tw, R_IMUtoGYRO, Ta, R_IMUtoACC; Tg 0).
 
     """
-    srcs = dict(zip(AXES, _six(sources)))
+    srcs, covers, horizon_s = _covered(sources, rate_hz, covers, horizon_s)
     pair = _pairs(srcs, covers, GYRO_AXES)['pair']
     lines = ['%YAML:1.0',
              '# OpenVINS IMU file (imu_allan): config/<dataset>/kalibr_imu_chain.yaml, the',

@@ -33,21 +33,21 @@ Effect names are term names (:mod:`imu_allan.core.noise.terms`): quantization, w
 flicker (B), gauss_markov (a further Gauss-Markov process, B and T), random_walk,
 rate_ramp, sinusoid; the old effect name bias_instability is read as flicker for one
 release.  The model's own low-pass is the term ``filtered_white``.
+
+Every threshold named here (:data:`DELTA_MIN`, :data:`P_CONSISTENT`, :data:`MAX_STEPS`
+...) lives in :mod:`imu_allan.core.rules`, with its reason.
 """
 
 from typing import Sequence
 
 from imu_allan.core.allan.blas import single_thread_blas
-from imu_allan.core.fit.criterion import DELTA_MIN
 from imu_allan.core.noise.terms import effect_name, effect_names, TERMS
 from imu_allan.core.search.choice import random_walk_or_slow_process, with_rivals
-from imu_allan.core.search.rules import (AMPLITUDE_FACTOR, BASE_LABELS, MAX_STEPS, Search,
-                                         SEARCH_EFFECTS, Step)
+from imu_allan.core.search.rules import BASE_LABELS, Search, SEARCH_EFFECTS, Step
 from imu_allan.core.search.run import _finish, _Run
 from imu_allan.errors import InputError
 
-__all__ = ['AMPLITUDE_FACTOR', 'BASE_LABELS', 'DELTA_MIN', 'MAX_STEPS', 'Search', 'search_axis',
-           'SEARCH_EFFECTS', 'Step']
+__all__ = ['BASE_LABELS', 'Search', 'search_axis', 'SEARCH_EFFECTS', 'Step']
 
 
 def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
@@ -113,7 +113,8 @@ def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effect
     run.backward()
     run.undecided()
     fit = run.final()
-    fit = random_walk_or_slow_process(with_rivals(fit, run), run)
+    final = run.final_model()
+    fit = random_walk_or_slow_process(with_rivals(fit, final), final)
     steps = run.step_fits(fit) if keep_steps else run.steps
     return Search(_finish(fit, steps, run.notes, unit, tuple(run.problems)), run.base_fit,
                   tuple(steps))

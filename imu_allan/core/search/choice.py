@@ -24,23 +24,16 @@ Gauss-Markov process can stand in for the random walk, K is only an upper bound
 
 from dataclasses import replace
 import math
-import re
 
 import numpy as np
 
 from imu_allan.core.fit.api import fit_fixed_weights, Fix, n_params, profile_threshold
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.noise.model import GM_PEAK_TAU
+from imu_allan.core.rules import GRID_POINTS, PIN_MARGIN, RIVAL_DELTA
 from imu_allan.core.search.rivals import _neg2_loglik
-from imu_allan.core.search.rules import _label_for
+from imu_allan.core.search.rules import _label_for, FinalModel, GridPoint, Rival
 
-_RIVAL = re.compile(r'^(\w+) \(chi2 drop ([-\d.e+]+)\)$')
-#: Grid points over the range of T_B (log-spaced).
-GRID_POINTS = 8
-#: A rival structure (the runner-up effect of a step in its place) within this many
-#: units of -2 ln L + BIC of the chosen model fits about equally well: the search's own
-#: margin :data:`imu_allan.core.fit.criterion.DELTA_MIN` is what an effect must buy.
-RIVAL_DELTA = 10.0
 #: Parameters whose intervals are widened by the rivals, with the term each comes from.
 _LEVELS = {'N': ('white', 'filtered_white'), 'B': ('bias_instability',),
            'K': ('random_walk',)}
@@ -69,7 +62,7 @@ def _largest_gm(slots, sol, scale: float) -> int | None:
         float(sol.coef[k]) * scale, *sol.phi[k])[slots[k].term.symbols[0]])
 
 
-def structural_rivals(run) -> list:
+def structural_rivals(model: FinalModel) -> list:
     """
     Re-fit the model with each step's runner-up effect in its place; return the rivals.
 
@@ -80,30 +73,30 @@ def structural_rivals(run) -> list:
     description, the difference of the criterion and N, B, T_B, K.
     """
     out = []
-    scale = run.fitter.data.scale
-    slots = run.slots_of(run.labels)
-    run.fitter.data.set_sigma(run.sigma)
-    mine = _neg2_loglik(run.fitter, run.sol, n_params(slots), run.penalty)
-    for st in run.steps:
-        got = _RIVAL.match(st.rival or '')
-        if got is None or abs(st.chi2_drop - float(got.group(2))) > RIVAL_DELTA:
+    scale = model.fitter.data.scale
+    slots = model.slots_of(model.labels)
+    model.fitter.data.set_sigma(model.sigma)
+    mine = _neg2_loglik(model.fitter, model.sol, n_params(slots), model.penalty)
+    for st in model.steps:
+        other = st.runner_up
+        if not other.effect or abs(st.chi2_drop - other.chi2_drop) > RIVAL_DELTA:
             continue
-        rest = [lb for lb in run.labels if lb != st.label]
-        label = _label_for(got.group(1), rest)
+        rest = [lb for lb in model.labels if lb != st.label]
+        label = _label_for(other.effect, rest)
         if label is None:
             continue
         labels = rest + [label]
-        r_slots = run.slots_of(labels)
-        phi0 = [p for lb, p in zip(run.labels, run.sol.phi) if lb != st.label] + [
+        r_slots = model.slots_of(labels)
+        phi0 = [p for lb, p in zip(model.labels, model.sol.phi) if lb != st.label] + [
             tuple(math.sqrt(lo * hi) for lo, hi in r_slots[-1].bounds)]
-        sol, _ = run.fitter.irls(r_slots, phi0=phi0)
-        value = _neg2_loglik(run.fitter, sol, n_params(r_slots), run.penalty)
-        run.fitter.data.set_sigma(run.sigma)
+        sol, _ = model.fitter.irls(r_slots, phi0=phi0)
+        value = _neg2_loglik(model.fitter, sol, n_params(r_slots), model.penalty)
+        model.fitter.data.set_sigma(model.sigma)
         if value - mine <= RIVAL_DELTA:
             i_b = _largest_gm(r_slots, sol, scale)
             levels = _levels(r_slots, sol, scale, -1 if i_b is None else i_b)
-            out.append((f'{got.group(1)} instead of {st.effect}', float(value - mine),
-                        levels))
+            out.append(Rival(f'{other.effect} instead of {st.effect}', float(value - mine),
+                             levels))
     return out
 
 
@@ -135,7 +128,7 @@ def rival_models(fitter, slots, sol, dof: int, i: int) -> list:
 
     Returns
     -------
-    list of (float, bool, dict)
+    list of GridPoint
         Per grid point: the rise of the chi-square over the best, whether it lies
         within the 95 % threshold, and N, B, T_B, K there.
 
@@ -150,10 +143,10 @@ def rival_models(fitter, slots, sol, dof: int, i: int) -> list:
                                  local=True)
         best = min(best, grid.j)
         out.append((grid.j, _levels(slots, grid, fitter.data.scale, i)))
-    return [(j - best, j - best <= threshold, lv) for j, lv in out]
+    return [GridPoint(j - best, j - best <= threshold, lv) for j, lv in out]
 
 
-def with_rivals(fit: AxisFit, run) -> AxisFit:
+def with_rivals(fit: AxisFit, model: FinalModel) -> AxisFit:
     """
     Widen the intervals of ``fit`` by its rival models (see the module doc).
 
@@ -162,28 +155,29 @@ def with_rivals(fit: AxisFit, run) -> AxisFit:
     intervals span their values under every rival; T_B is not identified when its
     confidence set falls apart, or when a rival structure puts it outside its interval.
     """
-    slots, sol = run.slots_of(run.labels), run.sol
-    run.fitter.data.set_sigma(run.sigma)
+    slots, sol = model.slots_of(model.labels), model.sol
+    model.fitter.data.set_sigma(model.sigma)
     t_b = fit.optimised.get('T_B')
     rivals, flips = [], []
     if t_b is not None and t_b.kind == 'estimate':
         i = _bias_slot(slots, sol, t_b.value)
         if i is not None:
-            dof = run.fitter.data.tau.size - n_params(slots)
-            grid = rival_models(run.fitter, slots, sol, dof, i)
-            own = np.array([t_b.ci95[0] <= g[2]['T_B'] <= t_b.ci95[1] for g in grid])
-            inside = np.array([g[1] for g in grid]) | own
+            dof = model.fitter.data.tau.size - n_params(slots)
+            grid = rival_models(model.fitter, slots, sol, dof, i)
+            own = np.array([t_b.ci95[0] <= g.levels['T_B'] <= t_b.ci95[1] for g in grid])
+            inside = np.array([g.inside for g in grid]) | own
             pieces = int(np.sum(np.diff(inside.astype(int)) == 1)) + int(inside[0])
             for g, o in zip(grid, own):
-                if g[1] and not o and g[2]['B'] > 0:
-                    rivals.append((f'T_B {g[2]["T_B"]:.3g} s', float(g[0]), g[2]))
+                if g.inside and not o and g.levels['B'] > 0:
+                    rivals.append(Rival(f'T_B {g.levels["T_B"]:.3g} s', float(g.rise),
+                                        g.levels))
                     if pieces > 1:
-                        flips.append(rivals[-1][0])
-    for r in structural_rivals(run):
+                        flips.append(rivals[-1].model)
+    for r in structural_rivals(model):
         rivals.append(r)
-        if (t_b is not None and t_b.kind == 'estimate' and math.isfinite(r[2]['T_B'])
-                and not t_b.ci95[0] <= r[2]['T_B'] <= t_b.ci95[1]):
-            flips.append(r[0])
+        if (t_b is not None and t_b.kind == 'estimate' and math.isfinite(r.levels['T_B'])
+                and not t_b.ci95[0] <= r.levels['T_B'] <= t_b.ci95[1]):
+            flips.append(r.model)
     if not rivals:
         return fit
     optimised = dict(fit.optimised)
@@ -192,21 +186,24 @@ def with_rivals(fit: AxisFit, run) -> AxisFit:
         p = optimised.get(sym)
         if p is None or p.kind != 'estimate':
             continue
-        values = [r[2][sym] for r in rivals]
+        values = [r.levels[sym] for r in rivals]
         lo, hi = min([p.ci95[0]] + values), max([p.ci95[1]] + values)
         if (lo, hi) != p.ci95:
-            optimised[sym] = p._replace(ci95=(float(lo), float(hi)))
+            optimised[sym] = p._replace(ci95=(float(lo), float(hi)),
+                                        reason='interval widened to span rival models')
     if flips and t_b is not None:
-        optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
+        optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit,
+                                 'fitted', 'rival models give it other values')
         notes.append(f'T_B: flips between rival models that fit about as well ('
                      f'{t_b.value:.3g} s; {", ".join(flips)}): not identified')
     elif t_b is not None and t_b.kind == 'estimate':
-        ts = [r[2]['T_B'] for r in rivals if math.isfinite(r[2]['T_B'])]
+        ts = [r.levels['T_B'] for r in rivals if math.isfinite(r.levels['T_B'])]
         optimised['T_B'] = t_b._replace(ci95=(float(min([t_b.ci95[0]] + ts)),
                                               float(max([t_b.ci95[1]] + ts))))
     notes.append('intervals of N, B, K span the rival models: '
-                 + ', '.join(r[0] for r in rivals))
-    listed = tuple({'model': r[0], 'criterion_rise': r[1], **r[2]} for r in rivals)
+                 + ', '.join(r.model for r in rivals))
+    listed = tuple({'model': r.model, 'criterion_rise': r.criterion_rise, **r.levels}
+                   for r in rivals)
     return replace(fit, optimised=optimised, notes=tuple(notes), rivals=listed)
 
 
@@ -245,8 +242,10 @@ def ambiguous_bias(fit: AxisFit) -> AxisFit:
     lo = min([b.ci95[0]] + [o.ci95[0] for _, o, _ in tied])
     hi = max([b.ci95[1]] + [o.ci95[1] for _, o, _ in tied])
     optimised = dict(opt)
-    optimised['B'] = b._replace(ci95=(float(lo), float(hi)))
-    optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
+    optimised['B'] = b._replace(ci95=(float(lo), float(hi)),
+                                reason='two processes of about this level: interval spans both')
+    optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit,
+                             'fitted', 'which process is the bias instability is not clear')
     levels = {sym: opt[sym].value if opt[sym].kind == 'estimate' else math.nan
               for sym in ('N', 'K')}
     listed = tuple({'model': f'bias instability = {label} (T {time.value:.3g} s)',
@@ -260,15 +259,15 @@ def ambiguous_bias(fit: AxisFit) -> AxisFit:
                    rivals=fit.rivals + listed)
 
 
-def _final_solution(run):
+def _final_solution(model: FinalModel) -> tuple:
     """Return the search's final slots and solution at its final weights."""
-    run.fitter.data.set_sigma(run.sigma)
-    slots = run.slots_of(run.labels)
-    sol = run.sol
+    model.fitter.data.set_sigma(model.sigma)
+    slots = model.slots_of(model.labels)
+    sol = model.sol
     if len(sol.phi) != len(slots):
         # final() dropped steps after the last IRLS: fit the kept labels at these weights.
-        sol = fit_fixed_weights(run.fitter.data, slots, [run.phi_of[lb] for lb in run.labels],
-                                local=True)
+        sol = fit_fixed_weights(model.fitter.data, slots,
+                                [model.phi_of[lb] for lb in model.labels], local=True)
     return slots, sol
 
 
@@ -276,7 +275,7 @@ def _final_solution(run):
 SLOWER_PROCESS_RIVAL = 'a slower gauss_markov instead of random_walk'
 
 
-def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
+def random_walk_or_slow_process(fit: AxisFit, model: FinalModel) -> AxisFit:
     """
     Report K as an upper bound where a slower Gauss-Markov process does as well.
 
@@ -300,33 +299,35 @@ def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
     label to a process whose time lies outside T_B's interval.
     """
     k, b, t_b = (fit.optimised.get(sym) for sym in ('K', 'B', 'T_B'))
-    if (k is None or k.kind != 'estimate' or 'random_walk' not in run.labels
-            or 'gauss_markov' not in run.effects):
+    if (k is None or k.kind != 'estimate' or 'random_walk' not in model.labels
+            or 'gauss_markov' not in model.effects):
         return fit
-    label = _label_for('gauss_markov', run.labels)
+    label = _label_for('gauss_markov', model.labels)
     if label is None:
         return fit
-    slots, sol = _final_solution(run)
-    kept = [i for i, lb in enumerate(run.labels) if lb != 'random_walk']
-    alt = [slots[i] for i in kept] + run.slots_of([label])
-    if n_params(alt) >= run.k:
+    slots, sol = _final_solution(model)
+    kept = [i for i, lb in enumerate(model.labels) if lb != 'random_walk']
+    alt = [slots[i] for i in kept] + model.slots_of([label])
+    if n_params(alt) >= model.k:
         return fit
     phi0 = [sol.phi[i] for i in kept] + [tuple(math.sqrt(lo * hi) for lo, hi in alt[-1].bounds)]
     # Only the new process is gridded; the others start where they are (the polish
     # moves them).
-    new = fit_fixed_weights(run.fitter.data, alt, phi0, grid_slots=[len(alt) - 1])
+    new = fit_fixed_weights(model.fitter.data, alt, phi0, grid_slots=[len(alt) - 1])
     family = [i for i, s in enumerate(alt) if s.term.name in ('bias_instability', 'gauss_markov')]
     rise = float(new.j - sol.j)
     slowest = max(new.phi[i][0] for i in family)
-    pinned = any(not alt[i].bounds[0][0] * 1.02 < new.phi[i][0] < alt[i].bounds[0][1] / 1.02
+    pinned = any(not alt[i].bounds[0][0] * PIN_MARGIN < new.phi[i][0]
+                 < alt[i].bounds[0][1] / PIN_MARGIN
                  for i in family)
-    if (np.any(new.coef[family] <= 0) or pinned or GM_PEAK_TAU * slowest > run.tau.max()
-            or rise > profile_threshold(sol.j, run.k - n_params(slots))):
+    if (np.any(new.coef[family] <= 0) or pinned or GM_PEAK_TAU * slowest > model.tau.max()
+            or rise > profile_threshold(sol.j, model.k - n_params(slots))):
         return fit
-    i_b = _largest_gm(alt, new, run.fitter.data.scale)
-    levels = _levels(alt, new, run.fitter.data.scale, -1 if i_b is None else i_b)
+    i_b = _largest_gm(alt, new, model.fitter.data.scale)
+    levels = _levels(alt, new, model.fitter.data.scale, -1 if i_b is None else i_b)
     optimised = dict(fit.optimised)
-    optimised['K'] = Param(k.ci95[1], (0.0, k.ci95[1]), 'upper_bound', k.unit)
+    optimised['K'] = Param(k.ci95[1], (0.0, k.ci95[1]), 'upper_bound', k.unit, 'fitted',
+                           'a slower Gauss-Markov process fits as well: 95 % upper bound')
     notes = [f'K: a slower Gauss-Markov process (T {slowest:.3g} s) instead of the '
              f'random walk fits as well (chi-square {rise:+.1f}): 95 % upper bound']
     if b is not None and b.kind == 'estimate':
@@ -334,7 +335,9 @@ def random_walk_or_slow_process(fit: AxisFit, run) -> AxisFit:
                                           max(b.ci95[1], levels['B'])))
     if t_b is not None and t_b.kind in ('estimate', 'lower_bound') and not (
             t_b.ci95[0] <= levels['T_B'] <= t_b.ci95[1]):
-        optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit)
+        optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit,
+                                 'fitted', 'a slower process instead of the random walk '
+                                 'gives another value')
         notes.append(f'T_B: {t_b.value:.3g} s with the random walk, {levels["T_B"]:.3g} s '
                      'with the slower process instead: not identified')
     listed = ({'model': SLOWER_PROCESS_RIVAL,

@@ -21,6 +21,7 @@ from scipy.optimize import minimize_scalar
 
 from imu_allan.core.allan.raw import raw_evidence, RawKeeper  # noqa: F401 (re-exported)
 from imu_allan.core.noise.model import TERMS
+from imu_allan.core.rules import LINE_FALSE_ALARM, RAMP_BLOCKS, RAMP_LR_MIN
 
 
 class PeakCheck(NamedTuple):
@@ -102,7 +103,7 @@ def periodogram_peak(y, rate_hz: float, f_lo: float, f_hi: float) -> PeakCheck |
                         & (np.abs(np.arange(freqs.size) - k) > 3) & (freqs > 0))
     background = float(np.median(power[nb])) if nb.size else float(np.median(power[1:]))
     ratio = float(power[k] / max(background, 1e-300))
-    threshold = math.log(max(sel.size, 1) / 1e-3) / math.log(2.0)
+    threshold = math.log(max(sel.size, 1) / LINE_FALSE_ALARM) / math.log(2.0)
     shift = 0.0
     if 0 < k < power.size - 1:
         a, b, c = np.log(np.maximum(power[k - 1:k + 2], 1e-300))
@@ -124,12 +125,6 @@ def periodogram_peak(y, rate_hz: float, f_lo: float, f_hi: float) -> PeakCheck |
 
 
 # ----------------------------------------------------------------- rate-ramp evidence
-
-#: Blocks the record is cut into for the ramp test (the covariance is blocks^2).
-RAMP_BLOCKS = 256
-#: Likelihood-ratio statistic a ramp must exceed: chi2(1) at about 1e-5, since the
-#: search asks this of every axis (few false ramps over a fleet of axes).
-RAMP_LR_MIN = 19.5
 
 
 class RampCheck(NamedTuple):

@@ -10,12 +10,10 @@ import math
 import numpy as np
 
 from imu_allan.core.fit.api import n_params
-from imu_allan.core.fit.criterion import criterion, DELTA_MIN
+from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.judge import shows_quantization
-from imu_allan.core.search.rules import _label_for
-
-#: Rival effects re-fitted (IRLS) and compared by their full likelihood at each step.
-N_RIVALS = 3
+from imu_allan.core.rules import DELTA_MIN, N_RIVALS
+from imu_allan.core.search.rules import _label_for, Choice, RunnerUp
 
 
 def _by_likelihood(fitter, slots_of, labels: list, ranked: list, penalty: float) -> list:
@@ -29,13 +27,13 @@ def _by_likelihood(fitter, slots_of, labels: list, ranked: list, penalty: float)
     to convergence and compared by -2 ln L = J + ln det Sigma (GLS chi-square at the
     model's own covariance plus its log-determinant) + ln(k) per parameter (BIC).
     """
-    ranked = sorted(ranked, key=lambda r: -r[0])
+    ranked = sorted(ranked, key=lambda r: -r.score)
     if len(ranked) < 2:
         return ranked
     scored = []
     for r in ranked[:N_RIVALS]:
-        slots = slots_of(labels + [r[3]])
-        sol, _ = fitter.irls(slots, phi0=r[4].phi, local=True)
+        slots = slots_of(labels + [r.label])
+        sol, _ = fitter.irls(slots, phi0=r.solution.phi, local=True)
         logdet = 2.0 * float(np.sum(np.log(np.abs(np.diag(fitter.data.chol)))))
         scored.append((sol.j + logdet + n_params(slots) * penalty, r))
     scored.sort(key=lambda x: x[0])
@@ -76,8 +74,8 @@ def _second_chance(fitter, slots_of, labels: list, sol, sigma, effects, penalty:
             continue
         value = _neg2_loglik(fitter, new, n_params(slots), penalty)
         if current - value > DELTA_MIN and (best is None or value < best[0]):
-            best = (value, (float(current - value), effect, label, new, '',
-                            'chosen by likelihood with its own weights'))
+            best = (value, Choice(float(current - value), effect, label, new, RunnerUp(),
+                                  'chosen by likelihood with its own weights'))
     return None if best is None else best[1]
 
 

@@ -4,13 +4,16 @@ What the effect search may add, and when.
 Its constants (the effects, their fit terms, the amplitude agreement), its result types
 and the rules an effect must pass: a label it can still take, periodogram evidence of a
 sinusoid.  The margin an effect must buy is the selection rule's
-(:data:`imu_allan.core.fit.criterion.DELTA_MIN`).
+(:data:`imu_allan.core.rules.DELTA_MIN`); every threshold is in
+:mod:`imu_allan.core.rules`.
 """
 
+import math
 from typing import NamedTuple, Sequence
 
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.noise.terms import base_name, search_effects, TERMS
+from imu_allan.core.rules import AMPLITUDE_FACTOR
 from imu_allan.core.search.evidence import periodogram_peak
 
 #: Effects the search may add, in the order they are tried (ties keep the first): the
@@ -18,10 +21,83 @@ from imu_allan.core.search.evidence import periodogram_peak
 SEARCH_EFFECTS = search_effects()
 #: The paper's base model (term names).
 BASE_LABELS = ('white', 'bias_instability', 'random_walk')
-#: Most effects added per axis.
-MAX_STEPS = 4
-#: A sinusoid's amplitude from the curve and from the periodogram agree within this.
-AMPLITUDE_FACTOR = 3.0
+
+
+class Candidate(NamedTuple):
+    """
+    One effect scored against the current model (the forward search's screen).
+
+    Attributes
+    ----------
+    score : float
+        Chi-square drop beyond the effect's margin (BIC per parameter plus
+        :data:`imu_allan.core.rules.DELTA_MIN`) [-].
+    chi2_drop : float
+        Drop of the GLS chi-square at the current model's weights [-].
+    effect : str
+        Effect name, e.g. 'sinusoid'.
+    label : str
+        Fit term label it would take, e.g. 'sinusoid_2'.
+    solution : object
+        The fit of the model with it (a solver solution: coef, phi, j).
+
+    """
+
+    score: float
+    chi2_drop: float
+    effect: str
+    label: str
+    solution: object
+
+
+class RunnerUp(NamedTuple):
+    """
+    The best other explanation of a step's gap.
+
+    Attributes
+    ----------
+    effect : str
+        Effect name ('' when none qualified).
+    chi2_drop : float
+        The drop it bought at the same weights [-] (NaN when none).
+
+    """
+
+    effect: str = ''
+    chi2_drop: float = math.nan
+
+    def __str__(self) -> str:
+        """Return 'effect (chi2 drop D)', or '' when none."""
+        return f'{self.effect} (chi2 drop {self.chi2_drop:.1f})' if self.effect else ''
+
+
+class Choice(NamedTuple):
+    """
+    The effect a step of the forward search takes.
+
+    Attributes
+    ----------
+    chi2_drop : float
+        Drop of the GLS chi-square it bought [-].
+    effect : str
+        Effect name.
+    label : str
+        Fit term label.
+    solution : object
+        The fit of the model with it (starting values of the re-weighted fit).
+    runner_up : RunnerUp
+        The best other explanation.
+    evidence : str
+        Time-domain evidence or how it was chosen ('' when none).
+
+    """
+
+    chi2_drop: float
+    effect: str
+    label: str
+    solution: object
+    runner_up: RunnerUp
+    evidence: str
 
 
 class Step(NamedTuple):
@@ -36,8 +112,8 @@ class Step(NamedTuple):
         Fit term label, e.g. 'sinusoid_2'.
     chi2_drop : float
         Drop of the GLS chi-square the effect bought at the previous model's weights.
-    rival : str
-        The runner-up explanation and its drop ('' when none qualified).
+    runner_up : RunnerUp
+        The runner-up explanation and its drop (empty when none qualified).
     evidence : str
         Time-domain evidence (periodogram line, ramp likelihood ratio) or ''.
     fit : AxisFit or None
@@ -48,9 +124,99 @@ class Step(NamedTuple):
     effect: str
     label: str
     chi2_drop: float
-    rival: str
+    runner_up: RunnerUp
     evidence: str
     fit: AxisFit | None = None
+
+    @property
+    def rival(self) -> str:
+        """The runner-up as the JSON and the notes show it ('' when none)."""
+        return str(self.runner_up)
+
+
+class FinalModel(NamedTuple):
+    """
+    The search's final model, as the rival checks read it (:mod:`imu_allan.core.search.choice`).
+
+    Attributes
+    ----------
+    fitter : object
+        The search's fitter (its curve and covariance); its weights are reset to
+        ``sigma`` by whoever re-fits with it.
+    sigma : np.ndarray
+        Shape (k, k), the final model's covariance of the curve (the fit's weights).
+    labels : tuple of str
+        Fit labels of the final model.
+    slots_of : callable
+        Labels to fit slots (the search's narrowed sinusoid ranges included).
+    sol : object
+        The final model's solution (coef, phi, j) at ``sigma``.
+    phi_of : dict of str to tuple
+        Nonlinear parameters per label.
+    penalty : float
+        BIC's penalty per parameter for these taus.
+    steps : tuple of Step
+        The accepted effects.
+    effects : tuple of str
+        The effects the search could add.
+    k : int
+        Number of fitted taus.
+    tau : np.ndarray
+        Shape (k,), the fitted taus [s].
+
+    """
+
+    fitter: object
+    sigma: object
+    labels: tuple
+    slots_of: object
+    sol: object
+    phi_of: dict
+    penalty: float
+    steps: tuple
+    effects: tuple
+    k: int
+    tau: object
+
+
+class Rival(NamedTuple):
+    """
+    A model that fits about as well as the chosen one.
+
+    Attributes
+    ----------
+    model : str
+        What differs from the chosen model.
+    criterion_rise : float
+        Its chi-square (or -2 ln L + BIC) above the chosen model's [-].
+    levels : dict of str to float
+        Its N, B, T_B and K [SI].
+
+    """
+
+    model: str
+    criterion_rise: float
+    levels: dict
+
+
+class GridPoint(NamedTuple):
+    """
+    One point of T_B's profile over its whole range.
+
+    Attributes
+    ----------
+    rise : float
+        Chi-square above the best grid point [-].
+    inside : bool
+        Within the 95 % profile threshold.
+    levels : dict of str to float
+        N, B, T_B and K there [SI].
+
+    """
+
+    rise: float
+    inside: bool
+    levels: dict
 
 
 class Search(NamedTuple):

@@ -7,6 +7,7 @@ model, ramp test, forward search, backward check, final fit (see the package doc
 
 from dataclasses import replace
 import math
+from typing import Any
 
 import numpy as np
 
@@ -14,15 +15,18 @@ from imu_allan.core.allan.quantiles import chi2_sf
 from imu_allan.core.fit import fit_axis
 from imu_allan.core.fit.api import (check_curve, filter_identified, filtered_start,
                                     fit_fixed_weights, Fitter, n_params, term_slot, thin)
-from imu_allan.core.fit.criterion import claim_penalty, DELTA_MIN, KEEP_PENALTY
-from imu_allan.core.fit.judge import P_CONSISTENT, shows_quantization
+from imu_allan.core.fit.criterion import claim_penalty
+from imu_allan.core.fit.judge import shows_quantization
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.trust import judge_fit
 from imu_allan.core.noise.model import base_name, TERMS
+from imu_allan.core.rules import (CANNOT_TELL_LR, DELTA_MIN, KEEP_PENALTY, MAX_STEPS,
+                                  P_CONSISTENT, PIN_MARGIN, RAMP_LR_MIN)
 from imu_allan.core.search.choice import ambiguous_bias
-from imu_allan.core.search.evidence import RAMP_LR_MIN, ramp_test
+from imu_allan.core.search.evidence import ramp_test
 from imu_allan.core.search.rivals import _by_likelihood, _grid_slots, _second_chance
-from imu_allan.core.search.rules import _label_for, _sinusoid_evidence, MAX_STEPS, Step
+from imu_allan.core.search.rules import (_label_for, _sinusoid_evidence, Candidate, Choice,
+                                         FinalModel, RunnerUp, Step)
 from imu_allan.errors import InputError
 
 
@@ -81,6 +85,11 @@ class _Run:
         self.problems: list[str] = []
         self.labels: list[str] = []
         self.base_labels: list[str] = []
+        # The current model: set by every fit (:meth:`irls`), first by :meth:`base`.
+        self.sol: Any = None
+        self.sigma: Any = None
+        self.base_fit: AxisFit       # the base model's full fit, set by :meth:`base`
+        self.phi_of: dict = {}
 
     def use_taus(self, first: int) -> None:
         """Fit the thinned curve from its ``first`` tau on (a new fitter)."""
@@ -117,7 +126,7 @@ class _Run:
         """Whether a nonlinear parameter of the current model sits at an end of its range."""
         for slot, phi in zip(self.slots_of(self.labels), self.sol.phi):
             for (lo, hi), v in zip(slot.bounds, phi):
-                if v <= lo * 1.02 or v >= hi / 1.02:
+                if v <= lo * PIN_MARGIN or v >= hi / PIN_MARGIN:
                     return True
         return False
 
@@ -192,7 +201,7 @@ class _Run:
         new = fit_fixed_weights(self.fitter.data, slots, list(sol.phi) + [()])
         if new.coef[-1] > 0:
             self.steps.append(Step(
-                'rate_ramp', 'rate_ramp', float(sol.j - new.j), '',
+                'rate_ramp', 'rate_ramp', float(sol.j - new.j), RunnerUp(),
                 f'ramp {check.slope:.3g} {self.unit}/s in the record: likelihood ratio '
                 f'{check.lr:.1f} against more random walk'))
             self.irls(self.labels + ['rate_ramp'], phi0=new.phi, local=True)
@@ -218,13 +227,13 @@ class _Run:
             drop = float(self.sol.j - new.j)
             score = drop - (1 + len(slots[-1].bounds)) * self.penalty - DELTA_MIN
             if score > 0:
-                ranked.append((score, drop, effect, label, new))
+                ranked.append(Candidate(score, drop, effect, label, new))
         return _by_likelihood(self.fitter, self.slots_of, self.labels, ranked, self.penalty)
 
-    def choose(self, ranked: list):
+    def choose(self, ranked: list) -> Choice | None:
         """Return the best ranked effect whose time-domain evidence holds, or None."""
-        for i, (_, drop, effect, label, new) in enumerate(ranked):
-            evidence = ''
+        for i, cand in enumerate(ranked):
+            effect, new, evidence = cand.effect, cand.solution, ''
             if effect == 'sinusoid' and self.raw is not None:
                 idx = len(self.labels)
                 amp = math.sqrt(new.coef[idx] * self.fitter.data.scale)
@@ -237,9 +246,9 @@ class _Run:
                 phi = list(new.phi)
                 phi[idx] = (f_line,)
                 new = new._replace(phi=tuple(phi))
-            rival = next((f'{r[2]} (chi2 drop {r[1]:.1f})' for r in ranked[i + 1:]
-                          if r[2] != effect), '')
-            return drop, effect, label, new, rival, evidence
+            runner_up = next((RunnerUp(r.effect, r.chi2_drop) for r in ranked[i + 1:]
+                              if r.effect != effect), RunnerUp())
+            return Choice(cand.chi2_drop, effect, cand.label, new, runner_up, evidence)
         return None
 
     def forward(self) -> None:
@@ -254,12 +263,12 @@ class _Run:
                 self.fitter.data.set_sigma(self.sigma)
             if chosen is None:
                 return
-            drop, effect, label, new, rival, evidence = chosen
-            if effect == 'sinusoid':
-                f_line = new.phi[len(self.labels)][0]
-                self.narrowed[label] = ((f_line / 1.2, f_line * 1.2),)
-            self.irls(self.labels + [label], phi0=new.phi, local=True)
-            self.steps.append(Step(effect, label, drop, rival, evidence))
+            if chosen.effect == 'sinusoid':
+                f_line = chosen.solution.phi[len(self.labels)][0]
+                self.narrowed[chosen.label] = ((f_line / 1.2, f_line * 1.2),)
+            self.irls(self.labels + [chosen.label], phi0=chosen.solution.phi, local=True)
+            self.steps.append(Step(chosen.effect, chosen.label, chosen.chi2_drop,
+                                   chosen.runner_up, chosen.evidence))
 
     def duration_s(self) -> float:
         """Length of the record [s]."""
@@ -318,6 +327,13 @@ class _Run:
         return fit_axis(tau0, avar0, edf0, self.rate_hz, self.n_samples, terms=list(labels),
                         unit=self.unit, select=False, phi0=self.phi_of, sigma0=sigma0)
 
+    def final_model(self) -> FinalModel:
+        """Return the final state the rival checks read (:mod:`imu_allan.core.search.choice`)."""
+        return FinalModel(fitter=self.fitter, sigma=self.sigma, labels=tuple(self.labels),
+                          slots_of=self.slots_of, sol=self.sol, phi_of=dict(self.phi_of),
+                          penalty=self.penalty, steps=tuple(self.steps),
+                          effects=tuple(self.effects), k=self.k, tau=self.tau)
+
     def final(self) -> AxisFit:
         """Return the final model's full fit; effects it does not hold are not named."""
         self.phi_of = dict(zip(self.labels, self.sol.phi))
@@ -345,11 +361,6 @@ class _Run:
             f = fit if i == len(self.steps) - 1 else self.full_fit(labels)
             out.append(st._replace(fit=f))
         return out
-
-
-#: A likelihood ratio (or chi-square drop) at least this large, yet short of what naming
-#: an effect needs, is "cannot tell from this record" rather than "not supported".
-CANNOT_TELL_LR = 4.0
 
 
 def cannot_tell(effect: str, what: str, value: float, need: float, duration_s: float,
@@ -383,7 +394,7 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str,
     flicker = optimised.get('flicker.B')
     if optimised['B'].kind != 'estimate' and flicker is not None and flicker.kind == 'estimate':
         # The floor is flicker noise, not a Gauss-Markov process: B is its level and
-        # T_B stays undefined (the Kalman model then uses kalman.flicker_time_s).
+        # T_B stays undefined (the Kalman model then lists B as left out).
         optimised['B'] = flicker
         notes.append('B is flicker noise (no Gauss-Markov floor): no T_B')
     effects = tuple({'effect': s.effect, 'term': s.label, 'chi2_drop': s.chi2_drop,

@@ -1,0 +1,127 @@
+"""
+Tests of imu_allan.core.outputs.reported: one decision per parameter, read by every output.
+
+The invariant: change one fitted value and every output that carries it changes with
+it, by the same rule; the outputs that do not carry it stay byte for byte the same.
+"""
+
+from dataclasses import replace
+import math
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+import yaml
+
+from conftest import REPO
+from imu_allan import AXES, GYRO_AXES
+from imu_allan.core.fit import Param
+from imu_allan.core.noise.params import AxisNoise, load_params
+from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.outputs.covering import N_MARGIN
+from imu_allan.core.outputs.reported import report_axes, report_axis
+from imu_allan.io.report import kalman_yaml, summary_text
+from imu_allan.pipeline.analysis import analyze
+from imu_allan.pipeline.session import Session, SessionConfig
+
+RATE_HZ = 50.0
+
+
+@pytest.fixture(scope='module')
+def result():
+    """A 20 min simulated u-blox record through the analyze pipeline (seeded)."""
+    spec = load_params(REPO / 'config' / 'ublox_c102_f9r.yaml')
+    t_s, y = simulate_imu(spec, RATE_HZ, 1200.0, seed=7)
+    stamps = 1_700_000_000 * 10 ** 9 + np.round(t_s * 1e9).astype(np.int64)
+    session = Session(SessionConfig())
+    session.add(stamps, y)
+    return analyze(session)
+
+
+def _cv_real(text: str, key: str) -> float:
+    """A key of an OpenCV FileStorage file (the VIO files) by plain YAML."""
+    body = text.split('\n', 1)[1]                     # after %YAML:1.0
+    doc = yaml.safe_load(body)
+    return float(doc['imu0'][key] if 'imu0' in doc else doc[key])
+
+
+def _outputs(res) -> dict:
+    """Every output that carries a value, as the user gets it."""
+    return {'kalibr': yaml.safe_load(res.kalibr_yaml()), 'vins': res.vins_yaml(),
+            'openvins': res.openvins_yaml(), 'ekf': res.robot_localization_yaml(),
+            'driver': res.driver_yaml(), 'kalman': yaml.safe_load(kalman_yaml(res)),
+            'json': res.to_json(), 'summary': summary_text(res),
+            'status': {a: dict(res.axis_status(a)[2]) for a in AXES}}
+
+
+def _consistent(res, out: dict) -> None:
+    """Every random-walk consumer writes the same covering pair; Q/R the reports."""
+    gyro_k = max(res.covers[a].K_cover for a in GYRO_AXES)
+    gyro_n = max(res.covers[a].N_cover for a in GYRO_AXES)
+    assert_allclose(out['kalibr']['gyroscope_random_walk'], gyro_k, rtol=1e-6)
+    assert_allclose(out['kalibr']['gyroscope_noise_density'], gyro_n, rtol=1e-6)
+    assert_allclose(_cv_real(out['openvins'], 'gyroscope_random_walk'), gyro_k, rtol=1e-6)
+    assert_allclose(_cv_real(out['vins'], 'gyr_w'), gyro_k * math.sqrt(res.rate_hz),
+                    rtol=1e-6)
+    for i, a in enumerate(AXES):
+        r = res.reports[a]
+        assert_allclose(res.kalman.Qc[2 * i + 1, 2 * i + 1], r.random_walk.value ** 2,
+                        rtol=1e-12)
+        assert_allclose(res.kalman.Rc[i, i], r.white.value ** 2, rtol=1e-12)
+        c = res.covers[a]
+        assert c.K_cover >= r.random_walk.value and c.N_cover >= r.white.value
+        assert out['json']['axes'][a]['params'] == {
+            s: p.to_json() for s, p in r.params.items()}
+        # A T_B the report does not identify never reaches the Kalman model.
+        t_b = r.params['T_B']
+        if t_b.kind == 'not_identified':
+            assert res.kalman.axes[i].T_B is None and res.kalman.Phi[2 * i, 2 * i] == 1.0
+
+
+def test_a_changed_k_changes_every_output_that_carries_it_and_no_other(result):
+    before = _outputs(result)
+    _consistent(result, before)
+    fit = result.fits['gyro_x']
+    k = fit.optimised['K']
+    k_new = 40.0 * (k.value if math.isfinite(k.value) else 1e-5)
+    fits = dict(result.fits, gyro_x=replace(fit, optimised=dict(
+        fit.optimised, K=Param(k_new, (0.5 * k_new, 2.0 * k_new), 'estimate', k.unit))))
+    changed = replace(result, fits=fits)
+    after = _outputs(changed)
+    _consistent(changed, after)
+    assert changed.reports['gyro_x'].random_walk.value >= k_new
+    assert after['kalibr']['gyroscope_random_walk'] >= k_new
+    assert after['kalibr']['gyroscope_random_walk'] > before['kalibr']['gyroscope_random_walk']
+    assert after['json']['axes']['gyro_x']['params']['K']['value'] == k_new
+    assert after['status']['gyro_x']['K'] == f'{k_new:.6g}'
+    assert after['summary'] != before['summary']
+    # The files that hold no random walk are the same byte for byte.
+    for key in ('ekf', 'driver'):
+        assert after[key] == before[key]
+    # The other axes' reports are untouched.
+    for a in AXES[1:]:
+        assert changed.reports[a].random_walk == result.reports[a].random_walk
+
+
+def test_covering_pair_is_never_below_the_reported_pair_at_any_horizon(result):
+    for tau_max in (1.0, 10.0, 30.0, 100.0, 1000.0):
+        res = replace(result, covering_tau_max_s=tau_max)
+        for a in AXES:
+            r, c = res.reports[a], res.covers[a]
+            assert c.K_cover >= r.random_walk.value, (tau_max, a)
+            assert c.N_cover >= N_MARGIN * r.white.value * (1 - 1e-12), (tau_max, a)
+
+
+def test_a_bare_model_reports_its_values_and_what_the_filter_leaves_out():
+    from imu_allan.core.noise.params import GaussMarkov, Sinusoid
+    noise = AxisNoise(N=1e-4, B=5e-5, T_B=80.0, K=2e-6,
+                      gauss_markov=(GaussMarkov(B=1e-5, T=500.0),),
+                      sinusoids=(Sinusoid(A=1e-4, f0_hz=20.0),))
+    r = report_axis(noise, 'gyro_x')
+    assert r.white == (1e-4, 'estimate', '') and r.random_walk == (2e-6, 'estimate', '')
+    assert r.gauss_markov.T_B == 80.0 and r.gauss_markov.B == 5e-5
+    assert [x.split(' ')[0] for x in r.left_out] == ['gauss_markov', 'sinusoid']
+    assert r.params['N'].value == 1e-4 and r.params['T_B'].value == 80.0
+    # A report is decided once: deciding it again returns the same object.
+    assert report_axis(r) is r
+    assert set(report_axes({'gyro_x': r, 'gyro_y': None})) == {'gyro_x', 'gyro_y'}
