@@ -105,3 +105,13 @@ def test_the_node_path_gives_analyzes_parameters_on_a_full_adis_run(shared_dir, 
             assert p.kind == q.kind, (axis, sym, p, q)
             if np.isfinite(q.value):
                 np.testing.assert_allclose(p.value, q.value, rtol=1e-6, err_msg=f'{axis} {sym}')
+
+
+def test_the_node_keeps_the_raw_copy_analyze_keeps():
+    # One raw-copy policy: the node's default rows are analyze's (a smaller copy is
+    # averaged down sooner and can lose a line the search needs to confirm).
+    from imu_allan.core.allan.raw import RAW_ROWS, RawKeeper
+    from imu_allan.ros.params import PARAMS
+
+    node_rows = next(p.default for p in PARAMS if p.name == 'diagnose_raw_samples')
+    assert node_rows == RAW_ROWS == RawKeeper(None).max_samples

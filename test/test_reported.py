@@ -125,3 +125,15 @@ def test_a_bare_model_reports_its_values_and_what_the_filter_leaves_out():
     # A report is decided once: deciding it again returns the same object.
     assert report_axis(r) is r
     assert set(report_axes({'gyro_x': r, 'gyro_y': None})) == {'gyro_x', 'gyro_y'}
+
+
+def test_the_summary_marks_bounds_both_ways(result):
+    # An upper bound reads '<', a lower bound (a T_B beyond the record) '>'.
+    fit = result.fits['gyro_x']
+    t_b = Param(300.0, (300.0, math.inf), 'lower_bound', 's', 'fitted',
+                'may exceed the longest tau of the record: lower bound')
+    k = Param(2e-5, (0.0, 2e-5), 'upper_bound', fit.optimised['K'].unit)
+    changed = replace(result, fits=dict(result.fits, gyro_x=replace(
+        fit, optimised=dict(fit.optimised, T_B=t_b, K=k))))
+    line = changed.summary_line('gyro_x')
+    assert 'T_B > ' in line and 'K < ' in line

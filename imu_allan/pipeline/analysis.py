@@ -241,7 +241,8 @@ class AnalysisResult:
                 parts.append(f'{sym} n/a')
                 continue
             text = format_quoted(sym, sensor, p.value, digits=3)
-            parts.append(f'{sym} < {text}' if p.kind == 'upper_bound' else f'{sym} {text}')
+            mark = {'upper_bound': '< ', 'lower_bound': '> '}.get(p.kind, '')
+            parts.append(f'{sym} {mark}{text}')
             if sym == 'B' and fit.b_floor is not None:
                 parts.append('B_floor ' + format_quoted('B', sensor, fit.b_floor.value,
                                                         digits=3))
