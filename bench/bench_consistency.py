@@ -154,7 +154,7 @@ OUTAGE_HORIZONS_S = (1.0, 10.0, 100.0, 900.0)
 
 
 def horizons() -> int:
-    """The covering pair's horizon against the NIS on held-out ADIS runs (docs/outputs.md)."""
+    """Print the covering pair's horizon against the NIS on held-out ADIS runs (outputs.md)."""
     from dataclasses import replace
     if not (DATA / 'adis16405_run1.csv.gz').is_file():
         print('(real data absent: ../shared/realdata/adis16405)', file=sys.stderr)

@@ -29,7 +29,7 @@ RATE_HZ = 50.0
 
 @pytest.fixture(scope='module')
 def result():
-    """A 20 min simulated u-blox record through the analyze pipeline (seeded)."""
+    """Analyse a 20 min simulated u-blox record through the pipeline (seeded)."""
     spec = load_params(REPO / 'config' / 'ublox_c102_f9r.yaml')
     t_s, y = simulate_imu(spec, RATE_HZ, 1200.0, seed=7)
     stamps = 1_700_000_000 * 10 ** 9 + np.round(t_s * 1e9).astype(np.int64)
@@ -39,7 +39,7 @@ def result():
 
 
 def _cv_real(text: str, key: str) -> float:
-    """A key of an OpenCV FileStorage file (the VIO files) by plain YAML."""
+    """Read a key of an OpenCV FileStorage file (the VIO files) by plain YAML."""
     body = text.split('\n', 1)[1]                     # after %YAML:1.0
     doc = yaml.safe_load(body)
     return float(doc['imu0'][key] if 'imu0' in doc else doc[key])

@@ -102,7 +102,7 @@ class AnalysisResult:
     @cached_property
     def reports(self) -> dict:
         """
-        What every output reports per axis (AxisReport): the one decision of the values.
+        Return what every output reports per axis (AxisReport): the one decision.
 
         :func:`imu_allan.core.outputs.reported.report_axes` of :attr:`fits`, made once;
         every file, topic and summary line of this class only formats it.

@@ -124,7 +124,7 @@ def horizon_taus(horizon_s: Sequence[float]) -> np.ndarray:
 
 
 def _reported(report: AxisReport) -> tuple[float, float]:
-    """The reported white-noise and random-walk densities of an axis (0.0 where absent)."""
+    """Return the reported white-noise and random-walk densities (0.0 where absent)."""
     return float(report.white.value), float(report.random_walk.value)
 
 

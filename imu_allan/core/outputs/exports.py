@@ -111,7 +111,7 @@ def sensor_value(sources, axes: Sequence[str], symbol: str,
 
 
 def _kalibr_pair(reports: dict, covers: dict, axes: Sequence[str], reduce: str) -> dict:
-    """The written N and K of one sensor: the covering pair, else the reported values."""
+    """Return the written N and K of one sensor: the covering pair, else the reported."""
     got = [covers[a] for a in axes if covers.get(a) is not None]
     if got:
         return {'N': _reduce([c.N_cover for c in got], reduce),

@@ -196,7 +196,7 @@ def _role_density(model: AxisNoise, role: str) -> float:
 
 
 def _extra_density(model: AxisNoise | None, role: str) -> float:
-    """What the terms without a field of their own add to one role (their coefficients)."""
+    """Return what the terms without a field of their own add to one role."""
     if model is None or not model.extra:
         return 0.0
     return _role_density(AxisNoise(extra=model.extra), role)
@@ -293,7 +293,7 @@ def _left_out(model: AxisNoise | None, params: dict,
 
 
 def _params_of_noise(noise: AxisNoise) -> dict:
-    """The parameters of a bare model: its N, B, T_B, K as estimates (absent: 0 / None)."""
+    """Return the parameters of a bare model: N, B, T_B, K as estimates (or absent)."""
     from imu_allan.core.fit.result import Param   # the one Param type of the package
     nan = (math.nan, math.nan)
     out = {}

@@ -47,7 +47,7 @@ _SENSORS = (('accelerometer', 'acc', ACCEL_AXES, 'm/s^2', 'm/s^3'),
 
 
 def _covered(sources, rate_hz: float, covers, horizon_s) -> tuple:
-    """The six reports, their covering pairs and the horizon (made here when not given)."""
+    """Return the six reports, their covering pairs and the horizon (made when not given)."""
     reports = report_axes(dict(zip(AXES, _six(sources))))
     horizon_s = default_horizon(rate_hz) if horizon_s is None else tuple(horizon_s)
     return reports, (cover_axes(reports, horizon_s) if covers is None else covers), horizon_s
@@ -55,7 +55,7 @@ def _covered(sources, rate_hz: float, covers, horizon_s) -> tuple:
 
 def _pairs(sources, covers, axes: Sequence[str]) -> dict:
     """
-    Reported and covering N, K of one sensor and which pair is written.
+    Return the reported and covering N, K of one sensor and which pair is written.
 
     Returns {'N_fit', 'K_fit', 'N_cov', 'K_cov', 'N', 'K', 'pair'}; the written values are
     the covering ones, or the reported ones where no axis has a pair (None: absent).

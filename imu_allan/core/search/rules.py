@@ -130,7 +130,7 @@ class Step(NamedTuple):
 
     @property
     def rival(self) -> str:
-        """The runner-up as the JSON and the notes show it ('' when none)."""
+        """Return the runner-up as the JSON and the notes show it ('' when none)."""
         return str(self.runner_up)
 
 
