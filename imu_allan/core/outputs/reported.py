@@ -31,11 +31,12 @@ read; none of them computes a value of its own.  The rules, each stated here onl
 
 from dataclasses import dataclass, field
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from imu_allan.core.allan.edf import curve_k_bound
+from imu_allan.core.noise.model import avar_model
 from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.errors import InputError
@@ -156,13 +157,11 @@ class AxisReport:
 
         """
         tau = np.asarray(tau_s, dtype=np.float64)
-        src = self.source
-        if hasattr(src, 'avar_at') and getattr(src, 'components', ()):
+        src: Any = self.source
+        model = src if isinstance(src, AxisNoise) else _model_of(src)
+        if getattr(src, 'components', None):
             avar = np.asarray(src.avar_at(tau), dtype=np.float64)
-            model = src.model if src.model is not None else AxisNoise()
         else:
-            from imu_allan.core.noise.model import avar_model
-            model = src if isinstance(src, AxisNoise) else _model_of(src)
             avar = avar_model(tau, model)
         d_n = self.white.value ** 2 - _role_density(model, 'white')
         d_k = self.random_walk.value ** 2 - _role_density(model, 'b_rw')
@@ -207,35 +206,39 @@ def _model_of(source) -> AxisNoise:
     return model if isinstance(model, AxisNoise) else AxisNoise()
 
 
-def _usable(p) -> bool:
-    """Whether a Param has a value a consumer can use (an estimate or an upper bound)."""
-    return (p is not None and p.kind in ('estimate', 'upper_bound')
-            and math.isfinite(p.value) and p.value > 0)
+def _usable(p: Any) -> tuple[float, str] | None:
+    """Return (value, kind) of a Param a consumer can use (estimate or upper bound), or None."""
+    if (p is not None and p.kind in ('estimate', 'upper_bound') and math.isfinite(p.value)
+            and p.value > 0):
+        return float(p.value), str(p.kind)
+    return None
 
 
 def _white(params: dict, model: AxisNoise | None, source) -> ConsumerValue:
-    p = params.get('N')
+    got = _usable(params.get('N'))
     extra = _extra_density(model, 'white')
-    if not _usable(p) and extra <= 0:
+    if got is None and extra <= 0:
         bound = _curve_bound(source, 'N')
         if bound > 0:
             return ConsumerValue(bound, 'curve_bound',
                                  "N not identified: the measured curve's own 95 % bound")
         return ConsumerValue(0.0, 'absent', 'no white-noise value')
-    value = math.sqrt((p.value ** 2 if _usable(p) else 0.0) + extra)
-    if _usable(p) and p.kind == 'upper_bound':
+    value = math.sqrt((got[0] ** 2 if got else 0.0) + extra)
+    if got and got[1] == 'upper_bound':
         return ConsumerValue(value, 'upper_bound', 'N used at its 95 % upper bound')
     return ConsumerValue(value, 'estimate')
 
 
 def _random_walk(params: dict, model: AxisNoise | None, source) -> ConsumerValue:
     p = params.get('K')
+    got = _usable(p)
     extra = _extra_density(model, 'b_rw')
-    if _usable(p) or extra > 0:
-        value = math.sqrt((p.value ** 2 if _usable(p) else 0.0) + extra)
-        if _usable(p) and p.kind == 'upper_bound':
+    if got is not None or extra > 0:
+        value = math.sqrt((got[0] ** 2 if got else 0.0) + extra)
+        if got and got[1] == 'upper_bound':
+            why = getattr(p, 'reason', '')
             return ConsumerValue(value, 'upper_bound', 'K used at its 95 % upper bound'
-                                 + (f' ({p.reason})' if getattr(p, 'reason', '') else ''))
+                                 + (f' ({why})' if why else ''))
         return ConsumerValue(value, 'estimate')
     bound = _curve_bound(source, 'K')
     if bound > 0:
@@ -268,20 +271,18 @@ def _curve_bound(source, symbol: str) -> float:
 
 
 def _gauss_markov(params: dict) -> GaussMarkovState | None:
-    b, t_b = params.get('B'), params.get('T_B')
-    if not _usable(b) or t_b is None or not math.isfinite(t_b.value) or t_b.value <= 0:
+    b, t_b = _usable(params.get('B')), params.get('T_B')
+    if (b is None or t_b is None or t_b.kind not in ('estimate', 'lower_bound')
+            or not math.isfinite(t_b.value) or t_b.value <= 0):
         return None
-    if t_b.kind not in ('estimate', 'lower_bound'):
-        return None
-    s_b = TERMS['bias_instability'].to_coef(b.value, t_b.value)
-    return GaussMarkovState(float(b.value), float(t_b.value), float(s_b), b.kind)
+    s_b = TERMS['bias_instability'].to_coef(b[0], t_b.value)
+    return GaussMarkovState(b[0], float(t_b.value), float(s_b), b[1])
 
 
 def _left_out(model: AxisNoise | None, params: dict,
               gm: GaussMarkovState | None) -> tuple:
     out = []
-    b = params.get('B')
-    if gm is None and _usable(b):
+    if gm is None and _usable(params.get('B')):
         out.append('bias instability B without an identified T_B (no Gauss-Markov state; '
                    'b_gm frozen)')
     for label, name, _ in terms_of(model or AxisNoise()):
@@ -331,11 +332,11 @@ def report_axis(source, axis: str = '') -> AxisReport:
     """
     if isinstance(source, AxisReport):
         return source
+    model = source if isinstance(source, AxisNoise) else _model_of(source)
     if isinstance(source, AxisNoise):
-        params, model, trust = _params_of_noise(source), source, ()
+        params, trust = _params_of_noise(source), ()
     elif hasattr(source, 'optimised'):
-        params, model = dict(source.optimised), getattr(source, 'model', None)
-        trust = tuple(getattr(source, 'trust', ()))
+        params, trust = dict(source.optimised), tuple(getattr(source, 'trust', ()))
     else:
         raise InputError(f'expected an AxisNoise or an AxisFit, got {type(source).__name__}')
     gm = _gauss_markov(params)

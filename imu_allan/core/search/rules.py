@@ -9,7 +9,9 @@ sinusoid.  The margin an effect must buy is the selection rule's
 """
 
 import math
-from typing import NamedTuple, Sequence
+from typing import Any, Callable, NamedTuple, Sequence
+
+import numpy as np
 
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.noise.terms import base_name, search_effects, TERMS
@@ -47,7 +49,7 @@ class Candidate(NamedTuple):
     chi2_drop: float
     effect: str
     label: str
-    solution: object
+    solution: Any
 
 
 class RunnerUp(NamedTuple):
@@ -95,7 +97,7 @@ class Choice(NamedTuple):
     chi2_drop: float
     effect: str
     label: str
-    solution: object
+    solution: Any
     runner_up: RunnerUp
     evidence: str
 
@@ -166,17 +168,17 @@ class FinalModel(NamedTuple):
 
     """
 
-    fitter: object
-    sigma: object
+    fitter: Any
+    sigma: np.ndarray
     labels: tuple
-    slots_of: object
-    sol: object
+    slots_of: Callable[..., list]
+    sol: Any
     phi_of: dict
     penalty: float
     steps: tuple
     effects: tuple
     k: int
-    tau: object
+    tau: np.ndarray
 
 
 class Rival(NamedTuple):
