@@ -129,10 +129,10 @@ def test_a_full_disk_while_writing_a_simulated_bag_is_one_line(tmp_path):
     _one_line(code, stdout, err, 'cannot write (File too large)')
 
 
-@pytest.mark.parametrize('options, words', [('size=1m', 'database or disk is full'),
-                                             ('ro', 'unable to open database file')])
-def test_a_full_or_read_only_disk_while_writing_a_sqlite3_bag_is_one_line(tmp_path, csv_rec,
-                                                                         options, words):
+@pytest.mark.parametrize('options, words', [
+    ('size=1m', 'database or disk is full'), ('ro', 'unable to open database file')])
+def test_a_full_or_read_only_disk_while_writing_a_sqlite3_bag_is_one_line(
+        tmp_path, csv_rec, options, words):
     # sqlite3 reports a full disk as its own OperationalError: one line, no traceback.
     prefix = _namespace_mount(options)
     if prefix is None:

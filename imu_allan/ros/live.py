@@ -181,7 +181,7 @@ class LiveInput:
         if self._raw is None or self._raw[0] is not self.session:
             # The rate is known after a few blocks; the copy keeps every sample anyway.
             self._raw = (self.session, RawKeeper(None, len(AXES), rows))
-        self._raw[1].add(samples[np.isfinite(samples).all(axis=1)])
+        self._raw[1].add(samples)     # leaves out the rows that are no readings (NaN ...)
 
     # ----------------------------------------------------- session, resume
     def _new_session(self, resume: bool) -> Session:
