@@ -801,7 +801,7 @@ def test_undecompressable_message_is_counted(tmp_path):
 # -- one source per analysis: message type, frame_id, split files ----------------------
 
 def _mcap_two_types(path: Path, stamps, samples) -> None:
-    """An Imu channel and a MagneticField channel on /imu, interleaved (mcap library)."""
+    """Write an Imu and a MagneticField channel on /imu, interleaved (mcap library)."""
     payloads = serialize_imu(stamps, samples, 'imu')
     with open(path, 'wb') as stream:
         writer = McapWriter(stream)
@@ -814,8 +814,7 @@ def _mcap_two_types(path: Path, stamps, samples) -> None:
             # The same bytes under the other type: decodable as Imu, so only the type
             # tells them apart.
             writer.add_message(imu, int(stamps[i]), payloads[i].tobytes(), int(stamps[i]))
-            writer.add_message(mag, int(stamps[i]) + 1, payloads[i][::-1].tobytes()[::-1],
-                               int(stamps[i]))
+            writer.add_message(mag, int(stamps[i]) + 1, payloads[i].tobytes(), int(stamps[i]))
         writer.finish()
 
 
@@ -885,7 +884,7 @@ def test_two_imus_on_one_topic_are_two_sources(tmp_path):
 
 
 def _split_bag(tmp_path: Path, stamps, samples, storage: str, listed: list) -> Path:
-    """Three files of one record; metadata.yaml lists ``listed`` (file names)."""
+    """Write a record as three files; metadata.yaml lists ``listed`` (file names)."""
     bag = tmp_path / f'split_{storage}'
     bag.mkdir()
     suffix = 'mcap' if storage == 'mcap' else 'db3'
