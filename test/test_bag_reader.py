@@ -27,7 +27,7 @@ from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import ImuBlock, list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
 from imu_allan.io.imu_cdr import (CovariancePatch, decode_imu_cdr, decode_imu_payloads,
-                                  imu_frame_id, set_imu_covariances_cdr)
+                                  imu_frame_id, payload_frames, set_imu_covariances_cdr)
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
@@ -292,6 +292,29 @@ def test_ros1_payloads_decode_alike(monkeypatch, compiled):
     assert_array_equal(stamp_ns[ok], stamps[ok])
     assert_array_equal(values[ok], samples[ok])
     assert np.isnan(values[2]).all()
+
+
+@pytest.mark.parametrize('ros1', [False, True])
+def test_payload_frames_match_rosbags_in_both_byte_orders(ros1):
+    # Equal frames take the one-comparison path, mixed ones the per-message path; both
+    # give rosbags' header.frame_id, for either CDR byte order and for ROS 1.
+    stamps, samples = _recording(8, seed=33)
+    store = ROS1 if ros1 else ROS2
+    for frames in (['imu_link'] * 8, [''] * 8, ['a', 'imu', '', 'a', 'bb', 'imu', 'a', ''],
+                   ['x' * 20] * 7 + ['x' * 19 + 'y']):
+        msgs = [_imu_msg(store, stamps[i], samples[i], frames[i]) for i in range(8)]
+        for big in ([False], [True], [i % 2 == 1 for i in range(8)])[:1 if ros1 else 3]:
+            payloads = [bytes(ROS1.serialize_ros1(m, IMU)) if ros1 else
+                        bytes(ROS2.serialize_cdr(m, IMU, little_endian=not big[i % len(big)]))
+                        for i, m in enumerate(msgs)]
+            u8, starts, lengths = (np.frombuffer(b''.join(payloads), np.uint8),
+                                   np.cumsum([0] + [len(p) for p in payloads[:-1]]),
+                                   np.array([len(p) for p in payloads]))
+            names, index = payload_frames(u8, starts, lengths, 'ros1' if ros1 else 'cdr')
+            got = [names[0]] * 8 if index is None else [names[k] for k in index]
+            assert got == [m.header.frame_id for m in msgs], (frames, big)
+            assert names == list(dict.fromkeys(frames))   # in order of first appearance
+            assert (index is None) == (len(set(frames)) == 1)
 
 
 def test_covariances_are_written_into_the_cdr_bytes():
