@@ -9,6 +9,7 @@ float64 values and integer nanoseconds must come back bit for bit).
 import os
 from pathlib import Path
 import re
+import shutil
 
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer as McapWriter
@@ -19,13 +20,14 @@ from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import StoragePlugin, Writer as Ros2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
+import yaml
 
 from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import ImuBlock, list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
 from imu_allan.io.imu_cdr import (CovariancePatch, decode_imu_cdr, decode_imu_payloads,
-                                  imu_frame_id, set_imu_covariances_cdr)
+                                  imu_frame_id, payload_frames, set_imu_covariances_cdr)
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
@@ -128,11 +130,21 @@ def test_rosbags_written_bag_with_two_imu_topics(tmp_path, storage):
     with pytest.raises(InputError, match=r'2 Imu topics: /imu/a \(sensor_msgs/msg/Imu, 600 '
                                          r'messages\), /imu/b .*--topic'):
         open_imu(bag)
-    for name, stamps, recv, samples in [('/imu/a', stamps_a, recv_a, samples_a),
-                                        ('imu/b', stamps_b, recv_b, samples_b)]:
-        with open_imu(bag, topic=name) as source:
-            _assert_topic(source.read_all(), stamps, recv, samples)
-            assert source.warnings == []
+    with open_imu(bag, topic='imu/b') as source:
+        _assert_topic(source.read_all(), stamps_b, recv_b, samples_b)
+        assert source.warnings == [] and source.frame_counts == {'imu_b': 300}
+    # Twelve frame_ids on /imu/a are twelve sources: refused together, each read alone.
+    with pytest.raises(InputError, match=r'/imu/a carries 12 IMUs \(header.frame_id\): '
+                                         r'\(empty\) \(50 messages\), i \(50 messages\), '
+                                         r'.* and 4 more; choose one with --frame-id NAME'):
+        open_imu(bag, topic='/imu/a').read_all()
+    for frame in sorted(set(frames_a)):
+        mine = np.array(frames_a) == frame
+        with open_imu(bag, topic='/imu/a', frame_id=frame) as source:
+            _assert_topic(source.read_all(), stamps_a[mine], recv_a[mine], samples_a[mine])
+            assert source.n_lost == 0 and source.frame_id == frame
+            assert re.fullmatch(rf'{600 - mine.sum()} messages of other IMUs on /imu/a skipped '
+                                rf"\(frame_id '{frame}' read; others: .*\)", source.warnings[0])
     assert [t.topic for t in list_imu_topics(bag)] == ['/imu/a', '/imu/b']
     assert {t.topic: t.n_messages for t in list_topics(bag)}['/status'] == 5
     with pytest.raises(InputError, match='/status is std_msgs/msg/String, not sensor_msgs'):
@@ -168,9 +180,14 @@ def test_ros1_bag_written_by_rosbags(tmp_path):
         writer.write(other, T0_NS, bytes(ROS1.serialize_ros1(
             ROS1.types['std_msgs/msg/String'](data='hi'), 'std_msgs/msg/String')))
     assert list_imu_topics(bag) == [('/imu/raw', 'sensor_msgs/Imu', 500)]
-    with open_imu(bag) as source:
-        assert source.storage == 'ros1'
-        _assert_topic(source.read_all(), stamps, stamps + 1_000_000, samples)
+    with pytest.raises(InputError, match=r'/imu/raw carries 2 IMUs \(header.frame_id\): '
+                                         r'i \(167 messages\), imu_link \(333 messages\)'):
+        open_imu(bag).read_all()
+    for frame, mine in (('i', np.arange(500) % 3 == 0), ('imu_link', np.arange(500) % 3 > 0)):
+        with open_imu(bag, frame_id=frame) as source:
+            assert source.storage == 'ros1'
+            _assert_topic(source.read_all(), stamps[mine], stamps[mine] + 1_000_000,
+                          samples[mine])
 
 
 def test_mcap_library_files_lz4_chunks_without_index_and_unchunked(tmp_path):
@@ -275,6 +292,29 @@ def test_ros1_payloads_decode_alike(monkeypatch, compiled):
     assert_array_equal(stamp_ns[ok], stamps[ok])
     assert_array_equal(values[ok], samples[ok])
     assert np.isnan(values[2]).all()
+
+
+@pytest.mark.parametrize('ros1', [False, True])
+def test_payload_frames_match_rosbags_in_both_byte_orders(ros1):
+    # Equal frames take the one-comparison path, mixed ones the per-message path; both
+    # give rosbags' header.frame_id, for either CDR byte order and for ROS 1.
+    stamps, samples = _recording(8, seed=33)
+    store = ROS1 if ros1 else ROS2
+    for frames in (['imu_link'] * 8, [''] * 8, ['a', 'imu', '', 'a', 'bb', 'imu', 'a', ''],
+                   ['x' * 20] * 7 + ['x' * 19 + 'y']):
+        msgs = [_imu_msg(store, stamps[i], samples[i], frames[i]) for i in range(8)]
+        for big in ([False], [True], [i % 2 == 1 for i in range(8)])[:1 if ros1 else 3]:
+            payloads = [bytes(ROS1.serialize_ros1(m, IMU)) if ros1 else
+                        bytes(ROS2.serialize_cdr(m, IMU, little_endian=not big[i % len(big)]))
+                        for i, m in enumerate(msgs)]
+            u8, starts, lengths = (np.frombuffer(b''.join(payloads), np.uint8),
+                                   np.cumsum([0] + [len(p) for p in payloads[:-1]]),
+                                   np.array([len(p) for p in payloads]))
+            names, index = payload_frames(u8, starts, lengths, 'ros1' if ros1 else 'cdr')
+            got = [names[0]] * 8 if index is None else [names[k] for k in index]
+            assert got == [m.header.frame_id for m in msgs], (frames, big)
+            assert names == list(dict.fromkeys(frames))   # in order of first appearance
+            assert (index is None) == (len(set(frames)) == 1)
 
 
 def test_covariances_are_written_into_the_cdr_bytes():
@@ -503,7 +543,7 @@ def _sqlite_both_ways(db3: Path, topic: str):
         backend = source._backend
         own = next(t for t in backend.topics() if t.name == source.topic)
         pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
-        got = list(pages.pieces(backend.ids[own.name], own.encoding))
+        got = list(pages.pieces(backend.ids[own.name, own.msgtype], own.encoding))
         assert sum(p.recv_ns.size for p, _ in got) == backend.count(own)
         fast = source.read_all()
     with open_imu(db3, topic) as source:
@@ -566,7 +606,7 @@ def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
         backend = source._backend
         pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
         with pytest.raises(rosbag2_sqlite._NotPlain, match='overflow'):
-            list(pages.pieces(list(backend.ids['/imu/data']), 'cdr'))
+            list(pages.pieces(list(backend.ids['/imu/data', IMU]), 'cdr'))
         _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
     # A write-ahead log next to the file: SQL reads it (committed rows live in the log).
     db3 = tmp_path / 'wal.db3'
@@ -779,3 +819,132 @@ def test_undecompressable_message_is_counted(tmp_path):
         assert source.read_all().stamp_ns.size == 199
         assert (source.n_read, source.n_lost) == (199, 1)
         assert any('1 messages on /imu are not decodable' in w for w in source.warnings)
+
+
+# -- one source per analysis: message type, frame_id, split files ----------------------
+
+def _mcap_two_types(path: Path, stamps, samples) -> None:
+    """Write an Imu and a MagneticField channel on /imu, interleaved (mcap library)."""
+    payloads = serialize_imu(stamps, samples, 'imu')
+    with open(path, 'wb') as stream:
+        writer = McapWriter(stream)
+        writer.start(profile='ros2')
+        imu = writer.register_channel('/imu', 'cdr', writer.register_schema(IMU, 'ros2msg',
+                                                                            b''))
+        mag = writer.register_channel('/imu', 'cdr', writer.register_schema(
+            'sensor_msgs/msg/MagneticField', 'ros2msg', b''))
+        for i in range(stamps.size):
+            # The same bytes under the other type: decodable as Imu, so only the type
+            # tells them apart.
+            writer.add_message(imu, int(stamps[i]), payloads[i].tobytes(), int(stamps[i]))
+            writer.add_message(mag, int(stamps[i]) + 1, payloads[i].tobytes(), int(stamps[i]))
+        writer.finish()
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_another_message_type_on_the_imu_topic_is_skipped_and_named(tmp_path, storage):
+    stamps, samples = _recording(3000, seed=29)
+    path = tmp_path / 'two_types.mcap'
+    _mcap_two_types(path, stamps, samples)
+    # The oracle: the mcap library's own count of Imu messages on /imu.
+    with open(path, 'rb') as stream:
+        n_imu = sum(1 for schema, _, _ in make_reader(stream).iter_messages(topics=['/imu'])
+                    if schema.name == IMU)
+    if storage == 'sqlite3':
+        # The same two rows in rosbag2's topics table, by rosbags' writer.
+        path = tmp_path / 'bag'
+        with Ros2Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+            imu = writer.add_connection('/imu', IMU, typestore=ROS2)
+            mag = writer.add_connection('/imu', 'sensor_msgs/msg/MagneticField',
+                                        typestore=ROS2)
+            payloads = serialize_imu(stamps, samples, 'imu')
+            for i in range(stamps.size):
+                writer.write(imu, int(stamps[i]), payloads[i].tobytes())
+                writer.write(mag, int(stamps[i]) + 1, payloads[i].tobytes())
+    with open_imu(path) as source:
+        assert source.n_messages == n_imu == 3000
+        _assert_topic(source.read_all(), stamps, stamps, samples)
+        assert (source.n_read, source.n_lost) == (n_imu, 0)
+        assert source.warnings == [f'{path}: 3000 messages of type sensor_msgs/msg/MagneticField '
+                                   f'on /imu skipped (only {IMU} is read)']
+    assert sorted(list_topics(path)) == [('/imu', IMU, 3000),
+                                         ('/imu', 'sensor_msgs/msg/MagneticField', 3000)]
+
+
+def test_two_imus_on_one_topic_are_two_sources(tmp_path):
+    # Two IMUs interleaved on /imu: read together they would be one IMU at twice the rate.
+    stamps, samples = _recording(4000, seed=30, rate_hz=100.0)
+    _, other = _recording(4000, seed=31, rate_hz=100.0)
+    both = np.concatenate([stamps, stamps + 5_000_000])
+    order = np.argsort(both, kind='stable')
+    frames = np.repeat(['imu_a', 'imu_b'], 4000)[order]
+    values = np.concatenate([samples, other])[order]
+    payloads = [serialize_imu(both[order][i:i + 1], values[i:i + 1], str(frames[i]))[0]
+                for i in range(both.size)]
+    path = tmp_path / 'two.mcap'
+    with open(path, 'wb') as stream:
+        writer = McapWriter(stream, chunk_size=50_000)
+        writer.start(profile='ros2')
+        channel = writer.register_channel('/imu', 'cdr', writer.register_schema(
+            IMU, 'ros2msg', b''))
+        for i, stamp in enumerate(both[order].tolist()):
+            writer.add_message(channel, stamp, payloads[i].tobytes(), stamp)
+        writer.finish()
+    with pytest.raises(InputError, match=r'^\S+two.mcap: /imu carries 2 IMUs \(header.frame_id\)'
+                                         r': imu_a \(4000 messages\), imu_b \(4000 messages\); '
+                                         r'choose one with --frame-id NAME$'):
+        with open_imu(path) as source:
+            source.read_all()
+    for name, expected, shift in (('imu_a', samples, 0), ('imu_b', other, 5_000_000)):
+        with open_imu(path, frame_id=name) as source:
+            _assert_topic(source.read_all(), stamps + shift, stamps + shift, expected)
+            assert (source.frame_id, source.n_read, source.n_lost) == (name, 4000, 0)
+            assert source.frame_counts == {'imu_a': 4000, 'imu_b': 4000}
+            assert source.warnings[0].startswith('4000 messages of other IMUs on /imu skipped')
+    with pytest.raises(InputError, match=r"no message of /imu has frame_id 'imu_c'; it "
+                                         r'carries imu_a \(4000 messages\), imu_b'):
+        open_imu(path, frame_id='imu_c').read_all()
+
+
+def _split_bag(tmp_path: Path, stamps, samples, storage: str, listed: list) -> Path:
+    """Write a record as three files; metadata.yaml lists ``listed`` (file names)."""
+    bag = tmp_path / f'split_{storage}'
+    bag.mkdir()
+    suffix = 'mcap' if storage == 'mcap' else 'db3'
+    for part, (begin, end) in enumerate([(0, 700), (700, 1500), (1500, 2400)]):
+        write_imu_bag(bag / f'split_{part}.{suffix}', stamps[begin:end], samples[begin:end])
+    (bag / 'metadata.yaml').write_text(yaml.safe_dump({'rosbag2_bagfile_information': {
+        'version': 9, 'storage_identifier': storage, 'relative_file_paths': listed}}))
+    return bag
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_split_bag_files_are_read_in_time_order_whatever_metadata_lists(tmp_path, storage,
+                                                                        monkeypatch):
+    from imu_allan.io import bag_reader
+
+    # A merge window shorter than a file, as for files of more than 2**20 messages: the
+    # files themselves must come in time order.
+    monkeypatch.setattr(bag_reader, '_MAX_HELD', 100)
+    stamps, samples = _recording(2400, seed=32)
+    suffix = 'mcap' if storage == 'mcap' else 'db3'
+    listed = [f'split_{k}.{suffix}' for k in (2, 0, 1)]
+    bag = _split_bag(tmp_path, stamps, samples, storage, listed)
+    with open_imu(bag) as source:
+        _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
+        assert source.warnings == [] and source.n_lost == 0
+    # A copy of a file (or the same record in the other storage) is read once, and said so.
+    shutil.copyfile(bag / listed[1], bag / f'copy.{suffix}')
+    write_imu_bag(bag / f'other.{"db3" if storage == "mcap" else "mcap"}', stamps[700:1500],
+                  samples[700:1500])
+    for extra, first, count in (([f'copy.{suffix}'], listed[1], 700),
+                                ([f'other.{"db3" if storage == "mcap" else "mcap"}'],
+                                 listed[2], 800)):
+        (bag / 'metadata.yaml').write_text(yaml.safe_dump({'rosbag2_bagfile_information': {
+            'relative_file_paths': listed + extra + ['gone.mcap']}}))
+        with open_imu(bag) as source:
+            _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
+            assert source.warnings == [   # the file listed first is the one read
+                f'{bag}: listed storage file gone.mcap is missing',
+                f'{bag}: {extra[0]} repeats {first} (the same {count} messages over the same '
+                'time span); read once']

@@ -551,3 +551,25 @@ def test_cover_tau_max_sets_the_covering_horizon(tmp_path, rec, capsys):
     code, _, err = _cli(['analyze', tmp_path / 'rec.csv', '--out', out_dir, '--no-plot',
                          '--cover-tau-max', '0'], capsys)
     assert code == 2 and len(err) == 1 and '--cover-tau-max' in err[0], err
+
+
+def test_huge_finite_values_are_spikes_not_a_traceback(tmp_path, rec, capsys):
+    # 1e154 squared overflows: the evidence's raw copy once ended in 'array must not
+    # contain infs or NaNs'.  The session replaces both values as spikes, warned.
+    stamps, samples = rec
+    bad = samples.copy()
+    bad[4500, 0], bad[6000, 4] = 1e154, -1.7e308
+    docs = []
+    for name, values in (('clean', samples), ('bad', bad)):
+        code, out, err = _cli(['analyze', _csv(tmp_path / f'{name}.csv', stamps, values),
+                               '--out', tmp_path / name, '--format', 'json', '--no-plot',
+                               '--no-plan', '--jobs', '1'], capsys)
+        assert code == 0, err
+        docs.append(json.loads(out))
+    clean, doc = docs
+    assert doc['hygiene']['n_spikes'] == clean['hygiene']['n_spikes'] + 2
+    assert any('spikes' in w and 'gyro_x' in w and 'accel_y' in w for w in doc['warnings'])
+    # The degraded record's white noise lies within the clean record's interval.
+    for axis in ('gyro_x', 'accel_y'):
+        low, high = clean['axes'][axis]['params']['N']['ci95']
+        assert low <= doc['axes'][axis]['params']['N']['value'] <= high, axis

@@ -129,6 +129,21 @@ def test_a_full_disk_while_writing_a_simulated_bag_is_one_line(tmp_path):
     _one_line(code, stdout, err, 'cannot write (File too large)')
 
 
+@pytest.mark.parametrize('options, words', [
+    ('size=1m', 'database or disk is full'), ('ro', 'unable to open database file')])
+def test_a_full_or_read_only_disk_while_writing_a_sqlite3_bag_is_one_line(
+        tmp_path, csv_rec, options, words):
+    # sqlite3 reports a full disk as its own OperationalError: one line, no traceback.
+    prefix = _namespace_mount(options)
+    if prefix is None:
+        pytest.skip('no user and mount namespaces here (unshare -rm)')
+    for argv in (['simulate', '--params', REPO / 'config' / 'xsens_mti7.yaml', '--rate',
+                  '100', '--duration', '60', '--seed', '1', '--out', '/mnt/s.db3'],
+                 ['csv-to-bag', csv_rec, '/mnt/c.db3']):
+        code, stdout, err, _ = _run(argv, prefix)
+        _one_line(code, stdout, err, f'{argv[-1]}: cannot write ({words}')
+
+
 @pytest.mark.parametrize('argv, words', [
     (['analyze', '{csv}', '--rate', 'nan'], '--rate must be a finite number'),
     (['analyze', '{csv}', '--rate', '-5'], '--rate must be a finite number'),

@@ -115,3 +115,70 @@ def test_the_node_keeps_the_raw_copy_analyze_keeps():
 
     node_rows = next(p.default for p in PARAMS if p.name == 'diagnose_raw_samples')
     assert node_rows == RAW_ROWS == RawKeeper(None).max_samples
+
+
+TWO_IMUS = r"""
+import logging, sys, tempfile
+from pathlib import Path
+
+class Refuse:
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in ('rclpy', 'sensor_msgs', 'std_msgs', 'std_srvs',
+                                  'diagnostic_msgs', 'rcl_interfaces'):
+            raise ImportError('refused ' + name)
+        return None
+
+sys.meta_path.insert(0, Refuse())
+import numpy as np
+from imu_allan.io.bag_writer import serialize_imu
+from imu_allan.ros.live import LiveInput
+from imu_allan.ros.params import PARAMS
+
+
+class Log:
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text):
+        pass
+
+    def warning(self, text):
+        self.lines.append(text)
+
+    error = warning
+
+
+rng = np.random.default_rng(6)
+n = 6000
+stamps = 1_700_000_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 10_000_000   # 100 Hz each
+a, b = (rng.standard_normal((n, 6)) * 1e-3 for _ in range(2))
+rows_a = serialize_imu(stamps, a, frame_id='imu_a')
+rows_b = serialize_imu(stamps + 5_000_000, b, frame_id='imu_b')
+for wanted, kept, other in (('', 'imu_a', 'imu_b'), ('imu_b', 'imu_b', 'imu_a')):
+    values = dict({p.name: p.default for p in PARAMS}, frame_id=wanted)
+    log = Log()
+    with tempfile.TemporaryDirectory() as tmp:
+        live = LiveInput(values, Path(tmp), log)
+        for k in range(n):                  # interleaved on one topic, as published
+            live.append(rows_a[k].tobytes())
+            live.append(rows_b[k].tobytes())
+            if live.due():
+                live.process()
+        live.process()
+        live.session.flush()
+        stats = live.session.stats
+        # One IMU at 100 Hz: the other is neither merged (200 Hz) nor lost silently.
+        assert live.frame_id == kept and live.frame_counts == {'imu_a': n, 'imu_b': n}
+        assert stats.n_received == n and abs(live.session.rate_hz - 100.0) < 0.01, stats
+        warned = [w for w in log.lines if 'another IMU' in w]
+        assert len(warned) == 1 and repr(other) in warned[0] and repr(kept) in warned[0], warned
+        assert ('set the frame_id parameter' in warned[0]) == (wanted == ''), warned
+print('ok')
+"""
+
+
+def test_two_imus_on_one_topic_are_never_merged_live():
+    out = subprocess.run([sys.executable, '-c', TWO_IMUS], cwd=REPO, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.strip().endswith('ok')

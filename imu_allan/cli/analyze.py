@@ -32,9 +32,13 @@ if TYPE_CHECKING:
     from imu_allan.pipeline.session import SessionConfig
 
 
-def add_input_options(p: argparse.ArgumentParser) -> None:
+def add_input_options(p: argparse.ArgumentParser, frame_id: bool = True) -> None:
     """Add the options of reading an input into a Session (shared with ``diagnose``)."""
     p.add_argument('--topic', help='Imu topic (needed when a bag holds several)')
+    if frame_id:
+        p.add_argument('--frame-id', metavar='NAME',
+                       help='the IMU to read when the Imu topic carries several, told apart '
+                            'by header.frame_id (needed then)')
     p.add_argument('--rate', type=float, default=0.0,
                    help='nominal rate in Hz (default: estimated from the stamps)')
     p.add_argument('--on-motion', choices=('warn', 'pause', 'restart'), default='pause',
@@ -99,11 +103,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, config, out, plot, units, tau_max_s, plan = args
+    path, topic, frame_id, config, out, plot, units, tau_max_s, plan = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True, units=units,
+                                        frame_id=frame_id,
                                         plan=plan is not None, plan_targets=plan)
         result = replace(result, covering_tau_max_s=tau_max_s)
         with writing(out):
@@ -246,7 +251,7 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         raise InputError(f'--cover-tau-max must be a positive number of seconds, got '
                          f'{args.cover_tau_max}')
     plan = None if args.no_plan else parse_targets(args.target)
-    jobs = [(p, args.topic, config, o, plot, units, args.cover_tau_max, plan)
+    jobs = [(p, args.topic, args.frame_id, config, o, plot, units, args.cover_tau_max, plan)
             for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
@@ -256,7 +261,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         if workers > 1:   # and the accumulator sums on a thread of its own
             config = replace(config, background_accumulator=True)
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
-                                        units=units, plan=plan is not None,
+                                        units=units, frame_id=args.frame_id,
+                                        plan=plan is not None,
                                         plan_targets=plan)
         result = replace(result, covering_tau_max_s=args.cover_tau_max)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading

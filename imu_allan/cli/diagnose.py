@@ -61,7 +61,7 @@ def _base_model(text: str) -> tuple:
 
 def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_model,
                    n_replicas: int = N_REPLICAS, seed: int = 0, quiet: bool = False,
-                   units=None):
+                   units=None, frame_id: str | None = None):
     """
     Stream one input through a Session with a raw copy and diagnose it.
 
@@ -77,7 +77,7 @@ def diagnose_input(path: Path, topic: str | None, config: SessionConfig, base_mo
 
     keep_raw, keeper = raw_tap()
 
-    with open_input(path, topic, units) as source, \
+    with open_input(path, topic, units, frame_id) as source, \
             Progress(path.name, source.n_messages) as progress:
         session = stream_input(source, config, on_warning=warn, progress=progress,
                                tap=keep_raw)
@@ -138,7 +138,8 @@ def run(args) -> int:
 
 def _run(args, config: SessionConfig, base: tuple) -> int:
     result = diagnose_input(args.input, args.topic, config, base, args.replicas, args.seed,
-                            quiet=args.format == 'json', units=units_from_args(args))
+                            quiet=args.format == 'json', units=units_from_args(args),
+                            frame_id=args.frame_id)
     if all(d is None for d in result.axes.values()):
         raise InputError(f'{args.input}: no axis could be diagnosed (frozen, constant or too '
                          f'short: {result.n_samples} samples)')

@@ -33,7 +33,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help='IMU id from each path: the (?P<imu>...) group or the first one '
                         "(default: the bag's topic@frame_id)")
     p.add_argument('--model', default='default', help='IMU model of inputs without one')
-    add_input_options(p)
+    add_input_options(p, frame_id=False)   # one IMU per bag; its id is topic@frame_id
     p.add_argument('--scheduler', metavar='ADDRESS',
                    help='Dask scheduler (tcp://host:8786); default: a local cluster')
     p.add_argument('--workers', type=int, default=0,

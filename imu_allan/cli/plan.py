@@ -87,7 +87,7 @@ def run(args) -> int:
         path = Path(args.input)
         check_path(path)
         result, _ = analyze_input(path, args.topic, session_config_from_args(args),
-                                  quiet=args.format == 'json', plan=True,
+                                  quiet=args.format == 'json', plan=True, frame_id=args.frame_id,
                                   plan_targets=targets)
         plans, rate, duration = result.plans, result.rate_hz, result.duration_s
         label = str(path)

@@ -142,13 +142,19 @@ class ImuSource:
         Messages the bag counts that were not delivered (damaged, undecodable);
         None when the bag states no count and damage was met.
     frame_id : str
-        header.frame_id of the first message read ('' before any).
+        header.frame_id of the messages read: the one asked for, else the topic's only
+        one ('' before any).
+    frame_counts : dict of str to int
+        Messages of the topic per header.frame_id (complete once ``blocks()`` has been
+        consumed); a topic may carry several IMUs, and one is read.
 
     """
 
     def __init__(self, path: Path, backend: _Backend, topic: _Topic,
-                 warnings: list[str]) -> None:
+                 warnings: list[str], frame_id: str | None = None) -> None:
         self.path = path
+        self.frame_counts: dict[str, int] = {}
+        self._wanted = frame_id
         self.topic = topic.name
         self.msgtype = topic.msgtype
         self.n_messages = topic.n_messages
@@ -190,6 +196,7 @@ class ImuSource:
         pending: list[_Piece] = []
         n_pending = 0
         self._counts = [0, 0, 0]      # good, undecodable, zero stamps
+        self.frame_counts = {}
         for piece in _in_stamp_order(self._guarded()):
             pending.append(piece)
             n_pending += piece.recv_ns.size
@@ -204,14 +211,16 @@ class ImuSource:
 
     def _guarded(self) -> Iterator[_Piece]:
         """Yield the backend's pieces, counted; a library failure ends the read with a warning."""
+        mixed = False
         try:
             for piece in self._backend.pieces(self._topic):
                 self._counts[1] += piece.n_bad
-                if not piece.recv_ns.size:
-                    continue
+                piece = self._one_source(piece)
+                mixed = mixed or (self._wanted is None and len(self.frame_counts) > 1)
+                if mixed or not piece.recv_ns.size:
+                    continue    # several IMUs and none chosen: only counted, for the error
                 self._counts[0] += piece.recv_ns.size
                 self._counts[2] += int(np.count_nonzero(piece.stamp_ns == 0))
-                self.frame_id = self.frame_id or piece.frame_id
                 yield piece
         except InputError:
             raise
@@ -219,11 +228,61 @@ class ImuSource:
             text = str(err).splitlines()[0] if str(err) else ''
             self._warn(f'{self.path}: reading stopped ({type(err).__name__}: {text}) after '
                        f'{self._counts[0]} messages of {self.topic}')
+        if mixed:
+            raise InputError(f'{self.path}: {self.topic} carries {len(self.frame_counts)} IMUs '
+                             f'(header.frame_id): {self._sources()}; choose one with '
+                             '--frame-id NAME')
+
+    def _one_source(self, piece: _Piece) -> _Piece:
+        """
+        Count a piece's messages per frame_id; keep those of the IMU read.
+
+        Two IMUs on one topic are two sources: merged, their samples would make one
+        IMU of twice the rate and a mixture of both noises.  The IMU read is the one
+        asked for, else the first seen (the read stops at a second one).
+        """
+        if not piece.frames:
+            return piece
+        if piece.frame is None:
+            sizes = [piece.recv_ns.size]
+        else:
+            sizes = np.bincount(piece.frame, minlength=len(piece.frames)).tolist()
+        for name, size in zip(piece.frames, sizes):
+            self.frame_counts[name] = self.frame_counts.get(name, 0) + size
+        if self._wanted is None and not self.frame_id:
+            self.frame_id = piece.frames[0]
+        keep = self.frame_id if self._wanted is None else self._wanted
+        if piece.frame is None:
+            return piece if piece.frames[0] == keep else _take(piece, slice(0, 0))
+        if keep not in piece.frames:
+            return _take(piece, slice(0, 0))
+        return _take(piece, piece.frame == piece.frames.index(keep))
+
+    def _sources(self) -> str:
+        """List the frame_ids with their message counts: 'imu_a (12000 messages), ...'."""
+        parts = [f'{name or "(empty)"} ({count} messages)'
+                 for name, count in list(self.frame_counts.items())[:_MAX_LISTED]]
+        if len(self.frame_counts) > _MAX_LISTED:
+            parts.append(f'and {len(self.frame_counts) - _MAX_LISTED} more')
+        return ', '.join(parts)
 
     def _account(self) -> None:
         """Compare what was read with the bag's count; warn with the count lost."""
         n_good, n_bad, n_zero = self._counts
         self.n_read = n_good
+        if self._wanted is not None:
+            self.frame_id = self._wanted
+            others = {name: k for name, k in self.frame_counts.items() if name != self._wanted}
+            if not n_good and others:
+                raise InputError(f'{self.path}: no message of {self.topic} has frame_id '
+                                 f'{self._wanted!r}; it carries {self._sources()}')
+            if others:
+                self._warn(f'{sum(others.values())} messages of other IMUs on {self.topic} '
+                           f'skipped (frame_id {self._wanted!r} read; others: '
+                           + ', '.join(f'{name or "(empty)"} ({k})' for name, k in others.items())
+                           + ')')
+        # Messages of another IMU were read, only not delivered: they are not lost.
+        n_other = sum(self.frame_counts.values()) - n_good
         try:
             expected = self._backend.count(self._topic)
         except InputError:
@@ -231,7 +290,7 @@ class ImuSource:
         if expected is None:
             self.n_lost = n_bad if n_bad or not self._damaged() else None
         else:
-            self.n_lost = max(expected - n_good, 0)
+            self.n_lost = max(expected - n_good - n_other, 0)
         if n_bad:
             self._warn(f'{n_bad} messages on {self.topic} are not decodable sensor_msgs/Imu '
                        'and were skipped')
@@ -303,14 +362,13 @@ def _sorted(piece: _Piece) -> _Piece:
 
 
 def _take(piece: _Piece, index) -> _Piece:
-    return _Piece(piece.recv_ns[index], piece.stamp_ns[index], piece.samples[index], 0,
-                  piece.frame_id)
+    return _Piece(piece.recv_ns[index], piece.stamp_ns[index], piece.samples[index], 0)
 
 
 def _concat(pieces: list[_Piece]) -> _Piece:
     return _Piece(np.concatenate([p.recv_ns for p in pieces]),
                   np.concatenate([p.stamp_ns for p in pieces]),
-                  np.concatenate([p.samples for p in pieces]), 0, pieces[0].frame_id)
+                  np.concatenate([p.samples for p in pieces]), 0)
 
 
 def _split(pieces: list[_Piece], n: int) -> tuple[ImuBlock, _Piece | None]:
@@ -322,7 +380,8 @@ def _split(pieces: list[_Piece], n: int) -> tuple[ImuBlock, _Piece | None]:
     return block, _Piece(joined.recv_ns[n:], joined.stamp_ns[n:], joined.samples[n:], 0)
 
 
-def open_imu(path: PathLike, topic: str | None = None) -> ImuSource:
+def open_imu(path: PathLike, topic: str | None = None,
+             frame_id: str | None = None) -> ImuSource:
     """
     Open the sensor_msgs/Imu topic of a bag for reading.
 
@@ -333,6 +392,9 @@ def open_imu(path: PathLike, topic: str | None = None) -> ImuSource:
         ``.db3`` file, or a ROS 1 ``.bag``.
     topic : str, optional
         Topic to read; by default the only Imu topic of the bag.
+    frame_id : str, optional
+        The IMU to read when the topic carries several (told apart by
+        header.frame_id); by default the topic must carry one only.
 
     Returns
     -------
@@ -343,17 +405,31 @@ def open_imu(path: PathLike, topic: str | None = None) -> ImuSource:
     ------
     InputError
         If the bag is missing, unreadable or empty, has no Imu topic, several Imu topics
-        and no ``topic``, or ``topic`` is missing or not of type Imu.
+        and no ``topic``, or ``topic`` is missing or not of type Imu.  Several
+        frame_ids on the topic and no ``frame_id`` (or one it does not carry) are an
+        InputError of ``blocks()``, raised once the messages are counted.
 
     """
     warnings: list[str] = []
     backend = _guarded_open(path, warnings)
     try:
         chosen = _choose_topic(Path(path), backend, topic)
+        _warn_other_types(Path(path), backend, chosen, warnings)
     except BaseException:
         backend.close()
         raise
-    return ImuSource(Path(path), backend, chosen, warnings)
+    return ImuSource(Path(path), backend, chosen, warnings, frame_id)
+
+
+def _warn_other_types(path: Path, backend: _Backend, chosen: _Topic,
+                      warnings: list[str]) -> None:
+    """Name the messages of other types on the chosen topic, which are not read."""
+    for other in backend.topics():
+        if other.name == chosen.name and other.msgtype != chosen.msgtype:
+            count = backend.count(other)
+            warnings.append(f'{path}: {"" if count is None else f"{count} "}messages of type '
+                            f'{other.msgtype or "(untyped)"} on {chosen.name} skipped (only '
+                            f'{chosen.msgtype} is read)')
 
 
 def _guarded_open(path: PathLike, warnings: list[str]) -> _Backend:
@@ -374,7 +450,9 @@ def _choose_topic(path: Path, backend: _Backend, name: str | None) -> _Topic:
     imu = [t for t in topics if _is_imu(t)]
     if name is not None:
         wanted = name if name.startswith('/') else '/' + name
-        match = next((t for t in topics if t.name in (name, wanted)), None)
+        named = [t for t in topics if t.name in (name, wanted)]
+        # Other message types may share the name: the Imu one is the topic.
+        match = next((t for t in named if _is_imu(t)), named[0] if named else None)
         if match is None:
             raise InputError(f'{path}: no topic {name}; Imu topics: {_describe(imu)}'
                              + ('' if imu else f'; topics: {_describe(topics)}'))

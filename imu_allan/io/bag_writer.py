@@ -354,7 +354,8 @@ def write_imu_bag(path: PathLike, stamps_ns: np.ndarray, samples: np.ndarray,
     Raises
     ------
     InputError
-        If the path exists, storage and suffix disagree, or the arrays do not fit.
+        If the path exists, storage and suffix disagree, the arrays do not fit, or the
+        bag cannot be written (a full disk, a read-only place).
 
     """
     path = Path(path)
@@ -397,12 +398,18 @@ def write_imu_bag(path: PathLike, stamps_ns: np.ndarray, samples: np.ndarray,
         if is_dir:
             text = yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
             (path / 'metadata.yaml').write_text(text)
-    except BaseException:
+    except BaseException as err:
         # Leave no half-written bag behind (only what this call created).
         if created.is_dir():
             shutil.rmtree(created, ignore_errors=True)
         elif created.exists():
             created.unlink()
+        if isinstance(err, (OSError, sqlite3.Error)):
+            # A full disk, a read-only place, a size limit: sqlite says so in its own
+            # words ('database or disk is full'), the file system in strerror.
+            reason = (getattr(err, 'strerror', None)
+                      or (str(err).strip() or type(err).__name__).splitlines()[0])
+            raise InputError(f'{path}: cannot write ({reason})') from None
         raise
 
 

@@ -130,8 +130,8 @@ def check_path(path: Path) -> None:
         raise InputError(f'{path}: permission denied')
 
 
-def open_input(path, topic: str | None = None,
-               units: DeclaredUnits | None = None) -> InputSource:
+def open_input(path, topic: str | None = None, units: DeclaredUnits | None = None,
+               frame_id: str | None = None) -> InputSource:
     """
     Open any supported input for streaming.
 
@@ -146,6 +146,9 @@ def open_input(path, topic: str | None = None,
     units : DeclaredUnits, optional
         The units the input is written in (``--units``): the blocks are converted to
         ns, rad/s and m/s^2.
+    frame_id : str, optional
+        The IMU to read when the topic carries several (header.frame_id); ignored for
+        CSV.
 
     Returns
     -------
@@ -179,7 +182,7 @@ def open_input(path, topic: str | None = None,
                 yield stamp_ns[k:k + CSV_BLOCK], samples[k:k + CSV_BLOCK]
         return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
     from imu_allan.io.bag_reader import open_imu
-    source = open_imu(path, topic)
+    source = open_imu(path, topic, frame_id)
     time_scale = units.time_scale(1e-9) if units is not None else 1.0
 
     def bag_blocks():
@@ -188,7 +191,8 @@ def open_input(path, topic: str | None = None,
             if time_scale != 1.0:
                 stamp_ns = np.round(stamp_ns * time_scale).astype(np.int64)
             yield stamp_ns, _to_si(block.samples, units)
-    return InputSource(path, f'{path.name} {source.topic}', source.storage, source.topic,
+    label = f'{path.name} {source.topic}' + (f' {frame_id}' if frame_id is not None else '')
+    return InputSource(path, label, source.storage, source.topic,
                        source.n_messages, bag_blocks, source.warnings, source.close,
                        lambda: source.frame_id, lambda: (source.n_read, source.n_lost))
 
@@ -304,16 +308,15 @@ def raw_tap() -> tuple:
     keeper = RawKeeper(None, len(AXES))
 
     def tap(session, samples) -> None:
-        if not np.isfinite(samples).all():      # a copy only where rows must go
-            samples = samples[np.isfinite(samples).all(axis=1)]
-        keeper.add(samples)
+        keeper.add(samples)     # leaves out the rows that are no readings (NaN ...)
     return tap, keeper
 
 
 def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
                   prefetch: bool = True, units: DeclaredUnits | None = None,
-                  plan: bool = False, plan_targets: dict | None = None):
+                  plan: bool = False, plan_targets: dict | None = None,
+                  frame_id: str | None = None):
     """
     Stream one input through a Session and fit it.
 
@@ -340,6 +343,8 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         See :func:`stream_input`.
     units : DeclaredUnits, optional
         The units of the input (see :func:`open_input`).
+    frame_id : str, optional
+        The IMU of a topic that carries several (see :func:`open_input`).
 
     Returns
     -------
@@ -360,7 +365,7 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
 
     show = (not quiet) if progress is None else progress
     tap, keeper = raw_tap()
-    with open_input(path, topic, units) as source:
+    with open_input(path, topic, units, frame_id) as source:
         bar = Progress(path.name, source.n_messages) if show else None
         try:
             session = stream_input(source, config, on_warning=warn, progress=bar, tap=tap,

@@ -29,7 +29,7 @@ from imu_allan import AXES
 from imu_allan.core.allan import confidence_bounds
 from imu_allan.core.diagnose import RawKeeper
 from imu_allan.errors import InputError
-from imu_allan.io.imu_cdr import decode_imu_payloads, imu_frame_id
+from imu_allan.io.imu_cdr import decode_imu_payloads, payload_frames
 from imu_allan.pipeline.analysis import CONFIDENCE
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.params import session_config
@@ -98,7 +98,11 @@ class LiveInput:
         self.n_received = 0
         self.n_buffer_dropped = 0
         self.n_undecodable = 0
-        self.frame_id = ''
+        #: header.frame_id of the IMU analysed: the frame_id parameter, else the first
+        #: seen ('' before any); messages of other frame_ids are counted and dropped.
+        self.frame_id = values['frame_id']
+        #: Messages seen per frame_id (decodable ones).
+        self.frame_counts: dict[str, int] = {}
         self.last_rx: float | None = None
         self._last_handover = time.monotonic()
         self._resume_hold: list | None = None   # blocks held until the resume is judged
@@ -146,7 +150,6 @@ class LiveInput:
         raws = self._take_buffer()
         if not raws:
             return
-        self.frame_id = imu_frame_id(raws[-1]) or self.frame_id
         stamp_ns, samples = self._decode(raws)
         with self.lock:
             if self._resume_hold is not None:
@@ -161,10 +164,11 @@ class LiveInput:
         lengths = np.fromiter(map(len, raws), np.int64, len(raws))
         starts = np.zeros(lengths.size, np.int64)
         np.cumsum(lengths[:-1], out=starts[1:])
-        stamp_ns, samples, ok = decode_imu_payloads(
-            np.frombuffer(b''.join(raws), np.uint8), starts, lengths, 'cdr')
+        u8 = np.frombuffer(b''.join(raws), np.uint8)
+        stamp_ns, samples, ok = decode_imu_payloads(u8, starts, lengths, 'cdr')
+        keep = self._one_source(u8, starts, lengths, ok)
         if ok.all():
-            return stamp_ns, samples
+            return (stamp_ns, samples) if keep is None else (stamp_ns[keep], samples[keep])
         bad = int(ok.size - np.count_nonzero(ok))
         before = self.n_undecodable
         self.n_undecodable += bad
@@ -172,7 +176,42 @@ class LiveInput:
         if self.n_undecodable.bit_length() > before.bit_length():
             self.log.warning(f'{bad} of {ok.size} messages are not CDR sensor_msgs/msg/Imu: '
                              f'dropped ({self.n_undecodable} so far)')
+        if keep is not None:
+            ok &= keep
         return stamp_ns[ok], samples[ok]
+
+    def _one_source(self, u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
+                    ok: np.ndarray) -> np.ndarray | None:
+        """
+        Return (n,) bool, the messages of the IMU analysed, or None for all of them.
+
+        Two IMUs on one topic (told apart by header.frame_id) are never merged: the
+        node keeps the frame_id parameter's, else the first frame_id it sees, counts
+        the others and names each in one warning.
+        """
+        good = np.flatnonzero(ok)
+        names, index = payload_frames(u8, starts[good], lengths[good], 'cdr')
+        if not names:
+            return None
+        sizes = [good.size] if index is None else np.bincount(
+            index, minlength=len(names)).tolist()
+        if not self.frame_id:
+            self.frame_id = names[0]
+            self.log.info(f'analysing the IMU of frame_id {self.frame_id!r}')
+        for name, size in zip(names, sizes):
+            if name != self.frame_id and name not in self.frame_counts:
+                chosen = ('the frame_id parameter' if self.values['frame_id'] else
+                          'the first seen; set the frame_id parameter to choose')
+                self.log.warning(f'messages of another IMU on the topic (frame_id {name!r}) '
+                                 f'are dropped: this node analyses frame_id '
+                                 f'{self.frame_id!r} ({chosen}); one node per IMU')
+            self.frame_counts[name] = self.frame_counts.get(name, 0) + size
+        if index is None:
+            return None if names[0] == self.frame_id else np.zeros(ok.size, bool)
+        keep = np.zeros(ok.size, bool)
+        if self.frame_id in names:
+            keep[good] = index == names.index(self.frame_id)
+        return keep
 
     def _keep_raw(self, samples: np.ndarray) -> None:
         rows = self.values['diagnose_raw_samples']
@@ -181,7 +220,7 @@ class LiveInput:
         if self._raw is None or self._raw[0] is not self.session:
             # The rate is known after a few blocks; the copy keeps every sample anyway.
             self._raw = (self.session, RawKeeper(None, len(AXES), rows))
-        self._raw[1].add(samples[np.isfinite(samples).all(axis=1)])
+        self._raw[1].add(samples)     # leaves out the rows that are no readings (NaN ...)
 
     # ----------------------------------------------------- session, resume
     def _new_session(self, resume: bool) -> Session:
@@ -280,6 +319,7 @@ class LiveInput:
                 self.log.error(f'could not delete {self.checkpoint_path} on reset: {exc}')
             self.session = self._new_session(resume=False)
             self._resume_hold = None
+            self.frame_id = self.values['frame_id']     # '' locks on again
 
     # ------------------------------------------------- snapshots, checkpoints
     def snapshot(self) -> tuple:

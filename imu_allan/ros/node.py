@@ -42,6 +42,7 @@ from std_srvs.srv import Trigger
 from imu_allan.core.diagnose import RawKeeper
 from imu_allan.core.plan import parse_targets
 from imu_allan.errors import InputError
+from imu_allan.io.imu_cdr import imu_frame_id
 from imu_allan.io.report import write_outputs
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session
@@ -147,6 +148,7 @@ class ImuAllanNode(Node):
             self.destroy_node()
             raise
         self.relay = CovarianceRelay(initial)
+        self._frame_bytes = ('', b'')     # frame_id and its CDR bytes, for the relay
         self.live = LiveInput(self.values, self.output_dir, self.get_logger())
         self._last_result = None
         self._fit_thread: threading.Thread | None = None
@@ -278,13 +280,25 @@ class ImuAllanNode(Node):
         else:                       # received (the data status stays OK), not collected
             self.live.n_received += 1
             self.live.last_rx = time.monotonic()
-        if self.pub_imu is not None:
+        if self.pub_imu is not None and self._analysed(raw):
             patched = self.relay.patch(raw)
             if patched is None:  # an unusual layout: through a Python message
                 patched = deserialize_message(raw, Imu)
                 patched.angular_velocity_covariance = self.relay.fields[0]
                 patched.linear_acceleration_covariance = self.relay.fields[1]
             self.pub_imu.publish(patched)
+
+    def _analysed(self, raw: bytes) -> bool:
+        """Whether a message is of the IMU analysed (another on the topic is not it)."""
+        frame = self.live.frame_id
+        if not frame:
+            return True
+        if self._frame_bytes[0] != frame:
+            name = frame.encode() + b'\0'
+            self._frame_bytes = (frame, len(name).to_bytes(4, 'little') + name)
+        # The little-endian CDR length and name, one slice (0.2 us); anything else decoded.
+        key = self._frame_bytes[1]
+        return raw[12:12 + len(key)] == key or imu_frame_id(raw) in (frame, None)
 
     def _on_process_timer(self) -> None:
         if self.live.due():

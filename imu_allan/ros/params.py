@@ -155,6 +155,9 @@ PARAMS: tuple[NodeParam, ...] = (
               ' OpenVINS files bounds (from the sample period; a VIO window is seconds)'),
     NodeParam('hardware_id', str, '', '', (),
               "hardware_id of the diagnostic statuses; '' takes the frame_id of the messages"),
+    NodeParam('frame_id', str, '', '', (),
+              'The IMU analysed, by header.frame_id, when the topic carries several (never'
+              " merged); '' takes the first seen; the others are counted, named and dropped"),
 )
 
 BY_NAME = {p.name: p for p in PARAMS}

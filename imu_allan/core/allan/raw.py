@@ -23,6 +23,35 @@ from imu_allan.errors import InputError
 RAW_ROWS = 1 << 20
 
 
+#: Magnitude from which a finite value is no reading [rad/s or m/s^2]: far beyond any
+#: sensor, and where the squares and fourth powers of the evidence's sums could
+#: overflow float64 (max 1.8e308): a Cholesky solve then ends in 'array must not contain
+#: infs or NaNs'.  The session replaces such a value as a spike.
+MAX_ABS_VALUE = 1e60
+
+
+def reading_rows(samples: np.ndarray) -> np.ndarray | None:
+    """
+    Return which rows hold readings: finite values below :data:`MAX_ABS_VALUE`.
+
+    Parameters
+    ----------
+    samples : numpy.ndarray
+        (n, n_axes) samples [rad/s, m/s^2].
+
+    Returns
+    -------
+    numpy.ndarray or None
+        (n,) bool, True for a row of readings; None when every row is one (the usual
+        case, answered by three reductions without a copy).
+
+    """
+    if samples.size == 0 or (np.isfinite(samples).all() and samples.max() < MAX_ABS_VALUE
+                             and samples.min() > -MAX_ABS_VALUE):
+        return None
+    return (np.abs(np.nan_to_num(samples, nan=np.inf)) < MAX_ABS_VALUE).all(axis=1)
+
+
 class RawKeeper:
     """
     A bounded copy of the raw samples for the periodogram check (block averages).
@@ -57,7 +86,10 @@ class RawKeeper:
 
     def add(self, samples) -> None:
         """
-        Append samples.
+        Append samples; rows that are no readings (:func:`reading_rows`) are left out.
+
+        The session drops NaN rows and replaces huge values as spikes, with warnings;
+        here they would only poison the block averages.
 
         Parameters
         ----------
@@ -66,6 +98,9 @@ class RawKeeper:
 
         """
         y = np.asarray(samples, dtype=np.float64).reshape(-1, self._data.shape[1])
+        rows = reading_rows(y)
+        if rows is not None:
+            y = y[rows]
         if self._carry.size:
             y = np.vstack([self._carry, y])
         usable = y.shape[0] // self.factor * self.factor

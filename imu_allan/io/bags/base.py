@@ -10,7 +10,7 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from imu_allan.io.imu_cdr import _join, decode_imu_payloads, payload_frame_id
+from imu_allan.io.imu_cdr import _join, decode_imu_payloads, payload_frames
 
 #: Messages per ImuBlock unless asked otherwise.
 DEFAULT_BLOCK_SIZE = 65536
@@ -60,13 +60,20 @@ class _Topic(NamedTuple):
 
 
 class _Piece(NamedTuple):
-    """Decoded messages of one fetch or chunk, plus how many were dropped."""
+    """
+    Decoded messages of one fetch or chunk, plus how many were dropped.
+
+    ``frames`` are the header.frame_ids met (in order of first appearance) and
+    ``frame`` the (n,) int64 position of each message's in it, None when all have
+    ``frames[0]`` (pieces cut from one source carry neither).
+    """
 
     recv_ns: np.ndarray
     stamp_ns: np.ndarray
     samples: np.ndarray
     n_bad: int
-    frame_id: str = ''
+    frames: tuple[str, ...] = ()
+    frame: np.ndarray | None = None
 
 
 # --------------------------------------------------------------------------------------
@@ -86,13 +93,12 @@ def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns
         u8, starts, lengths = _join(payloads)
     stamp_ns, samples, ok = decode_imu_payloads(u8, starts, lengths, encoding)
     n_bad = int(ok.size - np.count_nonzero(ok))
-    good = np.flatnonzero(ok)
-    # The frame of the piece's first good message: one slice per piece (identity only).
-    frame_id = (payload_frame_id(u8[starts[good[0]]:starts[good[0]] + lengths[good[0]]]
-                                 .tobytes(), encoding) if good.size else '')
     if n_bad:
-        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, frame_id)
-    return _Piece(recv_ns, stamp_ns, samples, 0, frame_id)
+        good = np.flatnonzero(ok)
+        names, frame = payload_frames(u8, starts[good], lengths[good], encoding)
+        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, tuple(names), frame)
+    names, frame = payload_frames(u8, starts, lengths, encoding)
+    return _Piece(recv_ns, stamp_ns, samples, 0, tuple(names), frame)
 
 
 def _safely(decompress: Callable[[bytes], bytes], data: bytes) -> bytes:
@@ -124,6 +130,16 @@ class _Backend:
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield decoded Imu messages of a topic in the bag's order."""
         raise NotImplementedError
+
+    def extent(self) -> tuple[int | None, int | None, int | None]:
+        """
+        Return the file's first and last receive time [ns] and its message count.
+
+        All topics together; each is None where the storage cannot tell without
+        reading the messages.  Split bags order their files by it and recognise a file
+        that repeats another.
+        """
+        return None, None, None
 
     def close(self) -> None:
         """Release files."""

@@ -71,6 +71,7 @@ class _McapBackend(_Backend):
         self.damage: list[str] = []
         self.data_crc = (0, 0)                        # (DataEnd position, its CRC)
         self.stated = False                           # counts from the summary's statistics
+        self.stated_extent: tuple[int, int, int] | None = None
         self._window = (0, b'')
         try:
             self._open()
@@ -132,8 +133,12 @@ class _McapBackend(_Backend):
             self.channels[channel.id] = (channel.topic, channel.schema_id,
                                          channel.message_encoding)
         if summary.statistics is not None:
-            self.counts = dict(summary.statistics.channel_message_counts)
+            stats = summary.statistics
+            self.counts = dict(stats.channel_message_counts)
             self.stated = True
+            if stats.message_count:
+                self.stated_extent = (stats.message_start_time, stats.message_end_time,
+                                      stats.message_count)
         self.indexed = sorted((c.chunk_start_offset, c.chunk_start_offset + c.chunk_length)
                               for c in summary.chunk_indexes)
 
@@ -400,17 +405,17 @@ class _McapBackend(_Backend):
 
     # -- reading --------------------------------------------------------------------
     def topics(self) -> list[_Topic]:
-        """Return one entry per topic (channels with the same topic are merged)."""
-        found: dict[str, _Topic] = {}
+        """Return one entry per topic and type (channels of both are merged)."""
+        found: dict[tuple[str, str], _Topic] = {}
         for channel_id, (name, schema_id, encoding) in sorted(self.channels.items()):
             count = None if self.counts is None else self.counts.get(channel_id, 0)
             msgtype = self.schemas.get(schema_id, '')
-            if name in found:
-                old = found[name]
+            old = found.get((name, msgtype))
+            if old is not None:
                 both = None if count is None or old.n_messages is None else old.n_messages + count
-                found[name] = old._replace(n_messages=both)
+                found[name, msgtype] = old._replace(n_messages=both)
             else:
-                found[name] = _Topic(name, msgtype, count, encoding)
+                found[name, msgtype] = _Topic(name, msgtype, count, encoding)
         return list(found.values())
 
     def count(self, topic: _Topic) -> int | None:
@@ -423,6 +428,13 @@ class _McapBackend(_Backend):
         if not self.complete or (self.damage and not self.stated):
             return None
         return topic.n_messages
+
+    def extent(self) -> tuple[int | None, int | None, int | None]:
+        """Return the summary's time span and count, else the first chunk's start time."""
+        if self.stated_extent is not None and not self.damage:
+            return self.stated_extent
+        starts = [it.start_ns for it in self.items if isinstance(it, _Chunk)]
+        return (min(starts) if starts else None), None, None
 
     def _message_piece(self, buf: np.ndarray, offsets: np.ndarray, wanted: set,
                        encoding: str) -> _Piece | None:
@@ -447,7 +459,9 @@ class _McapBackend(_Backend):
 
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield the topic's messages chunk by chunk; damage is skipped with a warning."""
-        wanted = {cid for cid, (name, _, _) in self.channels.items() if name == topic.name}
+        # By name and type: another message type on the same topic is not this topic.
+        wanted = {cid for cid, (name, schema_id, _) in self.channels.items()
+                  if name == topic.name and self.schemas.get(schema_id, '') == topic.msgtype}
         for text in self.damage:
             self.warnings.append(f'{self.path}: {text}')
         if any(isinstance(it, _Loose) for it in self.items) and not self._data_crc_ok():

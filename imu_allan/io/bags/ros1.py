@@ -35,15 +35,16 @@ class _Ros1Backend(_Backend):
                              '`rosbag reindex`') from None
 
     def topics(self) -> list[_Topic]:
-        """Return one entry per topic, with ROS 1 type names (sensor_msgs/Imu)."""
-        found: dict[str, _Topic] = {}
+        """Return one entry per topic and type, with ROS 1 type names (sensor_msgs/Imu)."""
+        found: dict[tuple[str, str], _Topic] = {}
         for conn in self.reader.connections:
             msgtype = conn.msgtype.replace('/msg/', '/')
-            if conn.topic in found:
-                old = found[conn.topic]
-                found[conn.topic] = old._replace(n_messages=(old.n_messages or 0) + conn.msgcount)
+            old = found.get((conn.topic, msgtype))
+            if old is not None:
+                found[conn.topic, msgtype] = old._replace(
+                    n_messages=(old.n_messages or 0) + conn.msgcount)
             else:
-                found[conn.topic] = _Topic(conn.topic, msgtype, conn.msgcount, 'ros1')
+                found[conn.topic, msgtype] = _Topic(conn.topic, msgtype, conn.msgcount, 'ros1')
         return list(found.values())
 
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
@@ -64,7 +65,8 @@ class _Ros1Backend(_Backend):
         reader = self.reader
         bio = reader.bio
         assert bio is not None   # opened in __init__
-        conn_ids = {c.id for c in reader.connections if c.topic == topic.name}
+        conn_ids = {c.id for c in reader.connections if c.topic == topic.name
+                    and c.msgtype.replace('/msg/', '/') == topic.msgtype}
         indexes = [reader.indexes[conn_id] for conn_id in sorted(conn_ids)]
         damaged: dict[int, str] = {}    # chunk_pos -> first line of its error
         n_skipped = 0

@@ -76,8 +76,37 @@ class _Rosbag2DirBackend(_Backend):
         except BaseException:
             self.close()
             raise
+        if len(self.parts) > 1:
+            self.parts = self._in_time_order(self.parts)
         self.storage = self.parts[0].storage
         self._topics = self._merge_topics(info)
+
+    def _in_time_order(self, parts: list[_Backend]) -> list[_Backend]:
+        """
+        Order split files by their first receive time; read a repeated file once.
+
+        metadata.yaml's list may be in any order (edited, or written by another tool);
+        read in that order, a split bag would jump back in time at every file.  A file
+        with the same time span and message count as another (a copy, the same record
+        in both storage formats) repeats its messages: it is left out, with a warning.
+        """
+        extents = [part.extent() for part in parts]
+        order = sorted(range(len(parts)), key=lambda k: (
+            extents[k][0] is None, extents[k][0] or 0, k))
+        kept: list[_Backend] = []
+        seen: dict[tuple, _Backend] = {}
+        for k in order:
+            part, extent = parts[k], extents[k]
+            first = seen.get(extent) if None not in extent else None
+            if first is None:
+                seen.setdefault(extent, part)
+                kept.append(part)
+                continue
+            self.warnings.append(f'{self.path}: {part.path.name} repeats {first.path.name} '
+                                 f'(the same {extent[2]} messages over the same time span); '
+                                 'read once')
+            part.close()
+        return kept
 
     def _metadata(self) -> dict | None:
         meta = self.path / 'metadata.yaml'
@@ -146,37 +175,45 @@ class _Rosbag2DirBackend(_Backend):
             raise InputError(f'{packed}: cannot decompress ({err})') from None
         return target
 
-    def _merge_topics(self, info: dict | None) -> dict[str, _Topic]:
-        merged: dict[str, _Topic] = {}
+    def _merge_topics(self, info: dict | None) -> dict[tuple[str, str], _Topic]:
+        merged: dict[tuple[str, str], _Topic] = {}
         for part in self.parts:
             for topic in part.topics():
-                old = merged.get(topic.name)
+                key = (topic.name, topic.msgtype)
+                old = merged.get(key)
                 if old is None:
-                    merged[topic.name] = topic
+                    merged[key] = topic
                 else:
                     both = (None if old.n_messages is None or topic.n_messages is None
                             else old.n_messages + topic.n_messages)
-                    merged[topic.name] = old._replace(n_messages=both)
+                    merged[key] = old._replace(n_messages=both)
         try:
             entries = (info or {}).get('topics_with_message_count') or []
-            counts = {x['topic_metadata']['name']: int(x['message_count']) for x in entries}
+            counts = {(x['topic_metadata']['name'], x['topic_metadata'].get('type', '')):
+                      int(x['message_count']) for x in entries}
         except (KeyError, TypeError, ValueError, AttributeError):
             counts = {}
-        for name, count in counts.items():
+        for key, count in counts.items():
             # metadata.yaml's counts are hints (they go stale): the files' own counts win.
-            if name in merged and merged[name].n_messages is None:
-                merged[name] = merged[name]._replace(n_messages=count)
+            if key in merged and merged[key].n_messages is None:
+                merged[key] = merged[key]._replace(n_messages=count)
         return merged
 
     def topics(self) -> list[_Topic]:
         """Return the topics of all storage files."""
         return list(self._topics.values())
 
+    @staticmethod
+    def _own(part: _Backend, topic: _Topic) -> _Topic | None:
+        """Return the entry of a topic (name and type) in one storage file, or None."""
+        return next((t for t in part.topics()
+                     if (t.name, t.msgtype) == (topic.name, topic.msgtype)), None)
+
     def count(self, topic: _Topic) -> int | None:
         """Count a topic's messages over all files (metadata.yaml's count if they cannot)."""
         total = 0
         for part in self.parts:
-            own = next((t for t in part.topics() if t.name == topic.name), None)
+            own = self._own(part, topic)
             count = part.count(own) if own is not None else 0
             if count is None:
                 return topic.n_messages
@@ -186,7 +223,7 @@ class _Rosbag2DirBackend(_Backend):
     def pieces(self, topic: _Topic) -> Iterator[_Piece]:
         """Yield the topic's messages file after file (split bags)."""
         for part in self.parts:
-            own = next((t for t in part.topics() if t.name == topic.name), None)
+            own = self._own(part, topic)
             if own is not None:
                 yield from part.pieces(own)
 

@@ -94,18 +94,19 @@ class _SqliteBackend(_Backend):
                 'SELECT id, name, type, serialization_format FROM topics ORDER BY id').fetchall()
             metadata_counts = self._metadata_counts() if 'metadata' in tables else {}
             total = None
-            if len({row[1] for row in rows}) == 1:
+            if len({(row[1], row[2]) for row in rows}) == 1:
                 # One topic: the total (answered from the timestamp index) is its count.
                 total = self._total()
         except sqlite3.DatabaseError as err:
             self.close()
             raise InputError(f'{path}: damaged or not a sqlite3 database ({_line(err)})') from None
-        self.ids: dict[str, list[int]] = {}
-        self._topics: dict[str, _Topic] = {}
+        # Keyed by name and type: another message type on the same topic is another topic.
+        self.ids: dict[tuple[str, str], list[int]] = {}
+        self._topics: dict[tuple[str, str], _Topic] = {}
         for topic_id, name, msgtype, fmt in rows:
-            self.ids.setdefault(name, []).append(topic_id)
-            count = total if total is not None else metadata_counts.get(name)
-            self._topics.setdefault(name, _Topic(name, msgtype, count, fmt))
+            self.ids.setdefault((name, msgtype), []).append(topic_id)
+            count = total if total is not None else metadata_counts.get((name, msgtype))
+            self._topics.setdefault((name, msgtype), _Topic(name, msgtype, count, fmt))
 
     def _total(self) -> int | None:
         """All rows of the messages table (None when a damaged page hides the count)."""
@@ -114,7 +115,7 @@ class _SqliteBackend(_Backend):
         except sqlite3.DatabaseError:
             return None
 
-    def _metadata_counts(self) -> dict[str, int]:
+    def _metadata_counts(self) -> dict[tuple[str, str], int]:
         """Return topic counts of the metadata table (schema 3+) of a one-file bag."""
         try:
             row = self.conn.execute(
@@ -123,7 +124,8 @@ class _SqliteBackend(_Backend):
             info = info.get('rosbag2_bagfile_information', info)
             if len(info['relative_file_paths']) != 1:
                 return {}   # one part of a split bag: the counts may cover other files
-            return {x['topic_metadata']['name']: int(x['message_count'])
+            return {(x['topic_metadata']['name'], x['topic_metadata']['type']):
+                    int(x['message_count'])
                     for x in info['topics_with_message_count']}
         except (sqlite3.DatabaseError, yaml.YAMLError, AttributeError, KeyError, TypeError,
                 ValueError):
@@ -133,12 +135,21 @@ class _SqliteBackend(_Backend):
         """Return every topic of the database."""
         return list(self._topics.values())
 
+    def extent(self) -> tuple[int | None, int | None, int | None]:
+        """Return the first and last receive time and the row count, by SQL."""
+        try:
+            first, last, count = self.conn.execute(
+                'SELECT min(timestamp), max(timestamp), count(*) FROM messages').fetchone()
+        except sqlite3.DatabaseError:
+            return None, None, None
+        return first, last, count
+
     def count(self, topic: _Topic) -> int | None:
         """Count a topic's messages by SQL (the stored hint where a damaged page hides it)."""
         if len(self.ids) == 1:
             total = self._total()
             return topic.n_messages if total is None else total
-        ids = self.ids[topic.name]
+        ids = self.ids[topic.name, topic.msgtype]
         try:
             return self.conn.execute(
                 f'SELECT count(*) FROM messages WHERE topic_id IN ({",".join("?" * len(ids))})',
@@ -159,7 +170,8 @@ class _SqliteBackend(_Backend):
         if self.decompress is None:
             try:
                 pages = _SqlitePages(self.db_path, self.conn)
-                for piece, last_rowid in pages.pieces(self.ids[topic.name], topic.encoding):
+                ids = self.ids[topic.name, topic.msgtype]
+                for piece, last_rowid in pages.pieces(ids, topic.encoding):
                     after = last_rowid
                     yield piece
                 return
@@ -174,7 +186,7 @@ class _SqliteBackend(_Backend):
         Rows are read in rowid order, the table's own B-tree, so a damaged page costs
         only its own rows: the read resumes past it (:meth:`_past_damage`).
         """
-        ids = self.ids[topic.name]
+        ids = self.ids[topic.name, topic.msgtype]
         sql = ('SELECT id, timestamp, data FROM messages WHERE id > ? AND topic_id IN '
                f'({",".join("?" * len(ids))}) ORDER BY id')
         repeated = 0
