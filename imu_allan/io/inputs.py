@@ -258,20 +258,24 @@ def _prefetch(blocks: Iterator, depth: int = 2) -> Iterator:
     slots: queue.Queue = queue.Queue(maxsize=depth)
     stop = threading.Event()
 
+    def offer(item) -> bool:
+        """Queue an item unless the consumer has stopped (it takes nothing more then)."""
+        while not stop.is_set():
+            try:
+                slots.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def produce():
         try:
             for item in blocks:
-                while not stop.is_set():
-                    try:
-                        slots.put((item, None), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not offer((item, None)):
                     return
-            slots.put((done, None))
+            offer((done, None))
         except BaseException as exc:  # noqa: B902 - handed over to the consumer
-            slots.put((done, exc))
+            offer((done, exc))
 
     worker = threading.Thread(target=produce, daemon=True, name='imu-allan-reader')
     worker.start()
