@@ -293,6 +293,7 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         json.dump(_finite(out), sys.stdout, allow_nan=False)
         sys.stdout.write('\n')
     else:
+        from imu_allan.io.report import ekf_advice
         for p, _, (result, _, files, seconds) in good:
             print(f'== {p}  ({result.n_samples:,} samples, {result.duration_s / 3600:.2f} h '
                   f'at {result.rate_hz:.2f} Hz, analysed in {seconds:.1f} s)')
@@ -302,6 +303,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
                 print(f'  {axis} plan: {axis_plan.progress_line()}')
             for w in result.warnings:
                 print(f'  warning: {w}')
+            if ekf_advice(result):
+                print(f'  {ekf_advice(result)}')
             print(f'  files: {Path(files[0]).parent}/ ({", ".join(Path(f).name for f in files)})')
         if comparison:
             print('\n' + (args.out / 'comparison.md').read_text())

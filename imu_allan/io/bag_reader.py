@@ -143,6 +143,9 @@ class ImuSource:
         None when the bag states no count and damage was met.
     frame_id : str
         header.frame_id of the first message read ('' before any).
+    n_no_orientation : int
+        Messages delivered whose orientation_covariance[0] is -1: they carry no
+        orientation (complete once ``blocks()`` has been consumed).
 
     """
 
@@ -157,9 +160,10 @@ class ImuSource:
         self.frame_id = ''
         self.n_read = 0
         self.n_lost: int | None = None
+        self.n_no_orientation = 0
         self._backend = backend
         self._topic = topic
-        self._counts = [0, 0, 0]
+        self._counts = [0, 0, 0, 0]
 
     def _warn(self, text: str) -> None:
         if text not in self.warnings:
@@ -189,7 +193,7 @@ class ImuSource:
             raise ValueError('block_size must be positive')
         pending: list[_Piece] = []
         n_pending = 0
-        self._counts = [0, 0, 0]      # good, undecodable, zero stamps
+        self._counts = [0, 0, 0, 0]   # good, undecodable, zero stamps, no orientation
         for piece in _in_stamp_order(self._guarded()):
             pending.append(piece)
             n_pending += piece.recv_ns.size
@@ -211,6 +215,7 @@ class ImuSource:
                     continue
                 self._counts[0] += piece.recv_ns.size
                 self._counts[2] += int(np.count_nonzero(piece.stamp_ns == 0))
+                self._counts[3] += piece.n_no_orientation
                 self.frame_id = self.frame_id or piece.frame_id
                 yield piece
         except InputError:
@@ -222,7 +227,7 @@ class ImuSource:
 
     def _account(self) -> None:
         """Compare what was read with the bag's count; warn with the count lost."""
-        n_good, n_bad, n_zero = self._counts
+        n_good, n_bad, n_zero, self.n_no_orientation = self._counts
         self.n_read = n_good
         try:
             expected = self._backend.count(self._topic)

@@ -76,11 +76,14 @@ class InputSource:
         -------
         dict
             ``n_read``: messages (rows) delivered; ``n_lost``: messages the input counts
-            but could not deliver (damaged, undecodable), None when it states no count.
+            but could not deliver (damaged, undecodable), None when it states no count;
+            ``n_no_orientation``: messages delivered that carry no orientation
+            (``orientation_covariance[0] = -1``), None for CSV.
 
         """
-        n_read, n_lost = self._counts()
-        return {'n_read': n_read, 'n_lost': n_lost}
+        n_read, n_lost, *rest = self._counts()
+        return {'n_read': n_read, 'n_lost': n_lost,
+                'n_no_orientation': rest[0] if rest else None}
 
     @property
     def frame_id(self) -> str:
@@ -190,7 +193,8 @@ def open_input(path, topic: str | None = None,
             yield stamp_ns, _to_si(block.samples, units)
     return InputSource(path, f'{path.name} {source.topic}', source.storage, source.topic,
                        source.n_messages, bag_blocks, source.warnings, source.close,
-                       lambda: source.frame_id, lambda: (source.n_read, source.n_lost))
+                       lambda: source.frame_id,
+                       lambda: (source.n_read, source.n_lost, source.n_no_orientation))
 
 
 def _to_si(samples: np.ndarray, units: DeclaredUnits | None) -> np.ndarray:

@@ -10,7 +10,8 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from imu_allan.io.imu_cdr import _join, decode_imu_payloads, payload_frame_id
+from imu_allan.io.imu_cdr import (_join, decode_imu_payloads, orientation_unknown,
+                                  payload_frame_id)
 
 #: Messages per ImuBlock unless asked otherwise.
 DEFAULT_BLOCK_SIZE = 65536
@@ -67,6 +68,8 @@ class _Piece(NamedTuple):
     samples: np.ndarray
     n_bad: int
     frame_id: str = ''
+    #: Good messages with orientation_covariance[0] = -1 (no orientation, REP 145).
+    n_no_orientation: int = 0
 
 
 # --------------------------------------------------------------------------------------
@@ -90,9 +93,12 @@ def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns
     # The frame of the piece's first good message: one slice per piece (identity only).
     frame_id = (payload_frame_id(u8[starts[good[0]]:starts[good[0]] + lengths[good[0]]]
                                  .tobytes(), encoding) if good.size else '')
+    n_no_orientation = int(np.count_nonzero(orientation_unknown(u8, starts, lengths,
+                                                                encoding) & ok))
     if n_bad:
-        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, frame_id)
-    return _Piece(recv_ns, stamp_ns, samples, 0, frame_id)
+        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, frame_id,
+                      n_no_orientation)
+    return _Piece(recv_ns, stamp_ns, samples, 0, frame_id, n_no_orientation)
 
 
 def _safely(decompress: Callable[[bytes], bytes], data: bytes) -> bytes:
