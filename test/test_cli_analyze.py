@@ -573,3 +573,48 @@ def test_huge_finite_values_are_spikes_not_a_traceback(tmp_path, rec, capsys):
     for axis in ('gyro_x', 'accel_y'):
         low, high = clean['axes'][axis]['params']['N']['ci95']
         assert low <= doc['axes'][axis]['params']['N']['value'] <= high, axis
+
+
+def _with_orientation(payloads: np.ndarray, every: int) -> np.ndarray:
+    """Set orientation_covariance[0] = 0.01 (an orientation) in every ``every``-th one."""
+    out = payloads.copy()
+    # The first -1.0 of a message is orientation_covariance[0] (the quaternion is 0, 0, 0, 1).
+    at = out[0].tobytes().find(np.float64(-1.0).tobytes())
+    out[::every, at:at + 8] = np.frombuffer(np.float64(0.01).tobytes(), np.uint8)
+    return out
+
+
+@pytest.mark.parametrize('kind', ['sqlite3', 'ros1'])
+@pytest.mark.parametrize('every', [0, 1000])
+def test_messages_without_orientation_get_the_no_orientation_ekf_file_first(
+        tmp_path, rec, capsys, kind, every):
+    stamps, samples = rec
+    payloads = serialize_imu(stamps, samples, ros1=kind == 'ros1')   # REP 145: all -1
+    if every:
+        payloads = _with_orientation(payloads, every)
+    if kind == 'ros1':
+        bag = tmp_path / 'r.bag'
+        with Ros1Writer(bag) as writer:
+            conn = writer.add_connection('/imu/raw', IMU, typestore=ROS1)
+            for t, p in zip(stamps.tolist(), payloads):
+                writer.write(conn, t, p.tobytes())
+    else:
+        bag = _rosbags2(tmp_path / 'r', {'/imu/raw': (IMU, [
+            (t, p.tobytes()) for t, p in zip(stamps.tolist(), payloads)])})
+    n_oriented = 0 if not every else -(-N // every)
+    from imu_allan.io.bag_reader import open_imu
+    with open_imu(bag) as source:
+        source.read_all()
+        assert (source.n_read, source.n_no_orientation) == (N, N - n_oriented)
+    code, out, _ = _cli(['analyze', bag, '--out', tmp_path / 'o', '--no-plot', '--no-plan',
+                         '--jobs', '1'], capsys)
+    assert code == 0
+    listed = out.split('files: ')[1]
+    first = listed.index('ekf_imu_no_orientation.yaml') < listed.index('ekf_imu.yaml')
+    summary = (tmp_path / 'o' / 'summary.txt').read_text()
+    # Only when no message carries an orientation: one that does makes ekf_imu.yaml fit.
+    assert first == (not every)
+    assert ('robot_localization: use ekf_imu_no_orientation.yaml' in summary) == (not every)
+    assert ('robot_localization: use ekf_imu_no_orientation.yaml' in out) == (not every)
+    doc = json.loads((tmp_path / 'o' / 'result.json').read_text())
+    assert doc['hygiene']['n_no_orientation'] == N - n_oriented

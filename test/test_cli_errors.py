@@ -7,6 +7,7 @@ line too.  Read-only and size-limited file systems are real tmpfs mounts in a us
 mount namespace (``unshare -rm``); the tests that need one skip where it is refused.
 """
 
+import json
 import os
 from pathlib import Path
 import resource
@@ -50,8 +51,11 @@ def _run(argv: list, prefix: list | None = None, **kwargs) -> tuple:
 
 
 def _one_line(code: int, out: str, err: list, words: str) -> None:
-    assert code == 2 and out == '', (code, out, err)
+    assert code == 2, (code, out, err)
     assert len(err) == 1 and err[0].startswith('imu-allan: error: '), err
+    # Nothing on stdout, or with --format json the one error object.
+    assert out == '' or json.loads(out) == {'error': err[0].removeprefix('imu-allan: error: '),
+                                            'exit_code': 2}, out
     assert words in err[0], err[0]
     assert 'Traceback' not in err[0]
 
@@ -119,6 +123,7 @@ def test_a_write_that_fails_after_the_analysis_is_one_line(tmp_path, csv_rec):
                                 preexec_fn=_small_files_only)
     _one_line(code, stdout, err[-1:], f'cannot write the outputs to {tmp_path / "o"}: '
                                       'File too large')
+    assert stdout, 'no JSON error object'
     assert not any('Traceback' in ln for ln in err)
 
 
@@ -173,3 +178,97 @@ def test_the_outputs_check_leaves_no_empty_directory_after_a_failed_input(tmp_pa
     bad.write_text('t,x\n0,1\n')
     code = main(['analyze', str(bad), '--out', str(tmp_path / 'o')])
     assert code == 2 and not (tmp_path / 'o').exists()
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['analyze', '{tmp}/missing.csv'], 'no such file'),
+    (['analyze', '{bad}', '{bad}', '--out', '{tmp}/o'], 'none of the 2 inputs'),
+    (['analyze', '{csv}', '--jobs', 'x'], "invalid int value: 'x'"),
+    (['adev', '{tmp}/missing.csv'], 'no such file'),
+    (['diagnose', '{csv}', '--rate', 'inf'], '--rate must be a finite number'),
+    (['plan', '--N', '1e-3'], 'needs the sample rate'),
+    (['plan', '--N', '1e-3', '--rate', '100', '--B', '1 parsec'], 'unit'),
+    (['fleet', '{csv}'], 'required: --store'),
+])
+@pytest.mark.parametrize('spelling', [['--format', 'json'], ['--format=json']])
+def test_a_failure_with_format_json_is_one_json_error_object(tmp_path, csv_rec, capsys,
+                                                             argv, words, spelling):
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('t,gyro_x\n')
+    argv = [a.format(csv=csv_rec, tmp=tmp_path, bad=bad) for a in argv] + spelling
+    code = main(argv)
+    out, err = capsys.readouterr()
+    doc = json.loads(out)           # all of stdout: exactly one document
+    assert doc == {'error': doc['error'], 'exit_code': code} and code == 2, (doc, code)
+    assert words in doc['error'] and doc['error'] in err.splitlines()[-1], (doc, err)
+    assert 'Traceback' not in err
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _fork_server_started(pgid: int) -> bool:
+    """Tell whether a fork server runs in the process group (it preloads its modules)."""
+    for proc in Path('/proc').iterdir():
+        try:
+            if proc.name.isdigit() and os.getpgid(int(proc.name)) == pgid and \
+                    b'forkserver' in (proc / 'cmdline').read_bytes():
+                return True
+        except OSError:
+            continue
+    return False
+
+
+@pytest.fixture(scope='module')
+def long_csv(tmp_path_factory) -> Path:
+    """Return a CSV of a still Xsens MTi-7, 30 min at 100 Hz (its fit takes seconds)."""
+    spec = load_params(REPO / 'config' / 'xsens_mti7.yaml')
+    t_s, samples = simulate_imu(spec, 100.0, 1800.0, seed=11)
+    path = tmp_path_factory.mktemp('long') / 'long.csv'
+    write_csv(path, t_s, samples, AXES)
+    return path
+
+
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='/proc, process groups')
+@pytest.mark.parametrize('when', ['fork server starting', 'fitting'])
+def test_ctrl_c_is_one_line_and_exit_130_promptly(tmp_path, long_csv, when):
+    # A terminal's Ctrl-C: SIGINT to the whole process group (fork server and workers).
+    err_path = tmp_path / 'err.txt'
+    with open(err_path, 'w') as err_file:
+        proc = subprocess.Popen(
+            [sys.executable, '-m', 'imu_allan', 'analyze', str(long_csv), '--out',
+             str(tmp_path / 'o'), '--jobs', '2', '--format', 'json'],
+            stdout=subprocess.PIPE, stderr=err_file, process_group=0,
+            env=dict(os.environ, PYTHONPATH=str(REPO)))
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if when == 'fitting' and 'fitting the noise model' in err_path.read_text():
+                break
+            if when != 'fitting' and _fork_server_started(proc.pid):
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, err_path.read_text()
+        sent = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+        took_s = time.monotonic() - sent
+        while _group_alive(proc.pid) and time.monotonic() - sent < 30:
+            time.sleep(0.05)
+        gone_s = time.monotonic() - sent
+    finally:
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+    err = err_path.read_text()
+    assert proc.returncode == 130, err
+    assert 'Traceback' not in err and err.splitlines()[-1] == 'imu-allan: interrupted', err
+    assert err.count('interrupted') == 1, err
+    assert json.loads(out) == {'error': 'interrupted', 'exit_code': 130}
+    # Promptly: the fit's workers are ended, not waited for (seconds each), and so is
+    # the fork server (its preloading takes seconds).
+    assert took_s < 5.0 and gone_s < 8.0, (took_s, gone_s)

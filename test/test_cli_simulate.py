@@ -11,6 +11,7 @@ from rosbags.highlevel import AnyReader
 from imu_allan import AXES
 from imu_allan.cli import main
 from imu_allan.core.noise.params import load_params
+from imu_allan.io.bag_reader import open_imu
 from imu_allan.io.csv_io import read_csv, write_csv
 from imu_allan.io.inputs import open_input
 
@@ -97,6 +98,25 @@ def test_csv_to_bag_round_trip(tmp_path, capsys, name, storage, kind):
     assert got_kind == kind
     assert_array_equal(back, samples)
     assert_array_equal(stamps, 1_700_000_000_000_000_000 + np.arange(500) * 10_000_000)
+
+
+@pytest.mark.parametrize('t0_s', [0.0, 1.7e9])
+def test_csv_to_bag_stamps_are_the_csv_times_and_never_zero(tmp_path, capsys, t0_s):
+    # A log of relative times (from 0) gets an epoch start: its bag must not read as
+    # one whose publisher leaves header.stamp 0.  Epoch times stay as they are.
+    t = t0_s + np.arange(300) * 0.01
+    write_csv(tmp_path / 'log.csv', t, np.random.default_rng(4).normal(size=(300, 6)), AXES)
+    before_s = time.time()
+    code, _, _ = _cli(['csv-to-bag', tmp_path / 'log.csv', tmp_path / 'log.mcap'], capsys)
+    assert code == 0
+    with open_imu(tmp_path / 'log.mcap') as source:
+        stamps = source.read_all().stamp_ns
+        assert not any('header.stamp is 0' in w for w in source.warnings), source.warnings
+    assert_array_equal(np.diff(stamps), np.diff(np.rint(t * 1e9).astype(np.int64)))
+    if t0_s:
+        assert stamps[0] == 1_700_000_000_000_000_000
+    else:
+        assert int(before_s) - 1 <= stamps[0] / 1e9 <= time.time()
 
 
 def test_csv_to_bag_other_column_names_and_errors(tmp_path, capsys):

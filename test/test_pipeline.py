@@ -99,6 +99,23 @@ def test_bursty_arrival_stamps_are_irregular_not_gaps():
     assert_allclose(s.rate_hz, RATE_HZ, rtol=0.02)
 
 
+def test_a_warning_quotes_no_rate_but_the_one_the_analysis_uses():
+    # The irregular-stamp warning used to quote the first window's rate (110.457 Hz
+    # for the MPU-6050), while the analysis used the whole record's mean (99.317 Hz).
+    rng = np.random.default_rng(5)
+    t, y = _record(30_000)
+    jitter = rng.uniform(-8e6, 8e6, t.size).astype(np.int64)
+    jitter[::50] += 300_000_000
+    jitter[:3_000] //= 4                          # calmer at first: another mean step
+    t = np.maximum.accumulate(t + jitter) + np.arange(t.size)
+    s = _feed(Session(), t, y)
+    assert s.stats.irregular_stamps
+    for text in s.warnings:
+        for rate in re.findall(r'(\d+(?:\.\d+)?) Hz', text):
+            # Quoted to 3 decimals at most: the same within their rounding.
+            assert_allclose(float(rate), s.rate_hz, atol=5e-3, err_msg=text)
+
+
 def test_saturated_and_frozen_axes():
     t, y = _record(5_000)
     y[1000:1010, 0] = 8.7266                          # clipped at 500 deg/s

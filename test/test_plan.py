@@ -9,6 +9,7 @@ Small seeded versions of bench/plan_validate.py (the full tables: docs/planning.
 
 import json
 import math
+import re
 
 import numpy as np
 from numpy.testing import assert_allclose
@@ -287,6 +288,27 @@ def test_plan_command_from_datasheet_numbers(capsys):
     assert 'nothing to plan from' in capsys.readouterr().err
     assert main(['plan', '--N', '1e-4']) == 2
     assert '--rate' in capsys.readouterr().err
+
+
+def test_every_example_in_the_plan_help_is_accepted(capsys):
+    from imu_allan.cli import build_parser
+    from imu_allan.core.noise.units import to_si
+
+    helps = {}
+    parser = build_parser(['plan'])
+    for action in parser._subparsers._group_actions[0].choices['plan']._actions:
+        helps.update({opt: action.help for opt in action.option_strings})
+    for flag in ('N', 'B', 'T_B', 'K'):
+        examples = re.findall(r"'([^']+)'", helps[f'--{flag}'])
+        assert examples, helps[f'--{flag}']
+        # The first in gyro units, a second one 'for --sensor accel'.
+        for value, sensor in zip(examples, ('gyro', 'accel')):
+            assert to_si(value, flag, sensor) > 0, (flag, value)
+            assert main(['plan', f'--{flag}', value, '--rate', '100', '--sensor', sensor]
+                        + (['--B', '1e-4'] if flag == 'T_B' else [])) == 0, (flag, value)
+    capsys.readouterr()
+    for target in re.findall(r'e\.g\. (\S+) or (\S+) ', helps['--target'])[0]:
+        assert parse_targets([target]), target
 
 
 def test_analysis_plan_in_summary_json_and_plan_command(tmp_path, capsys):

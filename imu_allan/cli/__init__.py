@@ -4,7 +4,10 @@ Command line interface ``imu-allan`` (also ``python -m imu_allan``).
 Each sub-command lives in its own ``cli_<name>.py`` module exposing
 ``add_parser(subparsers)`` and ``run(args) -> int``.  Contract (docs/contracts.md): with
 ``--format json`` stdout carries exactly one JSON document, logs go to stderr, and
-errors end with a non-zero exit and one clear line on stderr, never a traceback.
+errors end with a non-zero exit and one clear line on stderr, never a traceback; with
+``--format json`` a failure's document is ``{"error": ..., "exit_code": ...}``.  A
+command that returns a non-zero code has written its document itself.  Ctrl-C ends any
+command with the line ``imu-allan: interrupted`` and exit code 130.
 """
 
 import argparse
@@ -29,6 +32,18 @@ COMMANDS = {
 }
 
 
+class _UsageError(Exception):
+    """A command line argparse refuses: (the line to print, argparse's message)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors come back to :func:`main` (sub-parsers inherit it)."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        raise _UsageError(f'{self.prog}: error: {message}', message)
+
+
 def build_parser(argv=None) -> argparse.ArgumentParser:
     """
     Build the top-level parser; only the chosen command's module fills in its options.
@@ -48,7 +63,7 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     chosen = next((a for a in argv if a in COMMANDS), None)
     wanted = COMMANDS[chosen][0] if chosen else None
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog='imu-allan',
         description='Allan-variance characterisation of IMU noise (N, B, K, T_B).')
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
@@ -63,20 +78,74 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     return parser
 
 
+def wants_json(argv: list) -> bool:
+    """
+    Tell whether a command line asks for ``--format json`` (read before it is parsed).
+
+    Parameters
+    ----------
+    argv : list of str
+        The arguments; ``--format json``, ``--format=json`` and argparse's
+        abbreviations (``--form json``) count.
+
+    Returns
+    -------
+    bool
+        True when the last ``--format`` given is ``json``.
+
+    """
+    fmt = None
+    for k, arg in enumerate(argv):
+        name, eq, value = arg.partition('=')
+        if len(name) > 3 and '--format'.startswith(name):
+            fmt = value if eq else (argv[k + 1] if k + 1 < len(argv) else None)
+        elif arg == '--':
+            break
+    return fmt == 'json'
+
+
+def _fail(line: str, message: str, code: int, json_out: bool) -> int:
+    """
+    Report a failure: one line on stderr and, for ``--format json``, one JSON object.
+
+    The object, ``{"error": message, "exit_code": code}``, is all of stdout, so a pipe
+    into ``jq`` reads the failure instead of an empty document.
+    """
+    print(line, file=sys.stderr)
+    if json_out:
+        import json
+        try:
+            json.dump({'error': message, 'exit_code': code}, sys.stdout)
+            sys.stdout.write('\n')
+            sys.stdout.flush()
+        except (BrokenPipeError, ValueError):   # the reader is gone, or stdout closed
+            pass
+    return code
+
+
 def main(argv=None) -> int:
     """Run the CLI; return the process exit code."""
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    json_out = wants_json(argv)
     try:
-        return int(args.run(args) or 0)
+        args = build_parser(argv).parse_args(argv)
+        json_out = getattr(args, 'format', None) == 'json'
+        code = int(args.run(args) or 0)
+    except _UsageError as exc:
+        line, message = exc.args
+        return _fail(line, message, 2, json_out)
     except InputError as exc:
-        print(f'imu-allan: error: {exc}', file=sys.stderr)
-        return getattr(exc, 'exit_code', 2)     # NotEnoughStillData: 3
+        # NotEnoughStillData: 3
+        return _fail(f'imu-allan: error: {exc}', str(exc), getattr(exc, 'exit_code', 2),
+                     json_out)
     except KeyboardInterrupt:
-        print('imu-allan: interrupted', file=sys.stderr)
-        return 130
+        workers = sys.modules.get('imu_allan.pipeline.workers')   # its server, if started
+        if workers is not None:
+            workers.stop_workers()
+        return _fail('imu-allan: interrupted', 'interrupted', 130, json_out)
     except BrokenPipeError:
         return 1
+    return code
 
 
 def entry() -> None:

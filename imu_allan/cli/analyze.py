@@ -10,7 +10,7 @@ The input plumbing (open_input, stream_input, analyze_input) lives in
 """
 
 import argparse
-from concurrent.futures import as_completed, ProcessPoolExecutor
+from concurrent.futures import as_completed
 from contextlib import nullcontext
 from dataclasses import replace
 import json
@@ -198,7 +198,10 @@ def _run_several(jobs: list, n_workers: int) -> list:
                 outcomes[k] = _job(job)
                 bar.update(k + 1)
         return outcomes
-    with ProcessPoolExecutor(max_workers=n_workers) as pool:
+    pool = worker_pool(n_workers)
+    if pool is None:
+        return _run_several(jobs, 1)
+    with pool:
         # Submit (the workers fork) before the progress thread starts: forking a
         # multi-threaded process can deadlock the child.
         futures = {pool.submit(_job, job): k for k, job in enumerate(jobs)}
@@ -272,11 +275,13 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
             files = write_outputs(result, outs[0], plot=plot, pool=pool)
         outcomes = [(result, None, [str(f) for f in files], seconds)]
     failed = [err for (_, err, _, _) in outcomes if err]
+    good = [(p, s, o) for p, s, o in zip(paths, stems, outcomes) if o[0] is not None]
+    if not good and len(failed) == 1:
+        raise InputError(failed[0])
     for err in failed:
         print(f'imu-allan: error: {err}', file=sys.stderr)
-    good = [(p, s, o) for p, s, o in zip(paths, stems, outcomes) if o[0] is not None]
     if not good:
-        return 2
+        raise InputError(f'none of the {len(paths)} inputs could be analysed (errors above)')
     comparison = None
     if len(good) > 1:
         with writing(args.out):
@@ -294,6 +299,7 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         json.dump(_finite(out), sys.stdout, allow_nan=False)
         sys.stdout.write('\n')
     else:
+        from imu_allan.io.report import ekf_advice
         for p, _, (result, _, files, seconds) in good:
             print(f'== {p}  ({result.n_samples:,} samples, {result.duration_s / 3600:.2f} h '
                   f'at {result.rate_hz:.2f} Hz, analysed in {seconds:.1f} s)')
@@ -303,6 +309,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
                 print(f'  {axis} plan: {axis_plan.progress_line()}')
             for w in result.warnings:
                 print(f'  warning: {w}')
+            if ekf_advice(result):
+                print(f'  {ekf_advice(result)}')
             print(f'  files: {Path(files[0]).parent}/ ({", ".join(Path(f).name for f in files)})')
         if comparison:
             print('\n' + (args.out / 'comparison.md').read_text())

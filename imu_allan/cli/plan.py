@@ -18,6 +18,11 @@ from imu_allan.errors import InputError
 
 #: Datasheet flags: option -> parameter key of the units module.
 _FLAGS = {'N': 'N', 'B': 'B', 'T_B': 'T_B', 'K': 'K'}
+#: Each flag's help examples in its customary units: (gyro, accel); test_plan parses them.
+_EXAMPLES = {'N': ("'0.15 deg/sqrt(h)'", "'60 ug/sqrt(Hz)'"),
+             'B': ("'5 deg/h'", "'40 ug'"),
+             'T_B': ("'100 s'",),
+             'K': ("'2 deg/h/sqrt(h)'", "'3 ug/sqrt(s)'")}
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -33,9 +38,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     add_input_options(p)
     p.add_argument('--params', type=Path, help='parameter file (YAML, see config/)')
     for flag in _FLAGS:
+        given = ' or '.join(_EXAMPLES[flag])
         p.add_argument(f'--{flag}', dest=f'ds_{flag}', metavar='VALUE',
                        help=f'datasheet {flag}, SI or with a unit in quotes '
-                            "(e.g. '0.007 deg/s/sqrt(Hz)')")
+                            f'(e.g. {given}{"" if flag == "T_B" else " for --sensor accel"})')
     p.add_argument('--sensor', choices=('gyro', 'accel'), default='gyro',
                    help='what the datasheet flags describe (default gyro)')
     add_target_option(p)

@@ -75,8 +75,10 @@ def _add_csv_to_bag_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--columns', default=None, metavar='A,B,C,D,E,F',
                    help='the six CSV columns in gyro x, y, z, accel x, y, z order '
                         '(default: the contract names)')
-    p.add_argument('--start', type=float, default=0.0, metavar='S',
-                   help='added to t [s]: logs with relative time start at this epoch time')
+    p.add_argument('--start', type=float, default=None, metavar='S',
+                   help='added to t [s]: logs with relative time start at this epoch time '
+                        '(default: 0 for epoch times, else the current time in whole '
+                        'seconds, as header.stamp is never 0 in a real recording)')
     p.set_defaults(run=run_csv_to_bag)
     return p
 
@@ -85,7 +87,7 @@ def run_csv_to_bag(args) -> int:
     """Convert the CSV; a one-line summary goes to stderr."""
     from imu_allan.io.bag_writer import csv_to_bag
 
-    if not math.isfinite(args.start):
+    if args.start is not None and not math.isfinite(args.start):
         raise InputError(f'--start must be finite, got {args.start:g}')
     columns = [c.strip() for c in args.columns.split(',')] if args.columns else None
     if columns is not None and len(columns) != len(AXES):
@@ -93,7 +95,7 @@ def run_csv_to_bag(args) -> int:
     try:
         n = csv_to_bag(args.csv, args.out, topic=args.topic, frame_id=args.frame_id,
                        storage=args.storage, columns=columns,
-                       start_ns=int(round(args.start * 1e9)))
+                       start_ns=None if args.start is None else int(round(args.start * 1e9)))
     except OSError as exc:    # a parent that is a file, a read-only place, a full disk
         raise InputError(f'{args.out}: cannot write ({exc.strerror or exc})') from None
     print(f'imu-allan: wrote {n} sensor_msgs/Imu messages on {args.topic} -> {args.out}',

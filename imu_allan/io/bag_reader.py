@@ -147,6 +147,9 @@ class ImuSource:
     frame_counts : dict of str to int
         Messages of the topic per header.frame_id (complete once ``blocks()`` has been
         consumed); a topic may carry several IMUs, and one is read.
+    n_no_orientation : int
+        Messages delivered whose orientation_covariance[0] is -1: they carry no
+        orientation (complete once ``blocks()`` has been consumed).
 
     """
 
@@ -163,9 +166,10 @@ class ImuSource:
         self.frame_id = ''
         self.n_read = 0
         self.n_lost: int | None = None
+        self.n_no_orientation = 0
         self._backend = backend
         self._topic = topic
-        self._counts = [0, 0, 0]
+        self._counts = [0, 0, 0, 0]
 
     def _warn(self, text: str) -> None:
         if text not in self.warnings:
@@ -195,7 +199,7 @@ class ImuSource:
             raise ValueError('block_size must be positive')
         pending: list[_Piece] = []
         n_pending = 0
-        self._counts = [0, 0, 0]      # good, undecodable, zero stamps
+        self._counts = [0, 0, 0, 0]   # good, undecodable, zero stamps, no orientation
         self.frame_counts = {}
         for piece in _in_stamp_order(self._guarded()):
             pending.append(piece)
@@ -221,6 +225,8 @@ class ImuSource:
                     continue    # several IMUs and none chosen: only counted, for the error
                 self._counts[0] += piece.recv_ns.size
                 self._counts[2] += int(np.count_nonzero(piece.stamp_ns == 0))
+                if piece.unoriented is not None:
+                    self._counts[3] += int(np.count_nonzero(piece.unoriented))
                 yield piece
         except InputError:
             raise
@@ -268,7 +274,7 @@ class ImuSource:
 
     def _account(self) -> None:
         """Compare what was read with the bag's count; warn with the count lost."""
-        n_good, n_bad, n_zero = self._counts
+        n_good, n_bad, n_zero, self.n_no_orientation = self._counts
         self.n_read = n_good
         if self._wanted is not None:
             self.frame_id = self._wanted
@@ -362,7 +368,9 @@ def _sorted(piece: _Piece) -> _Piece:
 
 
 def _take(piece: _Piece, index) -> _Piece:
-    return _Piece(piece.recv_ns[index], piece.stamp_ns[index], piece.samples[index], 0)
+    unoriented = None if piece.unoriented is None else piece.unoriented[index]
+    return _Piece(piece.recv_ns[index], piece.stamp_ns[index], piece.samples[index], 0,
+                  unoriented=unoriented)
 
 
 def _concat(pieces: list[_Piece]) -> _Piece:

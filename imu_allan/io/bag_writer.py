@@ -21,6 +21,7 @@ import os
 from pathlib import Path
 import shutil
 import sqlite3
+import time
 from typing import Sequence
 
 import numpy as np
@@ -413,10 +414,15 @@ def write_imu_bag(path: PathLike, stamps_ns: np.ndarray, samples: np.ndarray,
         raise
 
 
+#: A CSV time from which on ``csv_to_bag`` reads it as seconds since the epoch [s]
+#: (2001-09-09); earlier first times are relative (time since the logger started).
+EPOCH_MIN_S = 1e9
+
+
 def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
                frame_id: str = 'imu_link', storage: str | None = None,
                columns: Sequence[str] | None = None, rate_hz: float | None = None,
-               start_ns: int = 0, covariances: Sequence | None = None) -> int:
+               start_ns: int | None = None, covariances: Sequence | None = None) -> int:
     """
     Convert a CSV log (docs/contracts.md CSV contract) into an Imu bag.
 
@@ -433,8 +439,11 @@ def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
         The six CSV columns to use, in AXES order (default: the AXES names).
     rate_hz : float, optional
         Sample rate [Hz] for a CSV without a ``t`` column.
-    start_ns : int
-        Added to ``round(t * 1e9)``: lets logs with relative time start at a real epoch [ns].
+    start_ns : int, optional
+        Added to ``round(t * 1e9)``: lets logs with relative time start at a real epoch
+        [ns].  Default: 0 when the first ``t`` is an epoch time (from
+        :data:`EPOCH_MIN_S` on), else the current time in whole seconds, so that no
+        message has the zero stamp of a publisher that does not fill its header.
 
     Returns
     -------
@@ -452,6 +461,9 @@ def csv_to_bag(csv_path: PathLike, out_path: PathLike, topic: str = '/imu/data',
         raise InputError(f'{csv_path}: need 6 columns (gyro x, y, z, accel x, y, z) for an Imu '
                          f'bag, got {samples.shape[-1] if samples.ndim == 2 else samples.ndim}')
     stamps_ns = np.rint(np.asarray(data.t_s, dtype=np.float64) * 1e9).astype(np.int64)
+    if start_ns is None:
+        relative = stamps_ns.size and stamps_ns[0] < EPOCH_MIN_S * 1e9
+        start_ns = int(time.time()) * 1_000_000_000 if relative else 0
     write_imu_bag(out_path, stamps_ns + int(start_ns), samples, topic=topic,
                   frame_id=frame_id, storage=storage, covariances=covariances)
     return int(stamps_ns.size)

@@ -221,6 +221,41 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     return stamp_ns, samples, ok
 
 
+def orientation_unknown(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
+                        encoding: str = 'cdr') -> np.ndarray:
+    """
+    Tell which serialised Imu messages state that they carry no orientation.
+
+    REP 145: ``orientation_covariance[0] = -1`` means the orientation is not estimated
+    (raw IMUs, most camera IMUs); robot_localization then takes roll and pitch from its
+    own state (docs/outputs.md).
+
+    Parameters
+    ----------
+    u8, starts, lengths, encoding
+        As in :func:`decode_imu_payloads`.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) bool, True where ``orientation_covariance[0] == -1``; False where it is not,
+        or the payload is not in a plain layout (rosbags' fallback decodes those).
+
+    """
+    starts = np.asarray(starts, np.int64)
+    lengths = np.asarray(lengths, np.int64)
+    unknown = np.zeros(starts.size, bool)
+    if not starts.size:
+        return unknown
+    offset, big, fits = _imu_layout(u8, starts, lengths, encoding == 'ros1')
+    # orientation_covariance[0] follows the 4 doubles of the quaternion: byte 32.
+    at = np.flatnonzero(fits)
+    raw = _gather(u8, starts[at] + offset[at] + 32, 8)
+    value = np.where(big[at], raw.view('>f8').ravel(), raw.view('<f8').ravel())
+    unknown[at] = value == -1.0
+    return unknown
+
+
 def _decode_plain(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, ros1: bool,
                   stamp_ns: np.ndarray, samples: np.ndarray, ok: np.ndarray) -> None:
     """Decode the payloads that fit the plain layout in numpy, into the given arrays."""

@@ -76,11 +76,14 @@ class InputSource:
         -------
         dict
             ``n_read``: messages (rows) delivered; ``n_lost``: messages the input counts
-            but could not deliver (damaged, undecodable), None when it states no count.
+            but could not deliver (damaged, undecodable), None when it states no count;
+            ``n_no_orientation``: messages delivered that carry no orientation
+            (``orientation_covariance[0] = -1``), None for CSV.
 
         """
-        n_read, n_lost = self._counts()
-        return {'n_read': n_read, 'n_lost': n_lost}
+        n_read, n_lost, *rest = self._counts()
+        return {'n_read': n_read, 'n_lost': n_lost,
+                'n_no_orientation': rest[0] if rest else None}
 
     @property
     def frame_id(self) -> str:
@@ -194,7 +197,8 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
     label = f'{path.name} {source.topic}' + (f' {frame_id}' if frame_id is not None else '')
     return InputSource(path, label, source.storage, source.topic,
                        source.n_messages, bag_blocks, source.warnings, source.close,
-                       lambda: source.frame_id, lambda: (source.n_read, source.n_lost))
+                       lambda: source.frame_id,
+                       lambda: (source.n_read, source.n_lost, source.n_no_orientation))
 
 
 def _to_si(samples: np.ndarray, units: DeclaredUnits | None) -> np.ndarray:
@@ -262,20 +266,24 @@ def _prefetch(blocks: Iterator, depth: int = 2) -> Iterator:
     slots: queue.Queue = queue.Queue(maxsize=depth)
     stop = threading.Event()
 
+    def offer(item) -> bool:
+        """Queue an item unless the consumer has stopped (it takes nothing more then)."""
+        while not stop.is_set():
+            try:
+                slots.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def produce():
         try:
             for item in blocks:
-                while not stop.is_set():
-                    try:
-                        slots.put((item, None), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not offer((item, None)):
                     return
-            slots.put((done, None))
+            offer((done, None))
         except BaseException as exc:  # noqa: B902 - handed over to the consumer
-            slots.put((done, exc))
+            offer((done, exc))
 
     worker = threading.Thread(target=produce, daemon=True, name='imu-allan-reader')
     worker.start()

@@ -36,6 +36,28 @@ FILES = {
 }
 
 
+def lacks_orientation(result: AnalysisResult) -> bool:
+    """
+    Tell whether every message read stated that it carries no orientation.
+
+    ``orientation_covariance[0] = -1`` in each (REP 145; counted by the bag readers as
+    ``hygiene.n_no_orientation``): robot_localization's ``ekf_imu.yaml`` would then
+    take roll and pitch from nothing, so ``ekf_imu_no_orientation.yaml`` is the file
+    to use.  False for CSV input and the node (not counted).
+    """
+    n_read = result.hygiene.get('n_read')
+    return bool(n_read) and result.hygiene.get('n_no_orientation') == n_read
+
+
+def ekf_advice(result: AnalysisResult) -> str:
+    """Return which robot_localization fragment fits the messages (one line, or '')."""
+    if lacks_orientation(result):
+        return (f'robot_localization: use {FILES["ekf_no_orientation"]} (every message has '
+                f'orientation_covariance[0] = -1: no orientation; {FILES["ekf"]} assumes '
+                'one)')
+    return ''
+
+
 def _atomic_write(path: Path, text: str) -> Path:
     """Write text to path through a temporary file, so a crash never leaves half a file."""
     return write_atomic(path, lambda f: f.write(text), mode='w')
@@ -51,6 +73,8 @@ def summary_text(result: AnalysisResult) -> str:
         if fit is not None and fit.notes:
             lines += [f'  {axis} note: {n}' for n in fit.notes]
     lines += [''] + result.covering_lines()
+    if ekf_advice(result):
+        lines += ['', ekf_advice(result)]
     if result.plans:
         lines += ['', 'precision (relative 95 % half-width) now, the record length to '
                   'reach each target, and at 1, 3, 10 h:']
@@ -132,6 +156,10 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
         _atomic_write(out / FILES['ekf_no_orientation'],
                       result.robot_localization_yaml(imu_topic, orientation=False)),
     ]
+    if lacks_orientation(result):
+        # Listed first of the two: the one that fits messages without orientation.
+        ekf = written.index(out / FILES['ekf'])
+        written.insert(ekf, written.pop())
     if plot and pool is None:
         from imu_allan.io.plot import plot_result
         written += plot_result(result, out / 'adev')

@@ -296,11 +296,13 @@ class StampClock:
         if self.stats.irregular_stamps:
             return
         self.stats.irregular_stamps = True
-        period = NS / self.rate_hz
-        self._warn('irregular', f'irregular stamps (jitter {100 * jitter:.0f}% of the '
-                   f'{period / 1e6:.2f} ms period): samples are taken as evenly spaced at '
-                   f'{self.rate_hz:.3f} Hz; only steps over {self.config.irregular_gap_s} s '
-                   'count as gaps')
+        # No rate in the text: the one used is the mean over every step of the record,
+        # known at its end (the result states it); the steps so far are only a window.
+        gap_s = self.config.irregular_gap_s
+        self._warn('irregular', f'irregular stamps (jitter {100 * jitter:.0f}% of the mean '
+                   f'step, {NS / self.rate_hz / 1e6:.2f} ms where first seen): samples are '
+                   f'taken as evenly spaced at the mean rate of all steps up to {gap_s} s '
+                   '(the rate the results state); only longer steps count as gaps')
         self._refine_rate()
 
     def _refine_rate(self) -> None:

@@ -7,11 +7,17 @@ server process that imported the package once (forking a process with threads, t
 reader and the progress line, can deadlock the child).  This module imports nothing
 heavy itself, so the server can be started before the input is read and its start-up
 overlaps the reading.
+
+Ctrl-C: the server and its workers block SIGINT (a terminal sends it to the whole
+process group), so only this process is interrupted; a pool left by an exception
+terminates its workers instead of waiting for their jobs, and :func:`stop_workers`
+ends the server.
 """
 
 from concurrent.futures import ProcessPoolExecutor
 import multiprocessing
 import os
+import signal
 from typing import Iterable
 
 #: Modules every server imports before it forks workers: the search and its scipy.
@@ -51,11 +57,66 @@ def start_workers(preload: Iterable[str] = ()) -> None:
         return
     ctx = multiprocessing.get_context('forkserver')
     ctx.set_forkserver_preload(list(dict.fromkeys(_PRELOAD + tuple(preload))))
+    from multiprocessing import forkserver, resource_tracker
+    # The server starts with SIGINT blocked (the mask survives its exec) and passes the
+    # mask on to the workers it forks: a Ctrl-C, which a terminal sends to the whole
+    # process group, then interrupts this process alone (one line, not a traceback per
+    # process), and it ends the workers itself (WorkerPool).  Blocked here, not
+    # ignored: a Ctrl-C meanwhile is delivered to this process afterwards.  The resource
+    # tracker first: starting it unblocks SIGINT.
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def stop_workers() -> None:
+    """
+    End the fork server this process started, for a process that is being interrupted.
+
+    The server may still be importing its modules (seconds), or owe a worker to a pool
+    whose start a Ctrl-C cut short: that worker would find the pool's queues gone and
+    print a traceback.  The workers of a pool end with their :class:`WorkerPool`.
+    """
     from multiprocessing import forkserver
-    forkserver.ensure_running()
+    # The standard library keeps the server's process id in a private attribute and
+    # offers no way to stop the server.
+    pid = getattr(getattr(forkserver, '_forkserver', None), '_forkserver_pid', None)
+    if pid:
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except OSError:
+            pass
 
 
-def worker_pool(workers: int) -> ProcessPoolExecutor | None:
+class WorkerPool(ProcessPoolExecutor):
+    """
+    A process pool whose ``with`` block, left by an exception, terminates the workers.
+
+    The standard pool waits for the running jobs (an axis search, seconds) before an
+    exception, such as a Ctrl-C's KeyboardInterrupt, goes on; their results are not
+    wanted then.
+    """
+
+    def __exit__(self, exc_type, exc_val, exc_tb):
+        if exc_type is not None:
+            self.terminate_workers()
+        return super().__exit__(exc_type, exc_val, exc_tb)
+
+    def terminate_workers(self) -> None:
+        """Cancel the queued jobs and terminate the worker processes now."""
+        processes = list((self._processes or {}).values())
+        self.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            if process.is_alive():
+                process.terminate()
+        for process in processes:
+            process.join()
+
+
+def worker_pool(workers: int) -> WorkerPool | None:
     """
     Return a pool of ``workers`` processes forked from the server, or None.
 
@@ -65,5 +126,4 @@ def worker_pool(workers: int) -> ProcessPoolExecutor | None:
     if workers < 2 or not available():
         return None
     start_workers()
-    return ProcessPoolExecutor(max_workers=workers,
-                               mp_context=multiprocessing.get_context('forkserver'))
+    return WorkerPool(max_workers=workers, mp_context=multiprocessing.get_context('forkserver'))

@@ -374,7 +374,8 @@ def cannot_tell(effect: str, what: str, value: float, need: float, duration_s: f
     """
     hours = duration_s * need / max(value, 1e-9) / 3600.0
     return (f'{effect}: cannot tell from this record whether {what} ({statistic} '
-            f'{value:.1f}, needs {need:.1f}); a record of about {hours:.2g} h would')
+            f'{value:.1f}, needs {need:.1f}); a record of about {hours:.2g} h would tell '
+            'them apart')
 
 
 def _level_above_zero(fit: AxisFit, label: str) -> bool:
@@ -390,12 +391,13 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str,
             problems: tuple = ()) -> AxisFit:
     """Attach the effects, judge the fit, and fall back to the curve where it fails."""
     optimised = dict(fit.optimised)
-    notes = list(fit.notes) + notes
+    notes = list(dict.fromkeys(list(fit.notes) + notes))    # each once, in order
     flicker = optimised.get('flicker.B')
     if optimised['B'].kind != 'estimate' and flicker is not None and flicker.kind == 'estimate':
         # The floor is flicker noise, not a Gauss-Markov process: B is its level and
         # T_B stays undefined (the Kalman model then lists B as left out).
         optimised['B'] = flicker
+        notes = [n for n in notes if not n.startswith('B is flicker noise')]
         notes.append('B is flicker noise (no Gauss-Markov floor): no T_B')
     effects = tuple({'effect': s.effect, 'term': s.label, 'chi2_drop': s.chi2_drop,
                      'rival': s.rival, 'evidence': s.evidence} for s in steps)

@@ -10,7 +10,8 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from imu_allan.io.imu_cdr import _join, decode_imu_payloads, payload_frames
+from imu_allan.io.imu_cdr import (_join, decode_imu_payloads, orientation_unknown,
+                                  payload_frames)
 
 #: Messages per ImuBlock unless asked otherwise.
 DEFAULT_BLOCK_SIZE = 65536
@@ -74,6 +75,9 @@ class _Piece(NamedTuple):
     n_bad: int
     frames: tuple[str, ...] = ()
     frame: np.ndarray | None = None
+    #: (n,) bool, True where orientation_covariance[0] = -1 (no orientation, REP 145);
+    #: None where not read.
+    unoriented: np.ndarray | None = None
 
 
 # --------------------------------------------------------------------------------------
@@ -93,12 +97,14 @@ def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns
         u8, starts, lengths = _join(payloads)
     stamp_ns, samples, ok = decode_imu_payloads(u8, starts, lengths, encoding)
     n_bad = int(ok.size - np.count_nonzero(ok))
+    unoriented = orientation_unknown(u8, starts, lengths, encoding)
     if n_bad:
         good = np.flatnonzero(ok)
         names, frame = payload_frames(u8, starts[good], lengths[good], encoding)
-        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, tuple(names), frame)
+        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, tuple(names), frame,
+                      unoriented[ok])
     names, frame = payload_frames(u8, starts, lengths, encoding)
-    return _Piece(recv_ns, stamp_ns, samples, 0, tuple(names), frame)
+    return _Piece(recv_ns, stamp_ns, samples, 0, tuple(names), frame, unoriented)
 
 
 def _safely(decompress: Callable[[bytes], bytes], data: bytes) -> bytes:
