@@ -18,6 +18,8 @@ from imu_allan.errors import InputError
 
 STATE_FORMAT = 'imu_allan.core.accumulator'
 STATE_VERSION = 1
+#: Arrays of the missing samples (absent from states written before they were known).
+_MISSING_KEYS = ('miss', 'dirty_sums', 'dirty_counts')
 
 
 # Long because from_state checks every field of a state it did not write: a corrupt
@@ -56,12 +58,15 @@ class _Persistence:
             'pending': self._pending, 'ref_set': self._ref_set,
             'level_h': [lv.h for lv in self._levels],
             'level_n': [lv.n for lv in self._levels],
+            'n_missing': self._n_missing,
         }
         arrays = {
             'buf': self._buf[:, :self._h0 + self._pending].copy(),
             'ref': self._ref.copy(),
             'level_hist': np.stack([lv.hist for lv in self._levels]),
             'sums': self._sums.copy(), 'counts': self._counts.copy(), 'm': self._m.copy(),
+            'miss': self._miss[:self._h0 + self._pending].copy(),
+            'dirty_sums': self._dirty_sums.copy(), 'dirty_counts': self._dirty_counts.copy(),
         }
         return meta, arrays
 
@@ -71,6 +76,12 @@ class _Persistence:
         self._ref = arrays['ref'].astype(float)
         self._sums = arrays['sums'].astype(float)
         self._counts = arrays['counts'].astype(np.int64)
+        # States written before missing samples were known have none.
+        if 'miss' in arrays:
+            self._miss[:w] = arrays['miss']
+            self._dirty_sums = arrays['dirty_sums'].astype(float)
+            self._dirty_counts = arrays['dirty_counts'].astype(np.int64)
+        self._n_missing = int(meta.get('n_missing', 0))
         for lv, hist, h, n in zip(self._levels, arrays['level_hist'], meta['level_h'],
                                   meta['level_n']):
             lv.hist[...] = hist
@@ -119,7 +130,7 @@ class _Persistence:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z['meta']))
                 arrays = {k: z[k] for k in ('buf', 'ref', 'level_hist', 'sums', 'counts',
-                                            'm')}
+                                            'm', *_MISSING_KEYS) if k in z}
         except FileNotFoundError:
             raise InputError(f'accumulator state {path} does not exist') from None
         except Exception as exc:  # zip, JSON, missing keys: all mean a bad file
@@ -184,6 +195,7 @@ class _Persistence:
                                  f'expected {shape}')
             if not np.isfinite(arr).all():
                 raise InputError(f'array {key!r} holds non-finite values')
+        _check_missing(meta, arrays, acc, h0 + pending)
         if not np.array_equal(arrays['m'], acc._m):
             raise InputError('its tau grid does not match its settings')
         if (arrays['counts'] < 0).any() or (arrays['sums'] < 0).any():
@@ -199,3 +211,26 @@ class _Persistence:
             raise InputError('inconsistent buffer counters')
         acc._set_state(meta, arrays)
         return acc
+
+
+def _check_missing(meta: dict, arrays: dict, acc, w: int) -> None:
+    """Check the missing-sample fields of a state (all present, or all absent)."""
+    present = [k in arrays for k in _MISSING_KEYS]
+    if not any(present) and 'n_missing' not in meta:
+        return
+    if not all(present):
+        raise InputError('the missing-sample arrays are incomplete')
+    k0 = acc._m0.size
+    expect = {'miss': (w,), 'dirty_sums': (k0, acc.n_axes), 'dirty_counts': (k0,)}
+    for key, shape in expect.items():
+        arr = arrays[key]
+        if arr.shape != shape or arr.dtype.kind not in ('b' if key == 'miss' else 'fi'):
+            raise InputError(f'array {key!r} has shape {arr.shape} and type {arr.dtype}, '
+                             f'expected {shape}')
+    n_missing = meta.get('n_missing')
+    dirty_sums, dirty_counts = arrays['dirty_sums'], arrays['dirty_counts']
+    if (not isinstance(n_missing, int) or isinstance(n_missing, bool) or n_missing < 0
+            or n_missing > int(meta['n_samples']) or not np.isfinite(dirty_sums).all()
+            or (dirty_sums < 0).any() or (dirty_counts < 0).any()
+            or (dirty_counts > arrays['counts'][:k0]).any()):
+        raise InputError('the missing-sample counts are invalid')
