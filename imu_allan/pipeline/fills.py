@@ -1,0 +1,78 @@
+"""
+Rows that stand in for lost samples: made by the stamp clock, found by the feed.
+
+A short gap in the stamps (at most ``SessionConfig.max_fill_samples`` lost samples)
+does not end the segment: the stamp clock fills it with the mean of the samples
+before it (:data:`FILL_WINDOW`), so the sample gate sees an even stream, and the accumulator is told
+which rows are filled (it leaves the terms over them out at short taus,
+:mod:`imu_allan.core.allan.accumulator`).  The gate passes rows on by value only, so a
+filled row carries its mark in its values: the low 16 bits of each value's mantissa
+hold :data:`TAG` (a change below 2e-11 of the value).  A row is a fill when at least
+:data:`MIN_TAGGED` of its values carry the tag: an axis whose neighbours are equal keeps
+their value untagged, so a held value stays one run for the frozen-axis check.  Real
+samples come from float32 (the low 29 bits zero) or from decimal text, where three
+values ending in the tag by chance have a probability below 1e-13 per row.
+"""
+
+import numpy as np
+
+#: Samples before a gap whose mean fills it.  Each of the w then weighs 1 + g / w in a
+#: cluster over a gap of g, which makes a cluster of white noise (1 + g / w) sigma^2
+#: more variable per lost sample than the real samples would: the filled terms read
+#: white noise high by about q (1 + g / w) for a share q lost, against q (1 + g / 2)
+#: for linear interpolation between the two neighbours.
+FILL_WINDOW = 16
+#: The low mantissa bits of a filled value.
+TAG = 0xA5C3
+_LOW = np.uint64(0xFFFF)
+#: Tagged values that make a row a fill.
+MIN_TAGGED = 3
+
+
+def fill_rows(level: np.ndarray, previous: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """
+    Rows filling gaps at a level, tagged as fills.
+
+    Parameters
+    ----------
+    level : numpy.ndarray
+        Shape (g, n_axes), the value each gap is filled with [unit].
+    previous : numpy.ndarray
+        Shape (g, n_axes), the row before each gap [unit]; an axis whose fill equals
+        it exactly stays untagged (a held value stays one run).
+    k : numpy.ndarray
+        Shape (g,), int, samples lost in each gap (>= 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (sum(k), n_axes), the fills of gap 0, then gap 1 ... [unit].
+
+    """
+    gap = np.repeat(np.arange(k.size), k)
+    rows = np.ascontiguousarray(level[gap], dtype=np.float64)
+    tagged = ((rows.view(np.uint64) & ~_LOW) | np.uint64(TAG)).view(np.float64)
+    return np.where(rows == previous[gap], rows, tagged)
+
+
+def filled(samples: np.ndarray) -> np.ndarray | None:
+    """
+    Tell which rows are fills (see the module docstring).
+
+    Parameters
+    ----------
+    samples : numpy.ndarray
+        Shape (n, n_axes), float64 rows.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        Shape (n,), bool; None when no row is a fill.
+
+    """
+    y = np.ascontiguousarray(samples, dtype=np.float64)
+    marks = (y.view(np.uint64) & _LOW) == np.uint64(TAG)
+    if not marks.any():
+        return None
+    rows = marks.sum(axis=1) >= MIN_TAGGED
+    return rows if rows.any() else None
