@@ -13,7 +13,7 @@ outlier and dropped.  So one glitched stamp can neither block later data nor be 
 in a checkpoint as the newest stamp.
 
 A short gap of regular stamps (at most ``max_fill_samples`` lost) does not split the
-segment: it is filled with the mean of the samples before it, marked as fills
+segment: it is filled by linear interpolation, marked as fills
 (:mod:`imu_allan.pipeline.fills`), which the accumulator leaves out at short taus.
 """
 
@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 
 from imu_allan.errors import InputError
-from imu_allan.pipeline.fills import fill_rows, FILL_WINDOW
+from imu_allan.pipeline.fills import fill_rows
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, NS, SessionConfig, WarningLog
 from imu_allan.pipeline.steps import is_int, judge_steps, MAX_JITTER, number, split_runs
 
@@ -75,9 +75,9 @@ class StampClock:
         self._jitter_sq = 0.0
         self._jitter_n = 0
         self._off_period_ns: float | None = None
-        # The last real rows of the segment (the level of a short gap's fill), and the
+        # The last row passed on in this segment (a short gap's left neighbour), and the
         # real rows that reached the gap search (the share of samples missing).
-        self._tail = np.empty((0, N_AXES))
+        self._last_row = np.empty((0, N_AXES))
         self._n_rows = 0
         self._on_run: RunSink = _nowhere
 
@@ -138,7 +138,7 @@ class StampClock:
         # Before the rate is known, rows are only collected; a break there is moot.
         if self.rate_hz > 0:
             self._break_next = True
-            self._tail = self._tail[:0]
+            self._last_row = self._last_row[:0]
 
     def _restart_clock(self) -> None:
         """Start a new segment: the stamps jumped back and went on (no step across)."""
@@ -447,7 +447,7 @@ class StampClock:
         short = np.zeros(gap_idx.size, bool)
         if not irregular and self.config.max_fill_samples > 0:
             short = lost <= self.config.max_fill_samples
-            if gap_idx.size and gap_idx[0] == 0 and (self._break_next or not self._tail.size):
+            if gap_idx.size and gap_idx[0] == 0 and (self._break_next or not self._last_row.size):
                 short[0] = False    # the rows before it are not of this segment
         if short.any():
             self.stats.n_short_gaps += int(short.sum())
@@ -492,16 +492,11 @@ class StampClock:
             Shape (g,), samples lost in each, and its stamp step [ns].
 
         """
-        n, h = stamp_ns.size, self._tail.shape[0]
+        n, h = stamp_ns.size, self._last_row.shape[0]
         self._n_rows += n
         if at.size:
-            rows = np.concatenate((self._tail, samples)) if h else samples
-            # The mean of the FILL_WINDOW real rows before each gap (fewer at the start).
-            idx = (at + h)[:, None] - FILL_WINDOW + np.arange(FILL_WINDOW)
-            valid = idx >= 0
-            level = ((rows[np.maximum(idx, 0)] * valid[:, :, None]).sum(axis=1)
-                     / valid.sum(axis=1)[:, None])
-            fills = fill_rows(level, rows[at + h - 1], lost)
+            rows = np.concatenate((self._last_row, samples)) if h else samples
+            fills = fill_rows(rows[at + h - 1], samples[at], lost)
             prev_t = stamp_ns[at] - steps_at
             gap = np.repeat(np.arange(at.size), lost)
             step = np.arange(gap.size) - np.repeat(np.cumsum(lost) - lost, lost) + 1
@@ -510,12 +505,9 @@ class StampClock:
             where = np.repeat(at, lost)
             self._pass_on(np.insert(stamp_ns, where, t_fill),
                           np.insert(samples, where, fills, axis=0))
-            tail = rows[-FILL_WINDOW:]
         else:
             self._pass_on(stamp_ns, samples)
-            tail = (samples[-FILL_WINDOW:] if n >= FILL_WINDOW
-                    else np.concatenate((self._tail, samples))[-FILL_WINDOW:])
-        self._tail = tail.copy()
+        self._last_row = samples[-1:].copy()
 
     def _note_missing(self, n_rows: int) -> None:
         """Update the one line on missing samples; ``n_rows`` real rows up to the last gap."""
@@ -540,18 +532,18 @@ class StampClock:
             'step_buf': [int(s) for b in self._step_buf for s in b],
             'jitter_sq': self._jitter_sq, 'jitter_n': self._jitter_n,
             'off_period_ns': self._off_period_ns,
-            'tail': self._tail.tolist(), 'n_rows': self._n_rows,
+            'last_row': self._last_row.tolist(), 'n_rows': self._n_rows,
         }
 
     def restore(self, state) -> None:
         """Take the state of :meth:`state`; InputError when it is invalid."""
-        if isinstance(state, dict) and 'tail' not in state:
+        if isinstance(state, dict) and 'last_row' not in state:
             # Written before short gaps were filled: no rows to fill from yet.
-            state = {**state, 'tail': [], 'n_rows': 0}
+            state = {**state, 'last_row': [], 'n_rows': 0}
         if not isinstance(state, dict) or set(state) != set(self.state()):
             raise InputError('the stamp clock state is incomplete')
-        tail = np.asarray(state['tail'], dtype=np.float64).reshape(-1, N_AXES)
-        if (tail.shape[0] > FILL_WINDOW or not np.isfinite(tail).all()
+        last_row = np.asarray(state['last_row'], dtype=np.float64).reshape(-1, N_AXES)
+        if (last_row.shape[0] > 1 or not np.isfinite(last_row).all()
                 or not is_int(state['n_rows']) or state['n_rows'] < 0):
             raise InputError('the rows before a short gap are invalid')
         rate = number(state['rate_hz'], 'rate_hz')
@@ -584,7 +576,7 @@ class StampClock:
         self._clock_n, self._clock_ns, self._jitter_n = counts
         self._jitter_sq = number(state['jitter_sq'], 'jitter_sq')
         self._off_period_ns = None if off is None else number(off, 'off_period_ns')
-        self._tail, self._n_rows = tail, int(state['n_rows'])
+        self._last_row, self._n_rows = last_row, int(state['n_rows'])
 
 
 def _nowhere(stamp_ns: np.ndarray, samples: np.ndarray, broken: bool) -> None:

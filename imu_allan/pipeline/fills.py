@@ -2,10 +2,10 @@
 Rows that stand in for lost samples: made by the stamp clock, found by the feed.
 
 A short gap in the stamps (at most ``SessionConfig.max_fill_samples`` lost samples)
-does not end the segment: the stamp clock fills it with the mean of the samples
-before it (:data:`FILL_WINDOW`), so the sample gate sees an even stream, and the accumulator is told
-which rows are filled (it leaves the terms over them out at short taus,
-:mod:`imu_allan.core.allan.accumulator`).  The gate passes rows on by value only, so a
+does not end the segment: the stamp clock fills it by linear interpolation between
+its neighbours, so the sample gate sees an even stream, and the accumulator is told
+which rows are filled (it leaves the terms over them out at short taus and takes the
+fills' known white-noise excess off the others, :mod:`imu_allan.core.allan.accumulator`).  The gate passes rows on by value only, so a
 filled row carries its mark in its values: the low 16 bits of each value's mantissa
 hold :data:`TAG` (a change below 2e-11 of the value).  A row is a fill when at least
 :data:`MIN_TAGGED` of its values carry the tag: an axis whose neighbours are equal keeps
@@ -16,12 +16,6 @@ values ending in the tag by chance have a probability below 1e-13 per row.
 
 import numpy as np
 
-#: Samples before a gap whose mean fills it.  Each of the w then weighs 1 + g / w in a
-#: cluster over a gap of g, which makes a cluster of white noise (1 + g / w) sigma^2
-#: more variable per lost sample than the real samples would: the filled terms read
-#: white noise high by about q (1 + g / w) for a share q lost, against q (1 + g / 2)
-#: for linear interpolation between the two neighbours.
-FILL_WINDOW = 16
 #: The low mantissa bits of a filled value.
 TAG = 0xA5C3
 _LOW = np.uint64(0xFFFF)
@@ -29,17 +23,16 @@ _LOW = np.uint64(0xFFFF)
 MIN_TAGGED = 3
 
 
-def fill_rows(level: np.ndarray, previous: np.ndarray, k: np.ndarray) -> np.ndarray:
+def fill_rows(left: np.ndarray, right: np.ndarray, k: np.ndarray) -> np.ndarray:
     """
-    Rows filling gaps at a level, tagged as fills.
+    Rows filling gaps by linear interpolation, tagged as fills.
 
     Parameters
     ----------
-    level : numpy.ndarray
-        Shape (g, n_axes), the value each gap is filled with [unit].
-    previous : numpy.ndarray
-        Shape (g, n_axes), the row before each gap [unit]; an axis whose fill equals
-        it exactly stays untagged (a held value stays one run).
+    left, right : numpy.ndarray
+        Shape (g, n_axes), the rows before and after each gap [unit]; an axis whose
+        two neighbours are equal keeps their value untagged (a held value stays one
+        run for the frozen-axis check).
     k : numpy.ndarray
         Shape (g,), int, samples lost in each gap (>= 1).
 
@@ -50,9 +43,11 @@ def fill_rows(level: np.ndarray, previous: np.ndarray, k: np.ndarray) -> np.ndar
 
     """
     gap = np.repeat(np.arange(k.size), k)
-    rows = np.ascontiguousarray(level[gap], dtype=np.float64)
+    step = np.arange(gap.size) - np.repeat(np.cumsum(k) - k, k) + 1
+    a, b = left[gap], right[gap]
+    rows = np.ascontiguousarray(a + (b - a) * (step / (k[gap] + 1.0))[:, None])
     tagged = ((rows.view(np.uint64) & ~_LOW) | np.uint64(TAG)).view(np.float64)
-    return np.where(rows == previous[gap], rows, tagged)
+    return np.where(a == b, rows, tagged)
 
 
 def filled(samples: np.ndarray) -> np.ndarray | None:

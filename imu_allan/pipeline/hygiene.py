@@ -78,9 +78,9 @@ class SessionConfig:
         duration [s], refuses the analysis (NotEnoughStillData).
     max_fill_samples : int
         A gap of regular stamps that lost at most this many samples is short: it is
-        filled (the mean of the 16 samples before it), and no Allan term at short
-        taus uses a filled sample; a longer one splits the segment [samples].  0
-        splits at every gap.
+        filled (linear interpolation), and no Allan term at short taus uses a
+        filled sample; a longer one splits the segment [samples].  0 splits at
+        every gap.
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
     background_accumulator : bool

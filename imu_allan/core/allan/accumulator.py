@@ -50,7 +50,17 @@ estimator over the available terms, the gap estimator of Sesia and Tavella (Metr
 45, 2008, S134), unbiased whatever the noise.  Beyond (at 2 % of samples missing at
 random, from m = 17 on) nearly every term holds a filled sample and the filled terms
 are used, with their count scaled by the share of real samples, so the EDF and
-the curve's covariance count only real data.
+the curve's covariance count only real data.  A fill reads white noise high: a gap
+of g samples filled by linear interpolation gives its two neighbours the weight
+1 + g / 2 in a cluster, so the sum over all terms of a cluster size m exceeds the
+real samples' by sigma^2 (g + g^2 / 2) (2 m - 4) (summed over the term positions,
+the gap's neighbours straddling a cluster edge included; sigma^2 the variance of
+white samples).  With K the sum of g + g^2 / 2 over the gaps and N the samples,
+the filled taus subtract sigma^2 K (m - 2) / (N m^2) from the AVAR, sigma^2 read
+off the first tau over real samples alone.  Unrepaired, 2 % of the samples lost at
+random read white noise 3 % high there (15 % at 10 %); repaired, within 0.5 %
+(1.5 % at 10 %, m >= 4) on simulated white and random-walk noise
+(test/test_accumulator.py).
 
 Precision: the running sum is rebuilt for every chunk from zero, after subtracting a
 per-axis reference (the mean of the first chunk) and then the chunk window's own
@@ -169,6 +179,10 @@ class AllanAccumulator(_Persistence):
         # counts of the terms that hold one.
         self._miss = np.zeros(self._hist_cap + self._chunk, dtype=bool)
         self._n_missing = 0
+        # Sum of g + g^2 / 2 over the gaps of g missing samples, and the missing samples
+        # that end the segment so far (a gap that goes on in the next block).
+        self._fill_excess = 0.0
+        self._miss_run = 0
         self._n_samples = 0
         self._n_segments = 0
         self._build_grid()
@@ -275,6 +289,7 @@ class AllanAccumulator(_Persistence):
                 raise InputError(f'missing must have one flag per row ({n}), '
                                  f'not {missing.size}')
             self._n_missing += int(missing.sum())
+            self._note_runs(missing)
         if not np.issubdtype(block.dtype, np.number) or np.iscomplexobj(block):
             raise InputError(f'samples must be real numbers, not {block.dtype}')
         for s in range(0, n, self._chunk):   # checked by chunks: bounded temporaries
@@ -294,6 +309,17 @@ class AllanAccumulator(_Persistence):
             if self._pending == self._chunk:
                 self._flush()
 
+    def _note_runs(self, missing: np.ndarray) -> None:
+        """Add each missing sample's share 1.5 + r of its gap's g + g^2 / 2 (r: its place)."""
+        if not missing.any():
+            self._miss_run = 0
+            return
+        idx = np.arange(missing.size)
+        last_real = np.maximum.accumulate(np.where(missing, -1, idx))
+        place = idx - last_real - 1 + np.where(last_real < 0, self._miss_run, 0)
+        self._fill_excess += float(np.sum(1.5 + place[missing]))
+        self._miss_run = int(place[-1]) + 1 if missing[-1] else 0
+
     def break_segment(self) -> None:
         """
         End the current contiguous segment (a gap in the data).
@@ -306,6 +332,7 @@ class AllanAccumulator(_Persistence):
             self._flush()
         self._h0 = 0
         self._seg_n = 0
+        self._miss_run = 0
         for level in self._levels:
             level.h = 0
             level.n = 0
@@ -392,7 +419,8 @@ class AllanAccumulator(_Persistence):
 
         With missing samples, an exact tau keeps the terms free of them while they are
         at least :data:`SKIP_SHARE` of its terms (then every term counts in full);
-        otherwise all terms are kept and count by the share of real samples.
+        otherwise all terms are kept, less the fills' white-noise excess (module
+        docstring), and count by the share of real samples.
         """
         sums, counts, dirty_sums, dirty_counts = self._sums_now()
         if not self._n_missing:
@@ -406,7 +434,19 @@ class AllanAccumulator(_Persistence):
         counts[:k0][skip] = clean[skip]
         real = 1.0 - self._n_missing / max(self._n_samples, 1)
         eff = np.maximum(np.round(counts * real).astype(np.int64), np.minimum(counts, 1))
-        eff[:k0][skip | (dirty_counts == 0)] = counts[:k0][skip | (dirty_counts == 0)]
+        kept = np.zeros(counts.size, bool)
+        kept[:k0] = skip | (dirty_counts == 0)
+        eff[kept] = counts[kept]
+        if counts[0] and self._m[0] == 1:
+            # sigma^2 from the first tau over real samples alone; the excess per term.
+            sigma2 = sums[0] / (2.0 * counts[0])
+            mf = self._m.astype(float)
+            excess = (sigma2[None, :] * (self._fill_excess / max(self._n_samples, 1))
+                      * np.maximum(2.0 * mf - 4.0, 0.0)[:, None])
+            fix = ~kept & (counts > 0)
+            # Never more than half the sum: a guard for noise far from white at tau0.
+            sums[fix] = np.maximum(sums[fix] - excess[fix] * counts[fix, None],
+                                   0.5 * sums[fix])
         return sums, counts, eff
 
     def curve(self, confidence: float = 0.683, alpha=None, min_terms: int = 1,

@@ -8,6 +8,7 @@ shape, counter and value, so a corrupt or foreign file is an InputError, not a w
 """
 
 import json
+import math
 from pathlib import Path
 from typing import Self, TYPE_CHECKING
 
@@ -58,7 +59,8 @@ class _Persistence:
             'pending': self._pending, 'ref_set': self._ref_set,
             'level_h': [lv.h for lv in self._levels],
             'level_n': [lv.n for lv in self._levels],
-            'n_missing': self._n_missing,
+            'n_missing': self._n_missing, 'fill_excess': self._fill_excess,
+            'miss_run': self._miss_run,
         }
         arrays = {
             'buf': self._buf[:, :self._h0 + self._pending].copy(),
@@ -82,6 +84,8 @@ class _Persistence:
             self._dirty_sums = arrays['dirty_sums'].astype(float)
             self._dirty_counts = arrays['dirty_counts'].astype(np.int64)
         self._n_missing = int(meta.get('n_missing', 0))
+        self._fill_excess = float(meta.get('fill_excess', 0.0))
+        self._miss_run = int(meta.get('miss_run', 0))
         for lv, hist, h, n in zip(self._levels, arrays['level_hist'], meta['level_h'],
                                   meta['level_n']):
             lv.hist[...] = hist
@@ -227,10 +231,12 @@ def _check_missing(meta: dict, arrays: dict, acc, w: int) -> None:
         if arr.shape != shape or arr.dtype.kind not in ('b' if key == 'miss' else 'fi'):
             raise InputError(f'array {key!r} has shape {arr.shape} and type {arr.dtype}, '
                              f'expected {shape}')
-    n_missing = meta.get('n_missing')
+    n_missing, excess, run = (meta.get(k) for k in ('n_missing', 'fill_excess', 'miss_run'))
     dirty_sums, dirty_counts = arrays['dirty_sums'], arrays['dirty_counts']
-    if (not isinstance(n_missing, int) or isinstance(n_missing, bool) or n_missing < 0
-            or n_missing > int(meta['n_samples']) or not np.isfinite(dirty_sums).all()
+    if (not all(isinstance(v, int) and not isinstance(v, bool) for v in (n_missing, run))
+            or not isinstance(excess, (int, float)) or not 0 <= excess < math.inf
+            or not 0 <= run <= n_missing <= int(meta['n_samples'])
+            or not np.isfinite(dirty_sums).all()
             or (dirty_sums < 0).any() or (dirty_counts < 0).any()
             or (dirty_counts > arrays['counts'][:k0]).any()):
         raise InputError('the missing-sample counts are invalid')
