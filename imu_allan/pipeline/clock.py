@@ -119,6 +119,7 @@ class StampClock:
         # NaN rows that end a block break the segment before the next block's rows.
         if finite is not None and not finite[-1]:
             self._break()
+        self._note_missing()    # the share over the rows so far, not up to the last gap
 
     def flush(self, on_run: RunSink) -> None:
         """Pass on the rows held for the rate estimate (end of a recording)."""
@@ -133,6 +134,7 @@ class StampClock:
             else:
                 self._pending_t, self._pending_y = [], []
         self._refine_rate()
+        self._note_missing()
 
     def _break(self) -> None:
         # Before the rate is known, rows are only collected; a break there is moot.
@@ -437,7 +439,8 @@ class StampClock:
         """
         period_ns = NS / self.rate_hz
         irregular = self.stats.irregular_stamps
-        limit = self.config.irregular_gap_s * NS if irregular else self.config.gap_factor * period_ns
+        limit = (self.config.irregular_gap_s * NS if irregular
+                 else self.config.gap_factor * period_ns)
         real = steps[skip:]
         ok = real <= limit
         self._clock_n += int(ok.sum())
@@ -471,10 +474,7 @@ class StampClock:
         if short.any():
             self.stats.n_gaps += int(short.sum())
             self.stats.n_missing += int(lost[short].sum())
-            last = int(gap_idx[short][-1])
-            self._note_missing(self._n_rows - (stamp_ns.size - last))
-        elif gap_idx.size and self.stats.n_short_gaps:
-            self._note_missing(self._n_rows - (stamp_ns.size - int(gap_idx[-1])))
+            self._note_missing(int(short.sum()))
 
     def _fill_and_pass(self, stamp_ns: np.ndarray, samples: np.ndarray, at: np.ndarray,
                        lost: np.ndarray, steps_at: np.ndarray) -> None:
@@ -509,16 +509,18 @@ class StampClock:
             self._pass_on(stamp_ns, samples)
         self._last_row = samples[-1:].copy()
 
-    def _note_missing(self, n_rows: int) -> None:
-        """Update the one line on missing samples; ``n_rows`` real rows up to the last gap."""
+    def _note_missing(self, n: int = 0) -> None:
+        """Count ``n`` short gaps in the one line on missing samples, with today's share."""
         s = self.stats
-        share = s.n_missing / max(n_rows + s.n_missing, 1)
+        if not s.n_short_gaps:
+            return
+        share = s.n_missing / max(self._n_rows + s.n_missing, 1)
         n_long = s.n_gaps - s.n_short_gaps
         self._warn.tally('missing', f'{100 * share:.1f} % of samples missing ({s.n_missing:,} '
                          f'in {s.n_gaps:,} gaps): {s.n_short_gaps:,} short gaps of up to '
                          f'{self.config.max_fill_samples} samples filled (no Allan term at '
                          f'short taus uses a filled sample), {n_long:,} long '
-                         f'gap{"s" if n_long != 1 else ""} split the record')
+                         f'gap{"s" if n_long != 1 else ""} split the record', n)
 
     # ------------------------------------------------------------- checkpoint
     def state(self) -> dict:

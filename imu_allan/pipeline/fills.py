@@ -5,13 +5,14 @@ A short gap in the stamps (at most ``SessionConfig.max_fill_samples`` lost sampl
 does not end the segment: the stamp clock fills it by linear interpolation between
 its neighbours, so the sample gate sees an even stream, and the accumulator is told
 which rows are filled (it leaves the terms over them out at short taus and takes the
-fills' known white-noise excess off the others, :mod:`imu_allan.core.allan.accumulator`).  The gate passes rows on by value only, so a
-filled row carries its mark in its values: the low 16 bits of each value's mantissa
-hold :data:`TAG` (a change below 2e-11 of the value).  A row is a fill when at least
-:data:`MIN_TAGGED` of its values carry the tag: an axis whose neighbours are equal keeps
-their value untagged, so a held value stays one run for the frozen-axis check.  Real
-samples come from float32 (the low 29 bits zero) or from decimal text, where three
-values ending in the tag by chance have a probability below 1e-13 per row.
+fills' known white-noise excess off the others, :mod:`imu_allan.core.allan.accumulator`).
+The gate passes rows on by value only, so a filled row carries its mark in its values:
+the low 16 bits of each value's mantissa hold :data:`TAG` (a change below 2e-11 of the
+value).  A row is a fill when at least :data:`MIN_TAGGED` of its values carry the tag:
+an axis whose neighbours are equal keeps their value untagged, so a held value stays
+one run for the frozen-axis check.  Real samples come from float32 (the low 29 bits
+zero) or from decimal text, where three values ending in the tag by chance have a
+probability below 1e-13 per row.
 """
 
 import numpy as np

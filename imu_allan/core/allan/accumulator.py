@@ -415,7 +415,7 @@ class AllanAccumulator(_Persistence):
 
     def _used_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
-        Sums (K, n_axes), term counts (K,) and effective term counts (K,) per tau.
+        Return the sums (K, n_axes), term counts (K,) and effective counts (K,) per tau.
 
         With missing samples, an exact tau keeps the terms free of them while they are
         at least :data:`SKIP_SHARE` of its terms (then every term counts in full);

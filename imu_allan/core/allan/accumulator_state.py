@@ -232,9 +232,10 @@ def _check_missing(meta: dict, arrays: dict, acc, w: int) -> None:
             raise InputError(f'array {key!r} has shape {arr.shape} and type {arr.dtype}, '
                              f'expected {shape}')
     n_missing, excess, run = (meta.get(k) for k in ('n_missing', 'fill_excess', 'miss_run'))
+    if not (isinstance(n_missing, int) and isinstance(run, int)) or isinstance(run, bool):
+        raise InputError('the missing-sample counts are invalid')
     dirty_sums, dirty_counts = arrays['dirty_sums'], arrays['dirty_counts']
-    if (not all(isinstance(v, int) and not isinstance(v, bool) for v in (n_missing, run))
-            or not isinstance(excess, (int, float)) or not 0 <= excess < math.inf
+    if (not isinstance(excess, (int, float)) or not 0 <= excess < math.inf
             or not 0 <= run <= n_missing <= int(meta['n_samples'])
             or not np.isfinite(dirty_sums).all()
             or (dirty_sums < 0).any() or (dirty_counts < 0).any()
