@@ -59,13 +59,15 @@ def _lose(n: int, share: float, burst: int, seed: int, long_s: float = 30.0) -> 
 def test_fills_are_marked_and_nothing_else_is():
     rng = np.random.default_rng(1)
     left, right = rng.normal(size=(3, 6)), rng.normal(size=(3, 6))
-    right[1, :4] = left[1, :4]                      # four held axes: not a fill
+    right[1, :5] = left[1, :5]                      # five held axes: still a fill
+    right[2] = left[2]                              # all six held: a repeat, not marked
     rows = fill_rows(left, right, np.array([1, 2, 3]))
     assert rows.shape == (6, 6)
-    # Linear interpolation to 2e-11 of the values (the mark is in the low bits).
-    assert_allclose(rows[2], left[1] + 2 * (right[1] - left[1]) / 3, rtol=2e-11)
-    assert_array_equal(rows[1:3, :4], left[[1, 1], :4])       # held values untouched
-    assert_array_equal(filled(rows), [True, False, False, True, True, True])
+    # Linear interpolation to 4e-9 of the values (the mark is in the low bits).
+    assert_allclose(rows[2], left[1] + 2 * (right[1] - left[1]) / 3, rtol=4e-9)
+    assert_array_equal(rows[1:3, :5], left[[1, 1], :5])       # held values untouched
+    assert_array_equal(rows[3:], left[[2, 2, 2]])
+    assert_array_equal(filled(rows), [True, True, True, False, False, False])
     # Samples from float32 (as Imu messages carry them) or from text never look filled.
     assert filled(rng.normal(size=(100_000, 6)).astype(np.float32).astype(float)) is None
     assert filled(np.round(rng.normal(size=(100_000, 6)), 6)) is None
