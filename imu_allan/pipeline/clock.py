@@ -11,6 +11,10 @@ judged by the stamp after it: when that one goes on from it, the far stamp is a 
 (ahead) or a clock that restarted (behind: a new segment); otherwise it is a lone
 outlier and dropped.  So one glitched stamp can neither block later data nor be saved
 in a checkpoint as the newest stamp.
+
+A short gap of regular stamps (at most ``max_fill_samples`` lost) does not split the
+segment: it is filled by linear interpolation, marked as fills
+(:mod:`imu_allan.pipeline.fills`), which the accumulator leaves out at short taus.
 """
 
 import math
@@ -19,6 +23,7 @@ from typing import Callable
 import numpy as np
 
 from imu_allan.errors import InputError
+from imu_allan.pipeline.fills import fill_rows
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, NS, SessionConfig, WarningLog
 from imu_allan.pipeline.steps import is_int, judge_steps, MAX_JITTER, number, split_runs
 
@@ -70,6 +75,10 @@ class StampClock:
         self._jitter_sq = 0.0
         self._jitter_n = 0
         self._off_period_ns: float | None = None
+        # The last row passed on in this segment (a short gap's left neighbour), and the
+        # real rows that reached the gap search (the share of samples missing).
+        self._last_row = np.empty((0, N_AXES))
+        self._n_rows = 0
         self._on_run: RunSink = _nowhere
 
     # ------------------------------------------------------------------ input
@@ -110,6 +119,7 @@ class StampClock:
         # NaN rows that end a block break the segment before the next block's rows.
         if finite is not None and not finite[-1]:
             self._break()
+        self._note_missing()    # the share over the rows so far, not up to the last gap
 
     def flush(self, on_run: RunSink) -> None:
         """Pass on the rows held for the rate estimate (end of a recording)."""
@@ -124,11 +134,13 @@ class StampClock:
             else:
                 self._pending_t, self._pending_y = [], []
         self._refine_rate()
+        self._note_missing()
 
     def _break(self) -> None:
         # Before the rate is known, rows are only collected; a break there is moot.
         if self.rate_hz > 0:
             self._break_next = True
+            self._last_row = self._last_row[:0]
 
     def _restart_clock(self) -> None:
         """Start a new segment: the stamps jumped back and went on (no step across)."""
@@ -421,28 +433,96 @@ class StampClock:
 
     def _split_gaps(self, stamp_ns: np.ndarray, samples: np.ndarray, steps: np.ndarray,
                     skip: int) -> None:
-        """Accumulate the rows between gaps; ``steps[:skip]`` are no steps."""
+        """
+        Fill the short gaps, split at the long ones; ``steps[:skip]`` are no steps.
+
+        A gap of regular stamps that lost at most ``max_fill_samples`` samples, with
+        rows of the same segment before it, is short.
+        """
         period_ns = NS / self.rate_hz
-        limit = (self.config.irregular_gap_s * NS if self.stats.irregular_stamps
+        irregular = self.stats.irregular_stamps
+        limit = (self.config.irregular_gap_s * NS if irregular
                  else self.config.gap_factor * period_ns)
         real = steps[skip:]
         ok = real <= limit
         self._clock_n += int(ok.sum())
         self._clock_ns += int(real[ok].sum())
         gap_idx = np.flatnonzero(~ok) + skip
+        lost = np.maximum(np.round(steps[gap_idx] / period_ns).astype(np.int64) - 1, 1)
+        short = np.zeros(gap_idx.size, bool)
+        if not irregular and self.config.max_fill_samples > 0:
+            short = lost <= self.config.max_fill_samples
+            if gap_idx.size and gap_idx[0] == 0 and (self._break_next or not self._last_row.size):
+                short[0] = False    # the rows before it are not of this segment
+        if short.any():
+            self.stats.n_short_gaps += int(short.sum())
+            self.stats.n_filled += int(lost[short].sum())
         start = 0
-        for g in [int(i) for i in gap_idx] + [stamp_ns.size]:
+        for i in [int(i) for i in np.flatnonzero(~short)] + [gap_idx.size]:
+            g = int(gap_idx[i]) if i < gap_idx.size else stamp_ns.size
             if g > start:
-                self._pass_on(stamp_ns[start:g], samples[start:g])
-            if g < stamp_ns.size:
-                missing = max(int(round(steps[g] / period_ns)) - 1, 1)
+                inner = (gap_idx > start) | ((gap_idx == start) & (start == 0))
+                inner &= (gap_idx < g) & short
+                self._fill_and_pass(stamp_ns[start:g], samples[start:g],
+                                    gap_idx[inner] - start, lost[inner], steps[gap_idx[inner]])
+            if i < gap_idx.size:
                 self.stats.n_gaps += 1
-                self.stats.n_missing += missing
-                self._warn('gap', f'gap of {steps[g] / 1e9:.3f} s (~{missing} samples) '
+                self.stats.n_missing += int(lost[i])
+                self._warn('gap', f'gap of {steps[g] / 1e9:.3f} s (~{int(lost[i])} samples) '
                            'in the stamps: the segment is split there, no term spans it',
                            once=False)
                 self._break()
             start = g
+        if short.any():
+            self.stats.n_gaps += int(short.sum())
+            self.stats.n_missing += int(lost[short].sum())
+            self._note_missing(int(short.sum()))
+
+    def _fill_and_pass(self, stamp_ns: np.ndarray, samples: np.ndarray, at: np.ndarray,
+                       lost: np.ndarray, steps_at: np.ndarray) -> None:
+        """
+        Pass a run on with its short gaps filled.
+
+        Parameters
+        ----------
+        stamp_ns, samples : numpy.ndarray
+            Shapes (n,) and (n, 6): the run's rows.
+        at : numpy.ndarray
+            Shape (g,), the rows each short gap lies before (row 0: a gap after the
+            last row passed on).
+        lost, steps_at : numpy.ndarray
+            Shape (g,), samples lost in each, and its stamp step [ns].
+
+        """
+        n, h = stamp_ns.size, self._last_row.shape[0]
+        self._n_rows += n
+        if at.size:
+            rows = np.concatenate((self._last_row, samples)) if h else samples
+            fills = fill_rows(rows[at + h - 1], samples[at], lost)
+            prev_t = stamp_ns[at] - steps_at
+            gap = np.repeat(np.arange(at.size), lost)
+            step = np.arange(gap.size) - np.repeat(np.cumsum(lost) - lost, lost) + 1
+            t_fill = prev_t[gap] + np.round((stamp_ns[at[gap]] - prev_t[gap]) * step
+                                            / (lost[gap] + 1.0)).astype(np.int64)
+            where = np.repeat(at, lost)
+            self._pass_on(np.insert(stamp_ns, where, t_fill),
+                          np.insert(samples, where, fills, axis=0))
+        else:
+            self._pass_on(stamp_ns, samples)
+        self._last_row = samples[-1:].copy()
+
+    def _note_missing(self, n: int = 0) -> None:
+        """Count ``n`` short gaps in the one line on missing samples, with today's share."""
+        s = self.stats
+        if not s.n_short_gaps:
+            return
+        share = s.n_missing / max(self._n_rows + s.n_missing, 1)
+        n_long = s.n_gaps - s.n_short_gaps
+        self._warn.tally('missing', f'{100 * share:.1f} % of samples missing ({s.n_missing:,} '
+                         f'in {s.n_gaps:,} gaps): {s.n_short_gaps:,} short gaps of up to '
+                         f'{self.config.max_fill_samples} samples filled (no Allan term at '
+                         f'short taus uses a filled sample), {n_long:,} long '
+                         f'gap{"s" if n_long != 1 else ""} split the record', n)
 
     # ------------------------------------------------------------- checkpoint
     def state(self) -> dict:
@@ -456,12 +536,20 @@ class StampClock:
             'step_buf': [int(s) for b in self._step_buf for s in b],
             'jitter_sq': self._jitter_sq, 'jitter_n': self._jitter_n,
             'off_period_ns': self._off_period_ns,
+            'last_row': self._last_row.tolist(), 'n_rows': self._n_rows,
         }
 
     def restore(self, state) -> None:
         """Take the state of :meth:`state`; InputError when it is invalid."""
+        if isinstance(state, dict) and 'last_row' not in state:
+            # Written before short gaps were filled: no rows to fill from yet.
+            state = {**state, 'last_row': [], 'n_rows': 0}
         if not isinstance(state, dict) or set(state) != set(self.state()):
             raise InputError('the stamp clock state is incomplete')
+        last_row = np.asarray(state['last_row'], dtype=np.float64).reshape(-1, N_AXES)
+        if (last_row.shape[0] > 1 or not np.isfinite(last_row).all()
+                or not is_int(state['n_rows']) or state['n_rows'] < 0):
+            raise InputError('the rows before a short gap are invalid')
         rate = number(state['rate_hz'], 'rate_hz')
         if rate <= 0:
             raise InputError(f'the stamp clock has no rate ({rate!r})')
@@ -492,6 +580,7 @@ class StampClock:
         self._clock_n, self._clock_ns, self._jitter_n = counts
         self._jitter_sq = number(state['jitter_sq'], 'jitter_sq')
         self._off_period_ns = None if off is None else number(off, 'off_period_ns')
+        self._last_row, self._n_rows = last_row, int(state['n_rows'])
 
 
 def _nowhere(stamp_ns: np.ndarray, samples: np.ndarray, broken: bool) -> None:

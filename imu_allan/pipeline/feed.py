@@ -18,6 +18,7 @@ import numpy as np
 
 from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
+from imu_allan.pipeline.fills import filled
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig
 
 #: Calls waiting for the accumulator at most (each holds one run of samples).
@@ -46,6 +47,7 @@ class AccumulatorFeed:
         self.acc: AllanAccumulator | BackgroundAccumulator | None = None
         self.rate_hz = 0.0
         self._queued: list[np.ndarray] = []
+        self._filled: list[np.ndarray | None] = []
 
     def start(self, rate_hz: float) -> None:
         """Start a new, empty accumulator at ``rate_hz`` [Hz]."""
@@ -61,9 +63,16 @@ class AccumulatorFeed:
         self.rate_hz = rate_hz
 
     def queue(self, samples: np.ndarray) -> None:
-        """Take still rows (n, 6); they reach the accumulator at :meth:`pass_on`."""
+        """
+        Take still rows (n, 6); they reach the accumulator at :meth:`pass_on`.
+
+        Rows that fill a short gap (:mod:`imu_allan.pipeline.fills`) reach it marked
+        as missing and do not count as used.
+        """
+        fill = filled(samples)
         self._queued.append(samples)
-        self.stats.n_used += samples.shape[0]
+        self._filled.append(fill)
+        self.stats.n_used += samples.shape[0] - (0 if fill is None else int(fill.sum()))
 
     def pass_on(self) -> None:
         """Hand the queued rows to the accumulator, in order."""
@@ -73,16 +82,29 @@ class AccumulatorFeed:
             return
         assert self.acc is not None
         short: list = []
-        for piece in self._queued + [None]:
+        marks: list = []
+        for piece, fill in zip(self._queued + [None], self._filled + [None]):
             if piece is not None and piece.shape[0] < _DIRECT_ROWS:
                 short.append(piece)
+                marks.append(fill)
                 continue
             if short:
-                self.acc.add(short[0] if len(short) == 1 else np.concatenate(short))
-                short = []
+                self._add(short, marks)
+                short, marks = [], []
             if piece is not None:
-                self.acc.add(piece)
-        self._queued = []
+                self._add([piece], [fill])
+        self._queued, self._filled = [], []
+
+    def _add(self, pieces: list, marks: list) -> None:
+        """Hand pieces of rows, joined, and their fill marks to the accumulator."""
+        assert self.acc is not None
+        rows = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+        if all(m is None for m in marks):
+            self.acc.add(rows)
+            return
+        missing = np.concatenate([np.zeros(p.shape[0], bool) if m is None else m
+                                  for p, m in zip(pieces, marks)])
+        self.acc.add(rows, missing=missing)
 
     def break_segment(self) -> None:
         """End the contiguous segment: no Allan term spans what comes next."""
@@ -92,7 +114,7 @@ class AccumulatorFeed:
 
     def restart(self) -> None:
         """Discard everything accumulated so far and start empty."""
-        self._queued = []
+        self._queued, self._filled = [], []
         self.stats.n_used = 0
         self.start(self.rate_hz)
 
@@ -161,10 +183,10 @@ class BackgroundAccumulator:
         if self._errors:
             raise self._errors.pop(0)
 
-    def add(self, samples) -> None:
+    def add(self, samples, missing=None) -> None:
         """Queue a block of samples (see :meth:`AllanAccumulator.add`)."""
         self._raise()
-        self._calls.put(('add', samples))
+        self._calls.put(('add', (samples, missing)))
 
     def break_segment(self) -> None:
         """Queue the end of the current segment (see :meth:`AllanAccumulator.break_segment`)."""
@@ -205,7 +227,7 @@ def _work(acc: AllanAccumulator, calls: queue.Queue, errors: list) -> None:
                 return
             if not errors:      # after an error the rest is dropped, as inline
                 if kind == 'add':
-                    acc.add(samples)
+                    acc.add(*samples)
                 else:
                     acc.break_segment()
         except Exception as exc:  # noqa: B902 - handed to the feeding thread

@@ -76,6 +76,11 @@ class SessionConfig:
     min_still_share, min_still_s : float
         Less still data than this share of the samples received, or than this
         duration [s], refuses the analysis (NotEnoughStillData).
+    max_fill_samples : int
+        A gap of regular stamps that lost at most this many samples is short: it is
+        filled (linear interpolation), and no Allan term at short taus uses a
+        filled sample; a longer one splits the segment [samples].  0 splits at
+        every gap.
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
     background_accumulator : bool
@@ -106,6 +111,7 @@ class SessionConfig:
     anchor_s: float = 10.0
     min_still_share: float = 0.2
     min_still_s: float = 10.0
+    max_fill_samples: int = 8
     exact_max_m: int = 0
     background_accumulator: bool = False
 
@@ -141,6 +147,9 @@ class HygieneStats:
         Spike values replaced per axis name.
     n_gaps, n_missing : int
         Gaps in the stamps, and the samples they are estimated to have lost.
+    n_short_gaps, n_filled : int
+        Of those, the short gaps (filled, see ``SessionConfig.max_fill_samples``) and
+        the samples filled in them; the others split the record.
     n_clock_restarts : int
         Times the stamps jumped back and went on (a new segment each).
     n_rate_changes, n_motion_events, n_restarts, n_reanchors : int
@@ -168,6 +177,8 @@ class HygieneStats:
     n_motion_dropped: int = 0
     n_gaps: int = 0
     n_missing: int = 0
+    n_short_gaps: int = 0
+    n_filled: int = 0
     n_clock_restarts: int = 0
     n_rate_changes: int = 0
     n_motion_events: int = 0
@@ -181,6 +192,9 @@ class HygieneStats:
     @classmethod
     def restore(cls, state) -> 'HygieneStats':
         """Counters from :func:`dataclasses.asdict`; InputError when any is invalid."""
+        if isinstance(state, dict):
+            # Counters written before short gaps were filled: none were.
+            state = {'n_short_gaps': 0, 'n_filled': 0, **state}
         if not isinstance(state, dict) or set(state) != {f.name for f in fields(cls)}:
             raise InputError('the counters are incomplete or unknown')
         stats = cls(**state)
@@ -229,6 +243,19 @@ class WarningLog:
         # Tell the user at 1, 2, 4, 8 ... occurrences: informative without flooding.
         if self.on_warning is not None and n & (n - 1) == 0:
             self.on_warning(self.text[key])
+
+    def tally(self, key: str, text: str, n: int = 1) -> None:
+        """
+        Note ``n`` more occurrences of ``key``, whose ``text`` states the totals itself.
+
+        The text replaces the previous one (no count is appended); the user is told at
+        the first occurrence and whenever the count passes a power of two.
+        """
+        before = self.count.get(key, 0)
+        self.count[key] = before + n
+        self.text[key] = text
+        if self.on_warning is not None and (before + n).bit_length() > before.bit_length():
+            self.on_warning(text)
 
     @property
     def lines(self) -> list[str]:

@@ -120,6 +120,9 @@ PARAMS: tuple[NodeParam, ...] = (
               'Identical consecutive values that mark an axis as frozen'),
     NodeParam('gap_factor', float, _S.gap_factor, 'periods', (1.01, 1000.0),
               'A stamp step longer than this many periods is a gap'),
+    NodeParam('max_fill_samples', int, _S.max_fill_samples, 'samples', (0, 1000),
+              'A gap that lost at most this many samples is filled (no Allan term at short'
+              ' taus uses a fill); a longer one splits the record; 0 splits at every gap'),
     NodeParam('rate_tolerance', float, _S.rate_tolerance, '', (0.001, 1.0),
               'Relative rate change that is reported (and refuses a resume)'),
     NodeParam('spike_sigma', float, _S.spike_sigma, 'sigmas', (0.0, 1.0e6),

@@ -42,6 +42,26 @@ the total sum over 2 m^2 times the total number of terms (the batch estimator
 applied to each segment and pooled).  The EDF of a pooled estimate is approximated by
 that of one segment with the same number of terms (N_eff = n_terms + 2 m' - 1).
 
+Missing samples (:meth:`AllanAccumulator.add` with ``missing``): a short gap filled by
+the caller keeps the segment whole.  At exact taus the accumulator also sums the terms
+whose 2m samples hold a filled one, and :meth:`~AllanAccumulator.curve` leaves them out
+while that keeps at least half of the terms (:data:`SKIP_SHARE`): the overlapping
+estimator over the available terms, the gap estimator of Sesia and Tavella (Metrologia
+45, 2008, S134), unbiased whatever the noise.  Beyond (at 2 % of samples missing at
+random, from m = 17 on) nearly every term holds a filled sample and the filled terms
+are used, with their count scaled by the share of real samples, so the EDF and
+the curve's covariance count only real data.  A fill reads white noise high: a gap
+of g samples filled by linear interpolation gives its two neighbours the weight
+1 + g / 2 in a cluster, so the sum over all terms of a cluster size m exceeds the
+real samples' by sigma^2 (g + g^2 / 2) (2 m - 4) (summed over the term positions,
+the gap's neighbours straddling a cluster edge included; sigma^2 the variance of
+white samples).  With K the sum of g + g^2 / 2 over the gaps and N the samples,
+the filled taus subtract sigma^2 K (m - 2) / (N m^2) from the AVAR, sigma^2 read
+off the first tau over real samples alone.  Unrepaired, 2 % of the samples lost at
+random read white noise 3 % high there (15 % at 10 %); repaired, within 0.5 %
+(1.5 % at 10 %, m >= 4) on simulated white and random-walk noise
+(test/test_accumulator.py).
+
 Precision: the running sum is rebuilt for every chunk from zero, after subtracting a
 per-axis reference (the mean of the first chunk) and then the chunk window's own
 mean.  A constant subtracted from all samples of a window cancels exactly in every
@@ -64,6 +84,9 @@ _M_LO = 64
 _MAX_M = 2 ** 40
 #: Largest exact_max_m: keeps the state under 1 MB per axis (0.58 MB at this value).
 _MAX_EXACT_M = 2 ** 14
+#: A tau keeps only the terms free of missing samples while they are at least this share
+#: of all its terms; below, the terms over filled samples are kept too (module docstring).
+SKIP_SHARE = 0.5
 #: End points per tile of the exact passes: 6 axes x 16384 doubles (768 KiB) stay in
 #: L2; wider tiles cost more, narrower ones hand the GIL over more often (offline, the
 #: accumulator runs on a thread beside the checks and the reader).
@@ -152,11 +175,21 @@ class AllanAccumulator(_Persistence):
         self._seg_n = 0                 # processed samples in the current segment
         self._ref = np.zeros(n_axes)
         self._ref_set = False
+        # Missing (filled) samples in the level-0 buffer, and the exact taus' sums and
+        # counts of the terms that hold one.
+        self._miss = np.zeros(self._hist_cap + self._chunk, dtype=bool)
+        self._n_missing = 0
+        # Sum of g + g^2 / 2 over the gaps of g missing samples, and the missing samples
+        # that end the segment so far (a gap that goes on in the next block).
+        self._fill_excess = 0.0
+        self._miss_run = 0
         self._n_samples = 0
         self._n_segments = 0
         self._build_grid()
         self._sums = np.zeros((self._m.size, n_axes))
         self._counts = np.zeros(self._m.size, dtype=np.int64)
+        self._dirty_sums = np.zeros((self._m0.size, n_axes))
+        self._dirty_counts = np.zeros(self._m0.size, dtype=np.int64)
         self._work: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ grid
@@ -191,6 +224,11 @@ class AllanAccumulator(_Persistence):
         return self._n_samples
 
     @property
+    def n_missing(self) -> int:
+        """Return the number of samples added as missing (filled by the caller)."""
+        return self._n_missing
+
+    @property
     def n_segments(self) -> int:
         """Return the number of contiguous segments that received at least one sample."""
         return self._n_segments
@@ -223,7 +261,7 @@ class AllanAccumulator(_Persistence):
                    + self._counts.nbytes + sum(lv.hist.nbytes for lv in self._levels))
 
     # ------------------------------------------------------------- streaming
-    def add(self, samples: np.ndarray) -> None:
+    def add(self, samples: np.ndarray, missing: np.ndarray | None = None) -> None:
         """
         Add a block of consecutive samples to the current segment.
 
@@ -231,6 +269,11 @@ class AllanAccumulator(_Persistence):
         ----------
         samples : np.ndarray
             Shape (n, n_axes), rate samples [unit], any n >= 0.
+        missing : np.ndarray, optional
+            Shape (n,), bool: rows that stand in for lost samples (a short gap the
+            caller filled, e.g. by linear interpolation).  Exact taus leave the terms
+            over them out while that keeps at least :data:`SKIP_SHARE` of the terms;
+            those sums are differences, so fills should be of the samples' own size.
 
         """
         block = np.asarray(samples)
@@ -240,6 +283,13 @@ class AllanAccumulator(_Persistence):
         n = block.shape[0]
         if n == 0:
             return
+        if missing is not None:
+            missing = np.asarray(missing, dtype=bool).reshape(-1)
+            if missing.size != n:
+                raise InputError(f'missing must have one flag per row ({n}), '
+                                 f'not {missing.size}')
+            self._n_missing += int(missing.sum())
+            self._note_runs(missing)
         if not np.issubdtype(block.dtype, np.number) or np.iscomplexobj(block):
             raise InputError(f'samples must be real numbers, not {block.dtype}')
         for s in range(0, n, self._chunk):   # checked by chunks: bounded temporaries
@@ -252,11 +302,23 @@ class AllanAccumulator(_Persistence):
             take = min(n - start, self._chunk - self._pending)
             at = self._h0 + self._pending
             self._buf[:, at:at + take] = block[start:start + take].T
+            self._miss[at:at + take] = False if missing is None else missing[start:start + take]
             self._pending += take
             self._n_samples += take
             start += take
             if self._pending == self._chunk:
                 self._flush()
+
+    def _note_runs(self, missing: np.ndarray) -> None:
+        """Add each missing sample's share 1.5 + r of its gap's g + g^2 / 2 (r: its place)."""
+        if not missing.any():
+            self._miss_run = 0
+            return
+        idx = np.arange(missing.size)
+        last_real = np.maximum.accumulate(np.where(missing, -1, idx))
+        place = idx - last_real - 1 + np.where(last_real < 0, self._miss_run, 0)
+        self._fill_excess += float(np.sum(1.5 + place[missing]))
+        self._miss_run = int(place[-1]) + 1 if missing[-1] else 0
 
     def break_segment(self) -> None:
         """
@@ -270,6 +332,7 @@ class AllanAccumulator(_Persistence):
             self._flush()
         self._h0 = 0
         self._seg_n = 0
+        self._miss_run = 0
         for level in self._levels:
             level.h = 0
             level.n = 0
@@ -294,7 +357,16 @@ class AllanAccumulator(_Persistence):
         x_all, x2_all, tile = self._work_arrays()
         x = x_all[:, :w + 1]
         r = _phase(buf[:, :w], x)
-        _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, x2_all, tile)
+        if self._miss[h:w].any():
+            sums = np.zeros((self._m0.size, self.n_axes))
+            counts = np.zeros(self._m0.size, dtype=np.int64)
+            _accumulate(x, h + 1, w, self._m0, sums, counts, 0, x2_all, tile)
+            self._sums[:self._m0.size] += sums
+            self._counts[:self._m0.size] += counts
+            _dirty_terms(x, self._miss[:w], h + 1, self._m0, sums, self._dirty_sums,
+                         self._dirty_counts)
+        else:
+            _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, x2_all, tile)
         # Cluster sums for level 1 end at segment indices that are multiples of D_1.
         base = self._seg_n - h
         if self._levels:
@@ -305,6 +377,7 @@ class AllanAccumulator(_Persistence):
         self._seg_n += p
         keep = min(self._hist_cap, self._seg_n)
         buf[:, :keep] = buf[:, w - keep:w]
+        self._miss[:keep] = self._miss[w - keep:w]
         self._h0, self._pending = keep, 0
         if self._levels and clusters.shape[1]:
             self._push(0, clusters)
@@ -332,13 +405,49 @@ class AllanAccumulator(_Persistence):
             values = x[:, ends] - x[:, ends - 2] + 2.0 * r[:, None]
 
     # ----------------------------------------------------------------- curve
-    def _sums_now(self) -> tuple[np.ndarray, np.ndarray]:
-        """Pooled sums and counts including pending samples, leaving self unchanged."""
+    def _sums_now(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Pooled sums and counts, then the exact taus' terms over missing samples."""
         if not self._pending:
-            return self._sums, self._counts
+            return self._sums, self._counts, self._dirty_sums, self._dirty_counts
         clone = self._copy()
         clone._flush()
-        return clone._sums, clone._counts
+        return clone._sums, clone._counts, clone._dirty_sums, clone._dirty_counts
+
+    def _used_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """
+        Return the sums (K, n_axes), term counts (K,) and effective counts (K,) per tau.
+
+        With missing samples, an exact tau keeps the terms free of them while they are
+        at least :data:`SKIP_SHARE` of its terms (then every term counts in full);
+        otherwise all terms are kept, less the fills' white-noise excess (module
+        docstring), and count by the share of real samples.
+        """
+        sums, counts, dirty_sums, dirty_counts = self._sums_now()
+        if not self._n_missing:
+            return sums, counts, counts
+        k0 = self._m0.size
+        clean = counts[:k0] - dirty_counts
+        skip = (dirty_counts > 0) & (clean >= SKIP_SHARE * counts[:k0])
+        sums, counts = sums.copy(), counts.copy()
+        # The clean sums are the larger part here: the difference keeps their digits.
+        sums[:k0][skip] = np.maximum(sums[:k0][skip] - dirty_sums[skip], 0.0)
+        counts[:k0][skip] = clean[skip]
+        real = 1.0 - self._n_missing / max(self._n_samples, 1)
+        eff = np.maximum(np.round(counts * real).astype(np.int64), np.minimum(counts, 1))
+        kept = np.zeros(counts.size, bool)
+        kept[:k0] = skip | (dirty_counts == 0)
+        eff[kept] = counts[kept]
+        if counts[0] and self._m[0] == 1:
+            # sigma^2 from the first tau over real samples alone; the excess per term.
+            sigma2 = sums[0] / (2.0 * counts[0])
+            mf = self._m.astype(float)
+            excess = (sigma2[None, :] * (self._fill_excess / max(self._n_samples, 1))
+                      * np.maximum(2.0 * mf - 4.0, 0.0)[:, None])
+            fix = ~kept & (counts > 0)
+            # Never more than half the sum: a guard for noise far from white at tau0.
+            sums[fix] = np.maximum(sums[fix] - excess[fix] * counts[fix, None],
+                                   0.5 * sums[fix])
+        return sums, counts, eff
 
     def curve(self, confidence: float = 0.683, alpha=None, min_terms: int = 1,
               bounds: bool = True) -> AllanCurve:
@@ -366,17 +475,19 @@ class AllanAccumulator(_Persistence):
         -------
         AllanCurve
             method 'overlapping'; edf from the level's effective (m', N_eff) as in the
-            module docstring; taus with ``m <= exact_max_m`` are exact.
+            module docstring; taus with ``m <= exact_max_m`` are exact.  With missing
+            samples, n_terms counts the terms used, or (where the terms over filled
+            samples are kept) their number scaled by the share of real samples.
 
         """
         if not 0.0 < confidence < 1.0:
             raise InputError(f'confidence must lie strictly between 0 and 1, not {confidence}')
-        sums, counts = self._sums_now()
+        sums, counts, eff = self._used_terms()
         sel = counts >= max(int(min_terms), 1)
         m = self._m[sel]
-        n_terms = counts[sel]
         tau_s = m / self.rate_hz
-        avar = sums[sel] / (2.0 * m.astype(float) ** 2 * n_terms)[:, None]
+        avar = sums[sel] / (2.0 * m.astype(float) ** 2 * counts[sel])[:, None]
+        n_terms = eff[sel]
         k, a = m.size, self.n_axes
         if k == 0:
             empty = np.zeros((0, a))
@@ -479,3 +590,46 @@ def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray, sums: 
             # a busy machine; numpy's own loop is as fast single-threaded.
             total += np.einsum('ij,ij->i', d, d)
         sums[row0 + k] += total
+
+
+def _dirty_terms(x: np.ndarray, miss: np.ndarray, j_first: int, ms: np.ndarray,
+                 totals: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> None:
+    """
+    Add the squared second differences that hold a missing sample, per cluster size.
+
+    The term ending at x[:, j] spans samples j - 2m .. j - 1 of the window; it is
+    dirty when one of them is missing.  Whichever of the dirty and the clean terms
+    are fewer is summed (the other part is the window's total less it), so the work
+    stays below half a pass per tau.
+
+    Parameters
+    ----------
+    x : np.ndarray
+        Shape (n_axes, w + 1), running sum of the window's samples.
+    miss : np.ndarray
+        Shape (w,), bool, the window's missing samples.
+    j_first : int
+        First new end point (local index into x); the last is w.
+    ms : np.ndarray
+        Shape (k,), cluster sizes [samples].
+    totals : np.ndarray
+        Shape (k, n_axes), the window's sums over all its new terms per size.
+    sums, counts : np.ndarray
+        Shapes (k, n_axes) and (k,), updated in place with the dirty terms.
+
+    """
+    w = miss.size
+    n_miss = np.concatenate(([0], np.cumsum(miss)))
+    for k, m in enumerate(ms.tolist()):
+        j = np.arange(max(j_first, 2 * m), w + 1)
+        if not j.size:
+            continue
+        dirty = n_miss[j] > n_miss[j - 2 * m]
+        n_dirty = int(dirty.sum())
+        if not n_dirty:
+            continue
+        pick = j[dirty] if 2 * n_dirty <= j.size else j[~dirty]
+        d = x[:, pick] + x[:, pick - 2 * m] - 2.0 * x[:, pick - m]
+        part = np.einsum('ij,ij->i', d, d)
+        sums[k] += part if 2 * n_dirty <= j.size else np.maximum(totals[k] - part, 0.0)
+        counts[k] += n_dirty

@@ -8,6 +8,7 @@ shape, counter and value, so a corrupt or foreign file is an InputError, not a w
 """
 
 import json
+import math
 from pathlib import Path
 from typing import Self, TYPE_CHECKING
 
@@ -18,6 +19,8 @@ from imu_allan.errors import InputError
 
 STATE_FORMAT = 'imu_allan.core.accumulator'
 STATE_VERSION = 1
+#: Arrays of the missing samples (absent from states written before they were known).
+_MISSING_KEYS = ('miss', 'dirty_sums', 'dirty_counts')
 
 
 # Long because from_state checks every field of a state it did not write: a corrupt
@@ -56,12 +59,16 @@ class _Persistence:
             'pending': self._pending, 'ref_set': self._ref_set,
             'level_h': [lv.h for lv in self._levels],
             'level_n': [lv.n for lv in self._levels],
+            'n_missing': self._n_missing, 'fill_excess': self._fill_excess,
+            'miss_run': self._miss_run,
         }
         arrays = {
             'buf': self._buf[:, :self._h0 + self._pending].copy(),
             'ref': self._ref.copy(),
             'level_hist': np.stack([lv.hist for lv in self._levels]),
             'sums': self._sums.copy(), 'counts': self._counts.copy(), 'm': self._m.copy(),
+            'miss': self._miss[:self._h0 + self._pending].copy(),
+            'dirty_sums': self._dirty_sums.copy(), 'dirty_counts': self._dirty_counts.copy(),
         }
         return meta, arrays
 
@@ -71,6 +78,14 @@ class _Persistence:
         self._ref = arrays['ref'].astype(float)
         self._sums = arrays['sums'].astype(float)
         self._counts = arrays['counts'].astype(np.int64)
+        # States written before missing samples were known have none.
+        if 'miss' in arrays:
+            self._miss[:w] = arrays['miss']
+            self._dirty_sums = arrays['dirty_sums'].astype(float)
+            self._dirty_counts = arrays['dirty_counts'].astype(np.int64)
+        self._n_missing = int(meta.get('n_missing', 0))
+        self._fill_excess = float(meta.get('fill_excess', 0.0))
+        self._miss_run = int(meta.get('miss_run', 0))
         for lv, hist, h, n in zip(self._levels, arrays['level_hist'], meta['level_h'],
                                   meta['level_n']):
             lv.hist[...] = hist
@@ -119,7 +134,7 @@ class _Persistence:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z['meta']))
                 arrays = {k: z[k] for k in ('buf', 'ref', 'level_hist', 'sums', 'counts',
-                                            'm')}
+                                            'm', *_MISSING_KEYS) if k in z}
         except FileNotFoundError:
             raise InputError(f'accumulator state {path} does not exist') from None
         except Exception as exc:  # zip, JSON, missing keys: all mean a bad file
@@ -184,6 +199,7 @@ class _Persistence:
                                  f'expected {shape}')
             if not np.isfinite(arr).all():
                 raise InputError(f'array {key!r} holds non-finite values')
+        _check_missing(meta, arrays, acc, h0 + pending)
         if not np.array_equal(arrays['m'], acc._m):
             raise InputError('its tau grid does not match its settings')
         if (arrays['counts'] < 0).any() or (arrays['sums'] < 0).any():
@@ -199,3 +215,29 @@ class _Persistence:
             raise InputError('inconsistent buffer counters')
         acc._set_state(meta, arrays)
         return acc
+
+
+def _check_missing(meta: dict, arrays: dict, acc, w: int) -> None:
+    """Check the missing-sample fields of a state (all present, or all absent)."""
+    present = [k in arrays for k in _MISSING_KEYS]
+    if not any(present) and 'n_missing' not in meta:
+        return
+    if not all(present):
+        raise InputError('the missing-sample arrays are incomplete')
+    k0 = acc._m0.size
+    expect = {'miss': (w,), 'dirty_sums': (k0, acc.n_axes), 'dirty_counts': (k0,)}
+    for key, shape in expect.items():
+        arr = arrays[key]
+        if arr.shape != shape or arr.dtype.kind not in ('b' if key == 'miss' else 'fi'):
+            raise InputError(f'array {key!r} has shape {arr.shape} and type {arr.dtype}, '
+                             f'expected {shape}')
+    n_missing, excess, run = (meta.get(k) for k in ('n_missing', 'fill_excess', 'miss_run'))
+    if not (isinstance(n_missing, int) and isinstance(run, int)) or isinstance(run, bool):
+        raise InputError('the missing-sample counts are invalid')
+    dirty_sums, dirty_counts = arrays['dirty_sums'], arrays['dirty_counts']
+    if (not isinstance(excess, (int, float)) or not 0 <= excess < math.inf
+            or not 0 <= run <= n_missing <= int(meta['n_samples'])
+            or not np.isfinite(dirty_sums).all()
+            or (dirty_sums < 0).any() or (dirty_counts < 0).any()
+            or (dirty_counts > arrays['counts'][:k0]).any()):
+        raise InputError('the missing-sample counts are invalid')

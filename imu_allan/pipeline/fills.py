@@ -1,0 +1,73 @@
+"""
+Rows that stand in for lost samples: made by the stamp clock, found by the feed.
+
+A short gap in the stamps (at most ``SessionConfig.max_fill_samples`` lost samples)
+does not end the segment: the stamp clock fills it by linear interpolation between
+its neighbours, so the sample gate sees an even stream, and the accumulator is told
+which rows are filled (it leaves the terms over them out at short taus and takes the
+fills' known white-noise excess off the others, :mod:`imu_allan.core.allan.accumulator`).
+The gate passes rows on by value only, so a filled row carries its mark in its values:
+the low 24 bits of each value's mantissa hold :data:`TAG` (a change below 4e-9 of the
+value, far below any sensor's resolution).  A row is a fill when one of its values
+carries the tag: an axis whose two neighbours are equal keeps their value untagged, so
+a held value stays one run for the frozen-axis check (a quantised accelerometer
+repeats its neighbours often; a row is missed only when all six axes do).  Real
+samples come from float32 (the low 29 bits zero: never tagged) or from decimal text,
+where a row ends in the tag by chance with a probability of 4e-7; such a row only
+loses its terms at short taus, which leaves the estimate unbiased.
+"""
+
+import numpy as np
+
+#: The low mantissa bits of a filled value.
+TAG = 0xA5C3E1
+_LOW = np.uint64(0xFFFFFF)
+
+
+def fill_rows(left: np.ndarray, right: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """
+    Rows filling gaps by linear interpolation, tagged as fills.
+
+    Parameters
+    ----------
+    left, right : numpy.ndarray
+        Shape (g, n_axes), the rows before and after each gap [unit]; an axis whose
+        two neighbours are equal keeps their value untagged (a held value stays one
+        run for the frozen-axis check).
+    k : numpy.ndarray
+        Shape (g,), int, samples lost in each gap (>= 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (sum(k), n_axes), the fills of gap 0, then gap 1 ... [unit].
+
+    """
+    gap = np.repeat(np.arange(k.size), k)
+    step = np.arange(gap.size) - np.repeat(np.cumsum(k) - k, k) + 1
+    a, b = left[gap], right[gap]
+    rows = np.ascontiguousarray(a + (b - a) * (step / (k[gap] + 1.0))[:, None])
+    tagged = ((rows.view(np.uint64) & ~_LOW) | np.uint64(TAG)).view(np.float64)
+    return np.where(a == b, rows, tagged)
+
+
+def filled(samples: np.ndarray) -> np.ndarray | None:
+    """
+    Tell which rows are fills (see the module docstring).
+
+    Parameters
+    ----------
+    samples : numpy.ndarray
+        Shape (n, n_axes), float64 rows.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        Shape (n,), bool; None when no row is a fill.
+
+    """
+    y = np.ascontiguousarray(samples, dtype=np.float64)
+    marks = (y.view(np.uint64) & _LOW) == np.uint64(TAG)
+    if not marks.any():
+        return None
+    return marks.any(axis=1)
