@@ -365,9 +365,11 @@ def test_bad_inputs_exit_2_with_one_clear_line(tmp_path, rec, capsys):
         code, out, err = _cli(['analyze', *args, '--out', tmp_path / 'o', '--format', 'json'],
                               capsys)
         assert code == 2, name
-        assert out == '', name
         assert len(err) == 1, (name, err)
         assert err[0].startswith('imu-allan: error: ') and words in err[0], (name, err[0])
+        # --format json: the same error as the one document on stdout.
+        assert json.loads(out) == {'error': err[0].removeprefix('imu-allan: error: '),
+                                   'exit_code': 2}, name
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason='root reads files whatever their mode')
@@ -382,9 +384,12 @@ def test_unreadable_file(tmp_path, capsys):
 def test_bad_input_in_a_real_process_has_no_traceback(tmp_path):
     proc = subprocess.run([sys.executable, '-m', 'imu_allan', 'analyze', str(tmp_path / 'x.db3'),
                            '--format', 'json'], capture_output=True, text=True, check=False)
-    assert proc.returncode == 2 and proc.stdout == ''
+    assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
         f'imu-allan: error: {tmp_path / "x.db3"}: no such file or directory']
+    # --format json: the error as the one document on stdout.
+    assert json.loads(proc.stdout) == {
+        'error': f'{tmp_path / "x.db3"}: no such file or directory', 'exit_code': 2}
 
 
 def test_several_inputs_one_bad_still_reports_the_good_one(tmp_path, rec, capsys):
@@ -483,6 +488,8 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
                            '--no-plot'], capsys)
     assert code == 0, err
     cli_doc = json.loads(out)
+    # The bag reader alone counts the messages without orientation (the node reads none).
+    assert cli_doc['hygiene'].pop('n_no_orientation') == N
     for key in ('sample_rate_hz', 'duration_s', 'n_samples', 'warnings', 'hygiene', 'kalman',
                 'imu_covariance'):
         assert cli_doc[key] == node_doc[key], key
