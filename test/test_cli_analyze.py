@@ -318,6 +318,28 @@ def test_one_imu_topic_among_others_is_found_several_need_topic(tmp_path, rec, c
     assert code == 0 and json.loads(out)['source'] == 'two /imu/a'
 
 
+def test_two_imus_on_one_topic_need_frame_id(tmp_path, rec, capsys):
+    # Two IMUs on /imu (frame_ids imu_a, imu_b, 5 ms apart): never one 200 Hz IMU.
+    stamps, samples = rec
+    rows_a = serialize_imu(stamps, samples, 'imu_a')
+    rows_b = serialize_imu(stamps + 5_000_000, samples[::-1], 'imu_b')
+    msgs = [m for k in range(N) for m in ((int(stamps[k]), rows_a[k].tobytes()),
+                                          (int(stamps[k]) + 5_000_000, rows_b[k].tobytes()))]
+    bag = _rosbags2(tmp_path / 'two', {'/imu': (IMU, msgs)}, storage=StoragePlugin.MCAP)
+    code, out, err = _cli(['analyze', bag, '--out', tmp_path / 'o'], capsys)
+    assert code == 2 and out == '' and len(err) == 1, err
+    assert err[0].endswith(f'/imu carries 2 IMUs (header.frame_id): imu_a ({N} messages), '
+                           f'imu_b ({N} messages); choose one with --frame-id NAME'), err[0]
+    code, out, err = _cli(['analyze', bag, '--frame-id', 'imu_b', '--out', tmp_path / 'o',
+                           '--format', 'json', '--no-plot', '--no-plan'], capsys)
+    assert code == 0, err
+    doc = json.loads(out)
+    assert (doc['n_samples'], doc['sample_rate_hz']) == (N, RATE)
+    assert doc['hygiene']['n_lost'] == 0
+    assert f"{N} messages of other IMUs on /imu skipped (frame_id 'imu_b' read; others: " \
+           f'imu_a ({N}))' in doc['warnings']
+
+
 # -- bad input: exit 2, one line, no traceback ---------------------------------------
 
 def _bad_inputs(tmp_path, stamps, samples) -> dict:

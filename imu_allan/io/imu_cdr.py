@@ -428,7 +428,7 @@ def payload_frames(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     width = 4 + max(min(size0, int(lengths[0]) - 16), 0)
     if (lengths >= 12 + width).all():
         heads = _records(u8, starts, _key_dtype(width))
-        if all((heads[name] == heads[name][0]).all() for name in heads.dtype.names):
+        if all((heads[name] == heads[name][0]).all() for name in heads.dtype.names or ()):
             # A CDR string's length counts its NUL.
             size = max(width - 4 - (encoding != 'ros1'), 0)
             return [u8[first + 16:first + 16 + size].tobytes().decode('utf-8', 'replace')], None
