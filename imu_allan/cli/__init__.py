@@ -13,6 +13,7 @@ import sys
 
 from imu_allan import __version__
 from imu_allan.errors import InputError
+from imu_allan.pipeline.workers import one_blas_thread
 
 SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'fleet', 'demo', 'plan')
 #: Every command: (module in SUBCOMMANDS, one-line help).  Only the module of the command
@@ -65,6 +66,7 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Run the CLI; return the process exit code."""
+    one_blas_thread()       # before the command's module loads numpy
     parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:

@@ -25,7 +25,7 @@ from imu_allan import AXES
 from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
 from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
-from imu_allan.pipeline.workers import one_blas_thread, start_workers, worker_pool
+from imu_allan.pipeline.workers import start_workers, worker_pool
 
 if TYPE_CHECKING:
     from imu_allan.core.noise.unit_check import DeclaredUnits
@@ -212,7 +212,6 @@ def run(args) -> int:
     config = session_config_from_args(args)    # bad values: one line, before the work
     units = units_from_args(args)
     paths = [Path(p) for p in args.inputs]
-    one_blas_thread()           # its threads and processes already fill the cores
     plot = not args.no_plot
     workers = args.jobs or min(2, os.cpu_count() or 1)
     if len(paths) == 1 and workers > 1 and paths[0].exists():
