@@ -252,8 +252,6 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         outcomes = _run_several(jobs, n_workers)
     else:
         # One input: its six axes are searched on the cores (several inputs: one each).
-        if workers > 1:   # and the accumulator sums on a thread of its own
-            config = replace(config, background_accumulator=True)
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
                                         units=units, plan=plan is not None,
                                         plan_targets=plan)

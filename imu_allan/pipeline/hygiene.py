@@ -78,11 +78,6 @@ class SessionConfig:
         duration [s], refuses the analysis (NotEnoughStillData).
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
-    background_accumulator : bool
-        The accumulator sums on a thread of its own while the checks go on (one input
-        on two cores: ``imu-allan analyze``).  The sums are identical either way.  The
-        thread reads the blocks given to :meth:`Session.add` later, so the caller must
-        not change them afterwards (the offline readers make a new array per block).
 
     """
 
@@ -107,7 +102,6 @@ class SessionConfig:
     min_still_share: float = 0.2
     min_still_s: float = 10.0
     exact_max_m: int = 0
-    background_accumulator: bool = False
 
     def __post_init__(self):
         if self.on_motion not in MOTION_POLICIES:
