@@ -33,6 +33,7 @@ lint: venv
 
 # Benchmarks print ratios against baselines measured in the same run (not timed tests).
 bench: venv
+	$(PY) bench/bench_guards.py
 	$(PY) bench/bench_accumulator.py
 	$(PY) bench/bench_batch.py
 	$(PY) bench/bench_fit.py
