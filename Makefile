@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 
 venv: $(STAMP)
 
-$(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg imu_allan/core/native/_native.c
+$(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg
 	@py="$${PYTHON:-$$(tools/find_python312.sh)}" || exit 1; \
 	if [ ! -x $(PY) ] || ! $(PY) -c 'import sys; assert sys.version_info[:2] == (3, 12)' 2>/dev/null; then \
 		rm -rf $(VENV); echo "creating $(VENV) with $$py"; "$$py" -m venv $(VENV) || exit 1; \
@@ -33,6 +33,7 @@ lint: venv
 
 # Benchmarks print ratios against baselines measured in the same run (not timed tests).
 bench: venv
+	$(PY) bench/bench_guards.py
 	$(PY) bench/bench_accumulator.py
 	$(PY) bench/bench_batch.py
 	$(PY) bench/bench_fit.py

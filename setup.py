@@ -1,7 +1,7 @@
 from glob import glob
 import os
 
-from setuptools import Extension, find_packages, setup
+from setuptools import find_packages, setup
 
 package_name = 'imu_allan'
 
@@ -15,11 +15,6 @@ setup(
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
     ],
-    # The core's compiled kernels: plain C called through ctypes (imu_allan/core/native/),
-    # so no numpy headers are needed.
-    ext_modules=[Extension(f'{package_name}.core.native._native',
-                           ['imu_allan/core/native/_native.c'],
-                           extra_compile_args=['-O3', '-ffp-contract=off'])],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml'],
     # imu-allan fleet: Dask for the cluster, pyarrow for the Parquet store.
     extras_require={'fleet': ['dask[distributed]>=2024.1', 'pyarrow>=14']},

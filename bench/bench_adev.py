@@ -10,8 +10,8 @@ temporary file, then measures, in the same run:
 * ``np.loadtxt`` plus ``allantools.oadev`` at the same taus in one fresh Python
   process (its imports included), best of ``--repeat``.
 
-Prints both, their ratio (guard of issue 28: at least 2x) and the largest relative difference of
-the two curves (target 1e-9).
+Prints both, their ratio (the guard, at least 2x, is measured by ``bench_guards.py``) and the
+largest relative difference of the two curves (target 1e-9).
 """
 
 import argparse

@@ -26,8 +26,8 @@ skip the writing.  For each storage it prints, measured in the same run:
   workers): reading with the checks and accumulation, the search, the plan and the
   files; the last three cost the same for any record length.
 
-Guards (issue 28, 2 cores): at least 1 M messages/s end to end and at least 15x the plain
-rosbags loop, on both storages.
+The guards, ratios against the storage libraries' own reading measured in the same run,
+are in ``bench_guards.py``.
 
 Usage: ``.venv/bin/python bench/bench_analyze.py [--hours H] [--rate HZ] [--subset N]
 [--cache DIR] [--storage mcap sqlite3] [--repeat R]``
@@ -282,10 +282,8 @@ def main() -> None:
         rate = n / wall
         base_rate = base_n / base_s
         print(f'[{storage}] analyze end to end: {wall:6.2f} s wall (best of {len(walls)}: '
-              f'{", ".join(f"{w:.2f}" for w in walls)} s), {rate / 1e6:.2f} M msg/s '
-              f'({"meets" if rate >= 1e6 else "MISSES"} the 1 M msg/s target), '
-              f'{rate / base_rate:.1f}x the rosbags loop '
-              f'({"meets" if rate >= 15 * base_rate else "MISSES"} the 15x guard); '
+              f'{", ".join(f"{w:.2f}" for w in walls)} s), {rate / 1e6:.2f} M msg/s, '
+              f'{rate / base_rate:.1f}x the rosbags loop; '
               f'{cpu:.2f} CPU s{cpu_scope} (at least {cpu / (os.cpu_count() or 1):.2f} s '
               f'of wall on these cores); load average {os.getloadavg()[0]:.1f}')
         print(f'[{storage}]   --jobs 1 (one process, accumulator inline): {wall_1:.2f} s; '

@@ -22,7 +22,6 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
-from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import ImuBlock, list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
@@ -33,7 +32,6 @@ IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
 T0_NS = 1_700_000_000_000_000_000
-COMPILED = native.LIB
 
 
 def _recording(n: int, seed: int, rate_hz: float = 400.0):
@@ -261,10 +259,7 @@ def _mixed_cdr(seed: int):
     return stamps, samples, msgs, payloads
 
 
-@pytest.mark.parametrize('compiled', [True, False], ids=['compiled', 'numpy'])
-def test_decoder_handles_big_endian_odd_lengths_and_garbage(monkeypatch, compiled):
-    if not compiled:
-        monkeypatch.setattr(native, 'LIB', None)
+def test_decoder_handles_big_endian_odd_lengths_and_garbage():
     stamps, samples, _, payloads = _mixed_cdr(seed=7)
     stamp_ns, values, ok = decode_imu_payloads(
         np.frombuffer(b''.join(payloads), np.uint8),
@@ -277,10 +272,7 @@ def test_decoder_handles_big_endian_odd_lengths_and_garbage(monkeypatch, compile
         decode_imu_cdr(payloads)
 
 
-@pytest.mark.parametrize('compiled', [True, False], ids=['compiled', 'numpy'])
-def test_ros1_payloads_decode_alike(monkeypatch, compiled):
-    if not compiled:
-        monkeypatch.setattr(native, 'LIB', None)
+def test_ros1_payloads_decode_alike():
     stamps, samples = _recording(5, seed=9)
     payloads = [bytes(ROS1.serialize_ros1(_imu_msg(ROS1, stamps[i], samples[i], 'x' * i), IMU))
                 for i in range(5)]

@@ -269,6 +269,25 @@ def test_a_checkpoint_of_another_format_version_is_refused(tmp_path):
         Session.load_state(tmp_path / 'old.npz')
 
 
+def test_a_checkpoint_with_the_retired_accumulator_thread_setting_resumes(tmp_path):
+    # Checkpoints of the version that had the accumulator's thread hold its setting.
+    t, y = _record(10_000)
+    first = Session()
+    for k in range(0, 5_000, 500):
+        first.add(t[k:k + 500], y[k:k + 500])
+    first.save_state(tmp_path / 'state.npz')
+    with np.load(tmp_path / 'state.npz') as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays['session_meta']))
+    meta['config']['background_accumulator'] = False
+    arrays['session_meta'] = np.array(json.dumps(meta))
+    np.savez(tmp_path / 'old.npz', **arrays)
+    resumed = Session.load_state(tmp_path / 'old.npz')
+    whole = _feed(Session(), t, y, block=500)
+    assert_allclose(_feed(resumed, t[5_000:], y[5_000:], block=500).curve().avar,
+                    whole.curve().avar, rtol=1e-12)
+
+
 @pytest.mark.parametrize('stamps, samples, match', [
     (np.zeros(3, dtype=np.int64), np.zeros((3, 5)), r'samples \(n, 6\)'),
     (np.array(['a', 'b']), np.zeros((2, 6)), 'integer nanoseconds'),

@@ -16,6 +16,7 @@ import sys
 
 from imu_allan import __version__
 from imu_allan.errors import InputError
+from imu_allan.pipeline.workers import one_blas_thread
 
 SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'fleet', 'demo', 'plan')
 #: Every command: (module in SUBCOMMANDS, one-line help).  Only the module of the command
@@ -127,6 +128,7 @@ def main(argv=None) -> int:
     """Run the CLI; return the process exit code."""
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     json_out = wants_json(argv)
+    one_blas_thread()       # before the command's module loads numpy
     try:
         args = build_parser(argv).parse_args(argv)
         json_out = getattr(args, 'format', None) == 'json'

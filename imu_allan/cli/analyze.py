@@ -25,7 +25,7 @@ from imu_allan import AXES
 from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
 from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
-from imu_allan.pipeline.workers import one_blas_thread, start_workers, worker_pool
+from imu_allan.pipeline.workers import start_workers, worker_pool
 
 if TYPE_CHECKING:
     from imu_allan.core.noise.unit_check import DeclaredUnits
@@ -220,7 +220,6 @@ def run(args) -> int:
     config = session_config_from_args(args)    # bad values: one line, before the work
     units = units_from_args(args)
     paths = [Path(p) for p in args.inputs]
-    one_blas_thread()           # its threads and processes already fill the cores
     plot = not args.no_plot
     workers = args.jobs or min(2, os.cpu_count() or 1)
     if len(paths) == 1 and workers > 1 and paths[0].exists():
@@ -261,8 +260,6 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         outcomes = _run_several(jobs, n_workers)
     else:
         # One input: its six axes are searched on the cores (several inputs: one each).
-        if workers > 1:   # and the accumulator sums on a thread of its own
-            config = replace(config, background_accumulator=True)
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
                                         units=units, frame_id=args.frame_id,
                                         plan=plan is not None,

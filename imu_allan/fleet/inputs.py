@@ -201,8 +201,8 @@ def content_key(path) -> str:
     """
     Return a hash of an input's content (a directory: names and contents).
 
-    The first 128 bits of SHA-256 (twice as fast as BLAKE2b on CPUs with SHA
-    instructions: 1.5 GB/s here).
+    The first 128 bits of SHA-256 (faster than BLAKE2b on CPUs with SHA
+    instructions).
 
     Raises
     ------

@@ -37,12 +37,12 @@ HEAP_KEEP_BYTES = 1 << 28
 HEAP_ENV = ('MALLOC_MMAP_THRESHOLD_', 'MALLOC_TRIM_THRESHOLD_')
 #: Set in every local worker before it starts.  Dask sets MALLOC_TRIM_THRESHOLD_, and any
 #: malloc variable freezes glibc's mmap threshold at 128 KiB: every large numpy temporary
-#: is then a fresh mmap and page-faults anew, which made each analysis 1.5x slower in a
-#: worker than in a plain process (bench/bench_fleet.py).  Large blocks stay on the heap,
-#: and the heap is trimmed only above 256 MiB: Dask's 64 KiB handed the freed top of the
-#: heap back after every large temporary, so the next one page-faulted again (8 % more
-#: CPU per analysis than in a plain process; a worker's peak stays about 0.3 GB).
-#: The statistical profiler (a stack sample every 10 ms) is off, and the event loop's
+#: is then a fresh mmap and page-faults anew, which made each analysis slower in a worker
+#: than in a plain process (bench/bench_fleet.py, docs/benchmarks.md).  Large blocks stay
+#: on the heap, and the heap is trimmed only above 256 MiB: Dask's 64 KiB handed the freed
+#: top of the heap back after every large temporary, so the next one page-faulted again
+#: (a worker's peak stays about 0.3 GB).
+#: The statistical profiler (its periodic stack samples) is off, and the event loop's
 #: watchdog tick and monitors run rarely: each wake-up takes the GIL from the analysis.
 WORKER_CONFIG = {**{f'distributed.nanny.pre-spawn-environ.{name}': HEAP_KEEP_BYTES
                     for name in HEAP_ENV},

@@ -5,12 +5,12 @@ Inputs: a rosbag2 directory (metadata.yaml of any version, or none: the storage
 files are read directly), a single ``.mcap`` or ``.db3`` file, or a ROS 1 ``.bag``.
 Time comes from ``header.stamp`` (docs/contracts.md); the bag's receive time is kept too.
 
-Speed: decoding one message at a time in Python reaches about 27,000 msg/s, so a
-3-hour 400 Hz recording would take minutes.  Here raw serialised payloads are
+Speed: decoding one message at a time in Python would take minutes for a long
+recording (docs/benchmarks.md).  Here raw serialised payloads are
 located in bulk (sqlite: the messages table's B-tree pages parsed straight from the
 file, with SQL in rowid order from the first row that path cannot vouch for; MCAP:
 whole chunks, CRC-checked, walked record by record) and decoded with numpy structured
-dtypes (or the compiled twin), one call per group of messages.  Files are read with
+dtypes, one call per group of messages.  Files are read with
 plain reads, never mapped, so a file that shrinks while it is read cannot crash the
 process.  Whatever is lost (damaged chunks or pages, undecodable payloads) is counted
 against the bag's own count and warned about (``ImuSource.n_lost``); messages come in

@@ -9,8 +9,8 @@ with the columns named explicitly, and headerless numeric files (one or more col
 be given.
 
 Reading reads the file (never maps it: a file that shrinks while it is read cannot
-crash the process) and parses the whole text in one call of the core's compiled parser
-(numpy's loadtxt when that refuses the text), then validates; only when both fail does
+crash the process) and parses the whole text in one call of numpy's loadtxt, then
+validates; only when both fail does
 a line-by-line pass run, to name the first bad row.  A lone carriage return (which some
 readers take for a line end and the parser for blank space) is refused.
 """
@@ -27,7 +27,6 @@ import zlib
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core import native
 from imu_allan.errors import InputError
 
 #: Names accepted for the time column [s].
@@ -129,18 +128,12 @@ def _is_number(text: str) -> bool:
 def _parse_fast(data: memoryview, n_cols: int, path: Path | None = None,
                 skip_lines: int = 0) -> np.ndarray | None:
     """
-    Parse the data rows in one C-level call; None when anything is off.
+    Parse the data rows in one call of numpy's loadtxt; None when anything is off.
 
-    The core's compiled parser (:func:`imu_allan.core.native.parse_csv`) reads plain
-    decimal numbers, 4 million in about 0.1 s; anything else (nan, text, a wrong field
-    count) goes on to numpy, whose loadtxt has a C tokenizer too: 0.37 s for 4 million
-    numbers when given the path of a plain file (it reads the file itself, skipping the
-    ``skip_lines`` lines before the data), 0.63 s through a Python file object.
+    Given the path of a plain file, loadtxt reads the file itself (skipping the
+    ``skip_lines`` lines before the data), which is quicker than through a Python file
+    object.
     """
-    if native.LIB is not None:
-        table = native.parse_csv(data, n_cols)
-        if table is not None:
-            return table
     source = path if path is not None else io.BytesIO(data)
     try:
         with warnings.catch_warnings():

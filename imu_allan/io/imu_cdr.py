@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from imu_allan.core import native
 from imu_allan.errors import InputError
 
 #: Message type name of sensor_msgs/Imu in ROS 2, and the names it has in ROS 2 and ROS 1.
@@ -206,8 +205,7 @@ def decode_imu_payloads(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     ok = np.zeros(n, bool)
     if n == 0:
         return stamp_ns, samples, ok
-    decode = native.decode_imu if native.LIB is not None else _decode_plain
-    decode(u8, starts, lengths, ros1, stamp_ns, samples, ok)
+    _decode_plain(u8, starts, lengths, ros1, stamp_ns, samples, ok)
     # The message must end with its last double: a damaged frame_id length that still
     # fits the payload would shift every value (CDR may pad to 4 bytes).
     offset, _, _ = _imu_layout(u8, starts, lengths, ros1)

@@ -1,8 +1,8 @@
 """
 Imported by the workers' fork server: matplotlib and its font loaded once.
 
-Every worker forked from the server then draws its figure at once instead of paying
-about 0.6 s of imports and font loading first (see
+Every worker forked from the server then draws its figure at once instead of
+importing matplotlib and loading its font first (see
 :func:`imu_allan.pipeline.workers.start_workers`).
 """
 

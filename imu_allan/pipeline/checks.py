@@ -10,7 +10,6 @@ dropped (:mod:`imu_allan.pipeline.motion`).
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig, WarningLog
 from imu_allan.pipeline.motion import MotionGate
@@ -133,11 +132,8 @@ def _repeat_runs(samples: np.ndarray, last: np.ndarray, run: np.ndarray) -> np.n
 
     ``run`` (n_axes,) int64, the run going on before row 0 (``last`` is the sample
     there, NaN for none), becomes in place the run that ends the block; the result
-    (n_axes,) is the longest run per axis, the one on entry included [samples].  The
-    compiled twin is :func:`imu_allan.core.native.repeats`.
+    (n_axes,) is the longest run per axis, the one on entry included [samples].
     """
-    if native.LIB is not None:
-        return native.repeats(samples, last, run)
     same = np.empty(samples.shape, dtype=bool)
     np.equal(samples[0], last, out=same[0])
     np.equal(samples[1:], samples[:-1], out=same[1:])

@@ -83,11 +83,6 @@ class SessionConfig:
         every gap.
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
-    background_accumulator : bool
-        The accumulator sums on a thread of its own while the checks go on (one input
-        on two cores: ``imu-allan analyze``).  The sums are identical either way.  The
-        thread reads the blocks given to :meth:`Session.add` later, so the caller must
-        not change them afterwards (the offline readers make a new array per block).
 
     """
 
@@ -113,7 +108,6 @@ class SessionConfig:
     min_still_s: float = 10.0
     max_fill_samples: int = 8
     exact_max_m: int = 0
-    background_accumulator: bool = False
 
     def __post_init__(self):
         if self.on_motion not in MOTION_POLICIES:

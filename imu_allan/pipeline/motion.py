@@ -19,7 +19,6 @@ reference was taken).  A reference replaced by a quieter one was motion: with
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, NS, SessionConfig, WarningLog
 
@@ -156,8 +155,8 @@ class MotionGate:
         i = 0
         while i < n_windows:
             if self.ref_mean is not None and self.ref_std is not None and not self.moving:
-                still, mean, std = _scan_still(y[i * win:], win, self.thresholds(), ratio,
-                                               self.ref_mean, self.ref_std)
+                still, mean, std = _still_run(y[i * win:], win, self.thresholds(), ratio,
+                                              self.ref_mean, self.ref_std)
                 if still:
                     self._in_motion = False
                     self.feed.queue(y[i * win:(i + still) * win])
@@ -395,7 +394,7 @@ class MotionGate:
 def _moved_axes(mean: np.ndarray, std: np.ndarray, thr: np.ndarray, ratio_limit: float,
                 ref_mean: np.ndarray, ref_std: np.ndarray) -> tuple:
     """
-    Judge one window against the still reference: the rule of the compiled scan too.
+    Judge one window against the still reference (the rule :func:`_still_run` scans with).
 
     Returns (moved (n_axes,) bool, |mean - ref_mean| (n_axes,), std / ref_std (n_axes,)):
     an axis moved when its mean is more than ``thr`` off or its std more than
@@ -412,21 +411,13 @@ def _follow_drift(ref_mean: np.ndarray, mean: np.ndarray) -> None:
     ref_mean[:] = 0.99 * ref_mean + 0.01 * mean
 
 
-def _scan_still(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
-                ref_mean: np.ndarray, ref_std: np.ndarray) -> tuple:
-    """Count the still windows before the first that moved (compiled or :func:`_still_run`)."""
-    scan = native.motion_scan if native.LIB is not None else _still_run
-    return scan(y, win, thr, ratio_limit, ref_mean, ref_std)
-
-
 def _still_run(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
                ref_mean: np.ndarray, ref_std: np.ndarray) -> tuple:
     """
     Find the first window that moved; pull the reference along the still ones before it.
 
-    The numpy twin of :func:`imu_allan.core.native.motion_scan`, window by window with
-    :func:`_moved_axes` and :func:`_follow_drift`, as :meth:`_SampleChecks._window_moving`
-    judges one window.
+    Window by window with :func:`_moved_axes` and :func:`_follow_drift`, as
+    :meth:`_SampleChecks._window_moving` judges one window.
 
     Parameters
     ----------

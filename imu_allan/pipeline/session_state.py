@@ -61,12 +61,17 @@ def load(path) -> tuple[dict, dict]:
     return meta, arrays
 
 
+#: Settings that checkpoints of earlier versions hold and this one no longer has.
+_RETIRED_SETTINGS = ('background_accumulator',)
+
+
 def resume_config(path, saved: tuple[dict, dict], config: SessionConfig | None) \
         -> SessionConfig:
     """Return the resumed session's settings: the given (or saved) ones, saved rate."""
     meta = saved[0]
     try:
-        saved_cfg = SessionConfig(**meta['config'])
+        saved_cfg = SessionConfig(**{k: v for k, v in meta['config'].items()
+                                     if k not in _RETIRED_SETTINGS})
         rate = float(meta['clock']['rate_hz'])
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f'checkpoint {path} is damaged: its settings: {exc}') from None

@@ -26,13 +26,13 @@ _PRELOAD = ('imu_allan.pipeline.analysis', 'imu_allan.core.search')
 
 def one_blas_thread() -> None:
     """
-    Hold OpenBLAS to one thread in this process and in the workers it starts.
+    Hold OpenBLAS to one thread in this process and in the processes it starts.
 
-    An offline analysis runs its own threads (reader, accumulator) and worker processes
-    on every core; OpenBLAS's pool of one thread per core only oversubscribes them
-    (docs/benchmarks.md).
-    The environment reaches the libraries loaded later (the fork server's, the workers'
-    and this process's own when numpy is not imported yet); a user's setting is kept.
+    The fits, searches and plans work on matrices of a few tens of rows, and an offline
+    analysis already runs its own threads and worker processes on every core:
+    OpenBLAS's pool of one thread per core would only oversubscribe them.  OpenBLAS
+    reads the variable when it is loaded, so the entry points (the CLI, the node) call
+    this before numpy is imported; a user's own setting is kept.
     """
     os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 

@@ -12,9 +12,9 @@ of CPU) runs on a worker thread on a snapshot of the Allan curve, so the executo
 taking messages while it runs.  Other timers report progress, publish /diagnostics at
 1 Hz and checkpoint.  The statuses come from a :class:`~imu_allan.ros.reports.NodeReports`
 and the services from a :class:`~imu_allan.ros.services.NodeServices`, plain objects the
-node owns.  ``main`` spins the node with rclpy's EventsExecutor (measured in
-bench/bench_node.py: several times cheaper per message than the SingleThreadedExecutor,
-which it falls back to when unavailable).
+node owns.  ``main`` spins the node with rclpy's EventsExecutor (cheaper per message
+than the SingleThreadedExecutor, which it falls back to when unavailable; see
+bench/bench_node.py).
 """
 
 from dataclasses import replace
@@ -274,7 +274,7 @@ class ImuAllanNode(Node):
     # ----------------------------------------------------------- callbacks
     def _on_imu(self, raw: bytes) -> None:
         # The only per-message Python work: count, append and (if asked) relay the
-        # message at once with the current covariances (a byte patch, ~1 us).
+        # message at once with the current covariances (a byte patch).
         if not self.collection_stopped:
             self.live.append(raw)
         else:                       # received (the data status stays OK), not collected

@@ -26,8 +26,7 @@ converges for -3 and -4.
 
 Modules: :mod:`.taus` (cluster sizes), :mod:`.kernels` (the variance sums),
 :mod:`.edf` (degrees of freedom, bounds), :mod:`.noise_id` (alpha per tau),
-:mod:`.curve` (:func:`allan_curve`), :mod:`.sums` (the difference sums), :mod:`.blas`
-(one OpenBLAS thread).
+:mod:`.curve` (:func:`allan_curve`), :mod:`.sums` (the difference sums).
 """
 
 from imu_allan.core.allan.curve import allan_curve, AllanCurve

@@ -71,7 +71,6 @@ variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 
 import numpy as np
 
-from imu_allan.core import native
 from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
 from imu_allan.core.allan.accumulator_state import _Persistence
 from imu_allan.core.allan.taus import dense_m_grid
@@ -130,11 +129,8 @@ class AllanAccumulator(_Persistence):
     -----
     Trade-off of ``exact_max_m`` (default 8192, i.e. 8.2 s at 1 kHz): every exact tau
     costs about three in-cache passes over the data, a decimated one almost nothing,
-    and the exact taus need 2 * exact_max_m samples of history.  Measured with
-    bench/bench_accumulator.py --sweep (6 axes, 10 taus per decade, CPU time of one
-    core, busy machine; exact_max_m: exact taus, M rows/s, MB of state per axis):
-    1024: 28, 2.5, 0.34; 4096: 34, 2.3, 0.39; 8192: 37, 2.0, 0.45; 16384: 40, 2.0,
-    0.58.  The default keeps twice the 1 M rows/s target on a shared machine.
+    and the exact taus need 2 * exact_max_m samples of history
+    (bench/bench_accumulator.py --sweep measures the rate and state of each value).
     Decimated taus keep the full EDF of the FM noises, so a larger exact_max_m buys
     agreement with the batch curve to rounding, not precision; it is capped at 16384
     so that the state stays under 1 MB per axis.
@@ -534,8 +530,6 @@ def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
         Shape (n_axes,), the mean that was removed [unit].
 
     """
-    if native.LIB is not None:
-        return native.phase(win, x)
     r = win.mean(axis=1)
     x[:, 0] = 0.0
     np.subtract(win, r[:, None], out=x[:, 1:])
@@ -569,9 +563,6 @@ def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray, sums: 
     j0 = np.maximum(j_first, 2 * ms)
     live = j0 <= j_last
     counts[row0:row0 + ms.size] += np.where(live, j_last - j0 + 1, 0)
-    if native.LIB is not None:
-        sums[row0:row0 + ms.size] += native.acc_sums(x, j_first, j_last, ms)
-        return
     w = x.shape[1]
     x2 = np.multiply(x, 2.0, out=None if x2_buf is None else x2_buf[:, :w])
     if tile is None:

@@ -10,7 +10,6 @@ import os
 
 import numpy as np
 
-from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.allan.noise_id import _fill_unknown
 from imu_allan.core.allan.sums import (_axis_work, _columns, _is_octave, _map_threads,
                                        _MAX_THREADS, _means, _workers)
@@ -35,19 +34,18 @@ def _curve_core(y2: np.ndarray, m: np.ndarray, method: str,
     ``_ALPHA_UNKNOWN`` where the record has too few clusters for a data-based test.
     """
     n, n_axes = y2.shape
-    with single_thread_blas():
-        if method == 'overlapping' and _is_octave(m) and m.size > 2:
-            cols, means = _columns(y2)
-        else:
-            # The running-sum path reads y2 itself: no axis-major copy.
-            cols, means = None, _means(y2)
-        workers = _workers(n_axes)
-        # Cores left over by the axes share each axis' taus.
-        tau_threads = max(1, min(os.cpu_count() or 1, _MAX_THREADS) // workers)
-        results = _map_threads(
-            lambda a: _axis_work(y2, None if cols is None else cols[a], a, float(means[a]),
-                                 m, method, identify, tau_threads),
-            n_axes, workers)
+    if method == 'overlapping' and _is_octave(m) and m.size > 2:
+        cols, means = _columns(y2)
+    else:
+        # The running-sum path reads y2 itself: no axis-major copy.
+        cols, means = None, _means(y2)
+    workers = _workers(n_axes)
+    # Cores left over by the axes share each axis' taus.
+    tau_threads = max(1, min(os.cpu_count() or 1, _MAX_THREADS) // workers)
+    results = _map_threads(
+        lambda a: _axis_work(y2, None if cols is None else cols[a], a, float(means[a]),
+                             m, method, identify, tau_threads),
+        n_axes, workers)
     n_terms = terms_count(m, n, method)
     sums = np.stack([r[0] for r in results], axis=1).reshape(m.size, n_axes)
     var = _normalise(sums, m, n_terms, method)

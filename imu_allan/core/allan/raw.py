@@ -12,7 +12,6 @@ import math
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core import native
 from imu_allan.errors import InputError
 
 #: Rows the raw copy keeps before it averages pairs: the one policy of the node and of
@@ -141,7 +140,7 @@ def _means(y: np.ndarray, factor: int) -> np.ndarray:
     """
     Return the means of ``factor`` consecutive rows (a power of two).
 
-    Strided sums: three times faster than ``reshape(...).mean(axis=1)``, the same
+    Strided sums, not ``reshape(...).mean(axis=1)``'s pairwise ones: the same
     additions in the same order (row 0 + row 1 + ...; a power of two divides exactly).
 
     Parameters
@@ -159,8 +158,6 @@ def _means(y: np.ndarray, factor: int) -> np.ndarray:
     """
     if factor == 1:
         return y
-    if native.LIB is not None:      # the compiled twin: same additions, one pass
-        return native.block_means(y, factor)
     out = np.add(y[0::factor], y[1::factor])
     for k in range(2, factor):
         out += y[k::factor]

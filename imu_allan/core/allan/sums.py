@@ -3,8 +3,7 @@ The difference sums behind the batch curve, fast and exact.
 
 Sums of squared differences of the phase (the running sum of the samples) per cluster
 size: a moving-sum pyramid and Gram kernels for octave cluster sizes, strip-wise
-differences of the phase otherwise, one thread per axis.  The compiled twin of the
-innermost loop is :func:`imu_allan.core.native.diff_sumsq`.  Part of
+differences of the phase otherwise, one thread per axis.  Part of
 :mod:`imu_allan.core.allan`; :mod:`.kernels` normalises the sums into variances.
 """
 
@@ -14,7 +13,6 @@ import os
 
 import numpy as np
 
-from imu_allan.core import native
 from imu_allan.core.allan.noise_id import _ACF_MAX_POINTS, _identify_axis
 from imu_allan.core.allan.taus import _DIFF_ORDER
 from imu_allan.errors import InputError
@@ -122,8 +120,6 @@ def _diff_sumsq(x: np.ndarray, m: int, order: int) -> float:
     n_terms = n - order * m
     if n_terms <= 0:
         return math.nan
-    if native.LIB is not None:
-        return native.diff_sumsq(x, m, order)
     rows = n // m
     full = rows - order  # rows of terms lying wholly inside the matrix
     total = 0.0

@@ -12,7 +12,6 @@ from typing import Sequence
 import numpy as np
 
 from imu_allan.core.allan import AllanCurve
-from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.nominal import nominal_fit
@@ -175,11 +174,8 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
         Mismatched arrays, a bad rate, an unknown term, or fewer than 3 usable taus.
 
     """
-    # The matrices are tiny (k ~ 20-30 taus): OpenBLAS threads only add overhead and
-    # oversubscribe a busy machine (measured: 2-3x slower wall time with them).
-    with single_thread_blas():
-        return _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
-                         select, phi0, sigma0)
+    return _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
+                     select, phi0, sigma0)
 
 
 def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,

@@ -9,8 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
-from imu_allan.core import native
-from imu_allan.core.noise.model import gcov_gauss_markov, Term
+from imu_allan.core.noise.model import Term
 
 # Lag-sum quadrature: lags within _EXACT of a kink are summed exactly, the rest is
 # integrated with Gauss-Legendre on pieces that grow _GROWTH-fold away from the kinks.
@@ -93,10 +92,7 @@ class _LagQuadrature:
             # Direct sums only between the kinks (beyond them the term has no
             # covariance, or its tail formula): one call over all nine stencil lags.
             inside, lags = self._stencil_lags(dt)
-            if gcov is gcov_gauss_markov and native.LIB is not None:
-                g[inside] = native.gm_stencil(lags, _STENCIL_WEIGHTS, *nonlinear)
-            else:
-                g[inside] = _STENCIL_WEIGHTS @ gcov(lags, *nonlinear)
+            g[inside] = _STENCIL_WEIGHTS @ gcov(lags, *nonlinear)
         else:
             reach = term.reach(self.m1, self.m2, dt, *nonlinear)
             direct = (self.h >= self.kmin - reach) & (self.h <= self.kmax + reach)
@@ -120,10 +116,7 @@ class _LagQuadrature:
         a_idx, b_idx = np.triu_indices(n)
         g = np.stack(gammas)
         # The nodes are stored pair by pair, so each pair's sum is one segment.
-        if native.LIB is not None:
-            sums = native.pair_sums(g, self.weight, self.starts, a_idx, b_idx)
-        else:
-            sums = np.add.reduceat((g * self.weight)[a_idx] * g[b_idx], self.starts, axis=1)
+        sums = np.add.reduceat((g * self.weight)[a_idx] * g[b_idx], self.starts, axis=1)
         sums *= scale[p, q]
         for s, a, b in zip(sums, a_idx, b_idx):
             out[a, b, p, q] = s

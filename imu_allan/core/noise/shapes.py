@@ -37,7 +37,6 @@ from typing import Callable
 
 import numpy as np
 
-from imu_allan.core import native
 from imu_allan.core.noise.values import GM_PEAK_FACTOR
 
 #: 2 ln2 / pi: flicker AVAR floor per unit B^2 (IEEE Std 952 C.1).
@@ -128,8 +127,6 @@ def _gm_shape(x: np.ndarray) -> np.ndarray:
     h(x) = sum_{n>=3} (-1)^n (2 - 2^(n-1)) x^n / n!.
     """
     x = np.asarray(x, dtype=np.float64)
-    if native.LIB is not None:
-        return native.gm_shape(x, _GM_SERIES)
     small = x < 0.05
     if small.all():  # long T: the series alone (a fit calls this very often)
         return _gm_series(x)

@@ -18,7 +18,6 @@ from typing import Collection, Mapping, Sequence
 
 import numpy as np
 
-from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.fit.api import CurveCovariance, profile_threshold
 from imu_allan.core.noise.model import TERMS
 from imu_allan.core.noise.params import AxisNoise
@@ -486,10 +485,8 @@ def plan_fits(fits: Mapping, rate_hz: float, duration_s: float,
     slow = {a for a in models if any(r.get('model') == SLOWER_PROCESS_RIVAL
                                      for r in fits[a].rivals)}
     factors = {a: inflation(fits[a].chi2, fits[a].dof) for a in models}
-    # One BLAS thread, as the fit: tiny matrices, and the same rounding in every process.
-    with single_thread_blas():
-        plans = plan_axes(models, rate_hz, duration_s, targets, present, slow_process=slow,
-                          inflations=factors)
+    plans = plan_axes(models, rate_hz, duration_s, targets, present, slow_process=slow,
+                      inflations=factors)
     out = {}
     for axis, plan in plans.items():
         params = plan.params + _unplanned(plan, fits[axis].optimised, targets)

@@ -40,7 +40,6 @@ Every threshold named here (:data:`DELTA_MIN`, :data:`P_CONSISTENT`, :data:`MAX_
 
 from typing import Sequence
 
-from imu_allan.core.allan.blas import single_thread_blas
 from imu_allan.core.noise.terms import effect_name, effect_names, TERMS
 from imu_allan.core.search.choice import random_walk_or_slow_process, with_rivals
 from imu_allan.core.search.rules import BASE_LABELS, Search, SEARCH_EFFECTS, Step
@@ -97,10 +96,8 @@ def search_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *, raw=None,
     for e in effects:
         if e not in TERMS or not TERMS[e].effect:
             raise InputError(f'unknown effect {e!r}; known: {", ".join(effect_names())}')
-    # Tiny matrices: OpenBLAS threads only add overhead (see fit_axis).
-    with single_thread_blas():
-        return _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit,
-                       effects, base_labels, keep_steps)
+    return _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effects,
+                   base_labels, keep_steps)
 
 
 def _search(tau_s, avar, edf, rate_hz, n_samples, raw, raw_rate_hz, unit, effects,

@@ -16,7 +16,6 @@ from urllib.parse import quote
 import numpy as np
 import yaml
 
-from imu_allan.core import native
 from imu_allan.errors import InputError
 from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _Piece, _Topic
 from imu_allan.io.imu_cdr import _gather, _join
@@ -289,8 +288,6 @@ def _varint(u8: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         (n,) int64 bytes used.
 
     """
-    if native.LIB is not None and u8.flags.c_contiguous:
-        return native.varints(u8, pos)
     b = u8[pos]
     value = (b & 0x7F).astype(np.int64)
     length = np.ones(pos.size, np.int64)
@@ -339,8 +336,8 @@ class _SqlitePages:
     """
     Read the rows of rosbag2's messages table from the file's pages directly.
 
-    The sqlite3 module costs about 1.5 us per fetched row, most of the reading time of
-    a large bag.  rosbag2's table is ``messages(id INTEGER PRIMARY KEY, topic_id,
+    Fetching the rows one by one through the sqlite3 module is most of the reading
+    time of a large bag.  rosbag2's table is ``messages(id INTEGER PRIMARY KEY, topic_id,
     timestamp, data)``: a rowid B-tree whose leaf cells hold the record (header of
     serial types, then topic_id, timestamp and the data blob) inline unless it is
     larger than the page.  The interior pages are walked level by level, then the leaf
