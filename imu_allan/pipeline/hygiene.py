@@ -148,6 +148,9 @@ class HygieneStats:
         references.
     frozen_axes, saturated_axes : list of str
         Axes seen frozen or saturated.
+    held : dict
+        Per axis with held values (a sensor slower than its stream), the share of the
+        steps that repeat the value before (0-1), beyond quantization's repeats.
     jitter_rel : float
         Standard deviation of the stamp steps (gaps left out) over the period,
         pooled over the windows judged so far.
@@ -175,6 +178,7 @@ class HygieneStats:
     n_reanchors: int = 0
     frozen_axes: list = field(default_factory=list)
     saturated_axes: list = field(default_factory=list)
+    held: dict = field(default_factory=dict)
     jitter_rel: float = 0.0
     irregular_stamps: bool = False
 
@@ -191,6 +195,10 @@ class HygieneStats:
             elif f.name == 'spikes':
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, int) and v >= 0 for v in value.values()))
+            elif f.name == 'held':
+                ok = (isinstance(value, dict) and set(value) <= set(AXES)
+                      and all(isinstance(v, (int, float)) and 0 <= v <= 1
+                              for v in value.values()))
             elif f.name == 'irregular_stamps':
                 ok = isinstance(value, bool)
             elif f.name == 'jitter_rel':
