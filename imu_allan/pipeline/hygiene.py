@@ -53,7 +53,8 @@ class SessionConfig:
     max_spike_share : float
         A record with a larger share of spike samples is refused (InputError).
     motion_window_s : float
-        Window over which motion statistics are computed [s].
+        Window over which motion statistics are computed [s]; at least
+        :data:`imu_allan.pipeline.motion.MIN_WINDOW` samples (longer below 10 Hz).
     motion_sigma : float
         A window mean that departs from the still reference by more than this many
         sigmas of a still window's mean (the reference's per-sample noise over the
@@ -150,7 +151,8 @@ class HygieneStats:
         Axes seen frozen or saturated.
     held : dict
         Per axis with held values (a sensor slower than its stream), the share of the
-        steps that repeat the value before (0-1), beyond quantization's repeats.
+        steps that repeat the value before (0-1), beyond quantization's repeats; the
+        spike filter measures it (nothing with ``spike_sigma`` 0).
     jitter_rel : float
         Standard deviation of the stamp steps (gaps left out) over the period,
         pooled over the windows judged so far.

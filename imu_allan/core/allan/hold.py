@@ -10,7 +10,7 @@ This follows from summing the squared weights of the difference of two adjacent
 averages over the ``k`` phases of the hold; it matches a simulation of 2,000,000
 samples for k = 2, 3, 5 and 10 within its scatter (test/test_allan.py).  In time: the
 bias is about ``T_u / (2 tau)`` (``T_u`` the update period), so it reaches well above
-the update period (5 % of the variance at ten update periods): the fit starts where it
+the update period (4-5 % of the variance at ten update periods): the fit starts where it
 is at most 10 % and takes the curve corrected by the closed form.  Cutting instead
 until the bias is lost in the estimates' random error left the accelerometers of the
 ADIS16405 too few white taus to fit (docs/input_gate.md).
