@@ -21,7 +21,9 @@ from imu_allan.pipeline.steps import split_runs
 #: What held values mean for the analysis (the end of the held-values warning).
 HELD_MEANING = ('spikes are judged between distinct updates, and the Allan variance, '
                 'low by about T_u / (2 tau) for an update period T_u, is fitted from where '
-                'that is under 10 %, corrected: N and B have wider intervals')
+                'that is under 10 %, corrected: N and B have wider intervals; if the '
+                'updates are read an uneven number of times (a polling logger), N reads '
+                'high (by up to 20 %, docs/input_gate.md): log at the rate of the sensor')
 
 
 class SampleGate:
