@@ -156,40 +156,48 @@ class SpikeFilter:
         if full:
             steps = d[:full * CHUNK].reshape(full, CHUNK, N_AXES)[:, ::_THIN]
             limits[:full] = _noise_sigma(steps.transpose(2, 0, 1)).T
+            # Every step counts for the held share: a thinned count aliases with holds.
+            self._held_scale(d[:full * CHUNK].reshape(full, CHUNK, N_AXES),
+                             rows[:full * CHUNK].reshape(full, CHUNK, N_AXES), limits[:full])
         if full < n_chunks:
             tail = d[full * CHUNK:k]
             limits[full] = _noise_sigma(tail.T[:, None])[:, 0] if tail.shape[0] >= 8 else np.nan
-        for c in range(n_chunks):
-            part = slice(c * CHUNK, min((c + 1) * CHUNK, k))
-            self._held_scale(d[part.start:min(part.stop, d.shape[0])], rows[part], limits[c])
+            self._held_scale(tail[None], rows[full * CHUNK:][None], limits[full:])
         for c in range(n_chunks):   # a short chunk, or no noise at all: the last scale
             ok = np.isfinite(limits[c]) & (limits[c] > 0)
             limits[c] = self._scale = np.where(ok, limits[c], self._scale)
         return self.sigma * limits
 
-    def _held_scale(self, d: np.ndarray, rows: np.ndarray, scale: np.ndarray) -> None:
+    def _held_scale(self, steps: np.ndarray, rows: np.ndarray, scale: np.ndarray) -> None:
         """
-        Count one chunk's held steps; give held axes the scale of distinct updates.
+        Count chunks' held steps; give held axes the scale of distinct updates.
 
-        ``d`` (m, 6) absolute steps and ``rows`` (k, 6) values of the chunk [unit];
-        ``scale`` (6,) its noise sigma per axis, replaced in place on held axes.
+        ``steps`` (c, s, 6) absolute steps of each of c chunks, ``rows`` (c, r, 6)
+        their values [unit]; ``scale`` (c, 6) their noise sigma per axis, replaced in
+        place where an axis holds.
         """
-        m = min(d.shape[0], rows.shape[0] - 1)
-        if m < 8:
+        if steps.shape[1] < 8 or rows.shape[1] < 16:
             return
-        zero = np.count_nonzero(d[:m] == 0, axis=0) / m
-        self.n_steps += m
-        for j in np.flatnonzero((zero >= HOLD_MIN) & (zero < 1)):
+        # Counted by a product: a sum over the middle axis takes seven times longer.
+        zero = (np.ones(steps.shape[1], np.float32) @ (steps == 0).astype(np.float32)
+                / steps.shape[1])
+        per_chunk = rows.shape[1] - 1
+        self.n_steps += rows.shape[0] * per_chunk
+        maybe = (zero >= HOLD_MIN) & (zero < 1)
+        for j in np.flatnonzero(maybe.any(axis=0)):
             # Twice the mean run of one value: past nearly every hold.
-            lag = min(int(np.ceil(2 / (1 - zero[j]))), m // 4)
-            far = np.abs(rows[lag:, j] - rows[:-lag, j])
-            zero_far = np.count_nonzero(far == 0) / far.size
-            held = (zero[j] - zero_far) / (1 - zero_far) if zero_far < 1 else 0.0
-            if held >= HOLD_MIN:
-                self.n_held[j] += held * m
-                sigma = _noise_sigma(far[None])[0]
-                if np.isfinite(sigma):
-                    scale[j] = sigma
+            lag = min(int(np.ceil(2 / (1 - zero[maybe[:, j], j].max()))), rows.shape[1] // 4)
+            # Every _THIN-th: past the holds, differences of two updates at any phase.
+            far = np.abs(rows[:, lag:, j][:, ::_THIN] - rows[:, :-lag, j][:, ::_THIN])
+            zero_far = np.count_nonzero(far == 0, axis=1) / far.shape[1]
+            held = np.where(maybe[:, j] & (zero_far < 1),
+                            (zero[:, j] - zero_far) / np.maximum(1 - zero_far, 1e-12), 0.0)
+            hit = np.flatnonzero(held >= HOLD_MIN)
+            if hit.size:
+                self.n_held[j] += float(held[hit].sum()) * per_chunk
+                sigma = _noise_sigma(far[hit][None])[0]
+                ok = np.isfinite(sigma)
+                scale[hit[ok], j] = sigma[ok]
 
     @property
     def held_share(self) -> np.ndarray:
