@@ -4,6 +4,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
+from imu_allan import AXES
 from imu_allan.errors import InputError, NotEnoughStillData
 from imu_allan.pipeline.session import Session, SessionConfig
 
@@ -81,6 +82,62 @@ def test_a_record_of_mostly_spikes_is_refused():
         s.check_usable()
 
 
+# -- held values ----------------------------------------------------------------------
+
+#: Quanta of an ADIS16405 (0.05 deg/s, 3.33 mg) [rad/s, m/s^2].
+LSB = np.array([0.05 * np.pi / 180] * 3 + [3.33e-3 * 9.80665] * 3)
+
+
+def _updates(n: int, samples_per_update: float, seed: int) -> np.ndarray:
+    """Return (n, 6) quantised sensor updates: the 100 Hz SIGMA averaged over an update."""
+    rng = np.random.default_rng(seed)
+    y = rng.standard_normal((n, 6)) * SIGMA / np.sqrt(samples_per_update)
+    y[:, 5] -= 9.81
+    return np.round(y / LSB) * LSB
+
+
+def _poll(updates: np.ndarray, samples_per_update: float, seed: int) -> np.ndarray:
+    """Poll a slower sensor at 100 Hz with jitter, as a logger does: updates held 1-5 times."""
+    rng = np.random.default_rng(seed)
+    n = int(updates.shape[0] * samples_per_update)
+    done_at = np.arange(1, updates.shape[0] + 1) * samples_per_update
+    polled = np.arange(n) + rng.uniform(-0.3, 0.3, n)
+    return updates[np.clip(np.searchsorted(done_at, polled, side='right') - 1, 0, None)]
+
+
+@pytest.mark.parametrize('k', [2, 3.6, 4, 5])   # 4: the spike scale's thinning
+def test_held_values_are_no_spikes_and_are_reported(k):
+    # Before: the median step was 0, the scale one quantum, most updates spikes, and
+    # the record refused as 'mostly outliers'.
+    y = _poll(_updates(int(60_000 / k), k, seed=11), k, seed=12)
+    t = 10**12 + np.arange(y.shape[0], dtype=np.int64) * 10**7
+    s = _feed(Session(), t, y)
+    assert s.stats.n_spikes == 0
+    s.check_usable()
+    held = 1 - 1 / k
+    assert_allclose(list(s.stats.held.values()), held, atol=0.02)
+    assert set(s.stats.held) == set(AXES)
+    line = next(w for w in s.warnings if w.startswith('held values'))
+    assert f'{100 * held:.0f} %' in line and f'about {100 / k:.2g} Hz' in line
+    assert s.stats.n_motion_events == 0 and s.stats.n_used == t.size
+
+
+def test_quantised_data_is_not_taken_for_held_and_spikes_are_still_found():
+    # The accelerometers repeat over a third of their values by quantization alone.
+    y = _updates(60_000, 3.0, seed=13)
+    t = 10**12 + np.arange(y.shape[0], dtype=np.int64) * 10**7
+    s = _feed(Session(), t, y)
+    assert s.stats.held == {} and s.stats.n_spikes == 0
+    assert np.mean(y[1:, 3] == y[:-1, 3]) > 0.33
+    # In held data, a bad update held 3 samples is a burst: still a spike.
+    held = _poll(_updates(20_000, 3.0, seed=14), 3.0, seed=15)
+    rows = np.arange(1_000, 59_000, 3_001)
+    for r in rows:
+        held[r:r + 3, 0] += 30 * SIGMA[0]
+    s = _feed(Session(), t, held)
+    assert s.stats.spikes.get('gyro_x', 0) >= 2 * rows.size
+
+
 # -- motion ---------------------------------------------------------------------------
 
 def _drive(y: np.ndarray, k: slice, seed: int) -> None:
@@ -112,6 +169,23 @@ def test_a_slow_bump_of_tens_of_sigma_is_motion():
     assert 1_000 <= s.stats.n_motion_dropped <= 3_000 + 600
     still = _feed(Session(), *_still(60_000, seed=8))
     assert still.stats.n_motion_events == 0 and still.stats.n_used == 60_000
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_a_still_1_hz_record_has_no_motion_and_driving_is_still_found(seed):
+    # A 1 s window at 1 Hz held 2 samples: 1 to 658 false episodes in 2 h.
+    rng = np.random.default_rng(seed)
+    n = 7_200
+    y = rng.standard_normal((n, 6)) * SIGMA
+    y += np.cumsum(rng.standard_normal((n, 6)), axis=0) * SIGMA * 2e-3
+    y[:, 5] -= 9.81
+    t = np.arange(n, dtype=np.int64) * 10**9
+    s = _feed(Session(), t, y)
+    assert s.stats.n_motion_events == 0 and s.stats.n_used == n
+    _drive(y, slice(3_000, 3_600), seed=seed)
+    s = _feed(Session(), t, y)
+    assert s.stats.n_motion_events >= 1
+    assert 600 <= s.stats.n_motion_dropped <= 600 + 200
 
 
 def test_too_little_still_data_is_refused_and_shown_live():

@@ -559,3 +559,33 @@ def test_the_pipeline_modules_import_without_a_cycle():
     for module in sorted(graph):
         visit(module)
     assert not (folder / 'parts.py').exists()
+
+
+def test_a_held_record_keeps_the_noise_of_its_updates():
+    # A sensor updating at 33.3 Hz read at 100 Hz: each update held 3 samples.  The
+    # held curve is low by (k^2 - 1) / (2 k m) well above the update period; the fit
+    # corrects it and starts where the correction is small: its intervals widen (the
+    # shortest taus are not used) and hold the values of the updates themselves.
+    from imu_allan.core.noise.params import AxisNoise
+    from imu_allan.core.noise.simulate import simulate_axis
+    from imu_allan.pipeline.analysis import analyze
+
+    rng = np.random.default_rng(31)
+    k, n = 3, 30_000
+    gyro = AxisNoise(N=7e-4, B=5e-4, T_B=20.0, K=3e-5)
+    updates = np.stack([simulate_axis(gyro, RATE_HZ / k, n, rng) for _ in range(6)], axis=1)
+    t = T0_NS + np.arange(n * k, dtype=np.int64) * 10**7
+    clean = analyze(_feed(Session(), t[::k], updates, block=5_000), workers=1)
+    held = _feed(Session(), t, np.repeat(updates, k, axis=0), block=5_000)
+    assert_allclose(list(held.stats.held.values()), 1 - 1 / k, atol=0.01)
+    result = analyze(held, workers=1)
+    assert any(w.startswith('held values') for w in result.warnings)
+    for axis in ('gyro_x', 'gyro_y', 'gyro_z'):
+        for sym in ('N', 'B'):
+            ref, got = clean.fits[axis].optimised[sym], result.fits[axis].optimised[sym]
+            assert got.kind == ref.kind == 'estimate', (axis, sym)
+            assert got.ci95[0] <= ref.value <= got.ci95[1], (axis, sym)
+            # Within the clean interval widened by the held one: no bias beyond it.
+            assert abs(got.value / ref.value - 1) <= (got.ci95[1] - got.ci95[0]) / ref.value
+        n_ref, n_got = clean.fits[axis].optimised['N'].ci95, result.fits[axis].optimised['N'].ci95
+        assert n_got[1] - n_got[0] > n_ref[1] - n_ref[0]

@@ -16,6 +16,7 @@ import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
 from imu_allan.core.allan import AllanCurve, confidence_bounds
+from imu_allan.core.allan.hold import held_fit_curve
 from imu_allan.core.allan.raw import raw_evidence
 from imu_allan.core.fit import AxisFit, json_floats
 from imu_allan.core.noise.params import AxisNoise
@@ -410,7 +411,10 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     for j, axis in enumerate(AXES):
         avar = curve.avar[:, j]
         if np.all(np.isfinite(avar)) and np.count_nonzero(avar > 0) >= 3:
-            jobs[axis] = (curve.tau_s, avar, curve.edf[:, j], curve.rate_hz,
+            # Held values bias the shortest taus low (core.allan.hold): fit above them.
+            first, fitted = held_fit_curve(curve.tau_s, avar, curve.rate_hz,
+                                           session.stats.held.get(axis, 0.0))
+            jobs[axis] = (curve.tau_s[first:], fitted, curve.edf[first:, j], curve.rate_hz,
                           int(session.stats.n_used),
                           None if samples is None else samples[:, j], raw_rate, AXIS_UNITS[axis])
     found, (lo, hi) = _map_axes(list(jobs.values()), workers, lambda: confidence_bounds(

@@ -13,8 +13,16 @@ from imu_allan import AXES
 from imu_allan.errors import InputError
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig, WarningLog
 from imu_allan.pipeline.motion import MotionGate
-from imu_allan.pipeline.spikes import SpikeFilter
+from imu_allan.pipeline.spikes import HOLD_MIN, SpikeFilter
 from imu_allan.pipeline.steps import split_runs
+
+
+#: What held values mean for the analysis (the end of the held-values warning).
+HELD_MEANING = ('spikes are judged between distinct updates, and the Allan variance, '
+                'low by about T_u / (2 tau) for an update period T_u, is fitted from where '
+                'that is under 10 %, corrected: N and B have wider intervals; if the '
+                'updates are read an uneven number of times (a polling logger), N reads '
+                'high (by up to 20 %, docs/input_gate.md): log at the rate of the sensor')
 
 
 class SampleGate:
@@ -59,7 +67,9 @@ class SampleGate:
             if broken:
                 self.end_segment()
             self._check_frozen(y_part)
-            self.motion.take(*self.spikes.take(t_part, y_part), rate_hz)
+            judged = self.spikes.take(t_part, y_part)
+            self._note_held(rate_hz)
+            self.motion.take(*judged, rate_hz)
 
     def release(self) -> None:
         """Pass the rows the spike filter holds on now (live: no wait for a chunk)."""
@@ -85,6 +95,29 @@ class SampleGate:
         self._warn('saturated', f'{n} saturated samples on '
                    f'{", ".join(self.stats.saturated_axes)} dropped (segment split there)',
                    once=False)
+
+    def _note_held(self, rate_hz: float) -> None:
+        """Count the held share per axis; warn when an axis is first seen held."""
+        share = self.spikes.held_share
+        self.motion.held = np.where(share >= HOLD_MIN, share, 0.0)
+        known = set(self.stats.held)
+        for j in np.flatnonzero(share >= HOLD_MIN):
+            self.stats.held[AXES[j]] = 0.0
+        for axis in self.stats.held:     # once held, the share of the whole record so far
+            self.stats.held[axis] = round(float(share[AXES.index(axis)]), 4)
+        if set(self.stats.held) == known:
+            return
+        found = []
+        for kind in ('gyro', 'accel'):
+            axes = [a for a in self.stats.held if a.startswith(kind)]
+            if axes:
+                held = float(np.mean([self.stats.held[a] for a in axes]))
+                found.append(f'{kind if len(axes) == 3 else ", ".join(axes)} '
+                             f'{100 * held:.0f} % (updates at about '
+                             f'{rate_hz * (1 - held):.2g} Hz)')
+        self._warn('held', f'held values (a driver or logger faster than its sensor): at '
+                   f'{rate_hz:.3g} Hz, {"; ".join(found)} of the samples repeat the one '
+                   'before; ' + HELD_MEANING, once=False)
 
     def _check_frozen(self, samples: np.ndarray) -> None:
         """Warn once per axis whose value repeats for ``frozen_samples`` samples or more."""

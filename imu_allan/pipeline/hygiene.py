@@ -53,7 +53,8 @@ class SessionConfig:
     max_spike_share : float
         A record with a larger share of spike samples is refused (InputError).
     motion_window_s : float
-        Window over which motion statistics are computed [s].
+        Window over which motion statistics are computed [s]; at least
+        :data:`imu_allan.pipeline.motion.MIN_WINDOW` samples (longer below 10 Hz).
     motion_sigma : float
         A window mean that departs from the still reference by more than this many
         sigmas of a still window's mean (the reference's per-sample noise over the
@@ -151,6 +152,10 @@ class HygieneStats:
         references.
     frozen_axes, saturated_axes : list of str
         Axes seen frozen or saturated.
+    held : dict
+        Per axis with held values (a sensor slower than its stream), the share of the
+        steps that repeat the value before (0-1), beyond quantization's repeats; the
+        spike filter measures it (nothing with ``spike_sigma`` 0).
     jitter_rel : float
         Standard deviation of the stamp steps (gaps left out) over the period,
         pooled over the windows judged so far.
@@ -180,6 +185,7 @@ class HygieneStats:
     n_reanchors: int = 0
     frozen_axes: list = field(default_factory=list)
     saturated_axes: list = field(default_factory=list)
+    held: dict = field(default_factory=dict)
     jitter_rel: float = 0.0
     irregular_stamps: bool = False
 
@@ -199,6 +205,10 @@ class HygieneStats:
             elif f.name == 'spikes':
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, int) and v >= 0 for v in value.values()))
+            elif f.name == 'held':
+                ok = (isinstance(value, dict) and set(value) <= set(AXES)
+                      and all(isinstance(v, (int, float)) and 0 <= v <= 1
+                              for v in value.values()))
             elif f.name == 'irregular_stamps':
                 ok = isinstance(value, bool)
             elif f.name == 'jitter_rel':

@@ -1,7 +1,8 @@
 """
 The motion gate: still windows go on to the accumulator, windows that moved do not.
 
-Samples are judged in windows of ``motion_window_s`` against a still reference: the
+Samples are judged in windows of ``motion_window_s`` (at least :data:`MIN_WINDOW`
+samples) against a still reference: the
 per-axis mean and noise of still data.  A window moved when its mean is off by more
 than ``motion_sigma`` times the noise of a window mean (the reference's per-sample
 noise over the root of the window's samples; capped by ``motion_gyro_rad_s`` and
@@ -35,6 +36,12 @@ MIN_STEPS = 20
 _RUN_TAIL = 60
 #: Reference noise floor as a share of the threshold caps (quantised sensors).
 _FLOOR = 0.01
+#: Fewest samples a window holds [samples]: below 10 Hz a window is longer than
+#: ``motion_window_s``.  The mean and standard deviation of two samples (a 1 s window at
+#: 1 Hz) judge nothing, and the first window is the reference: still 1 Hz records gave
+#: 1082 false episodes in 20 seeded records of 2 h with windows of 2 samples, 20 with
+#: 4, 1 with 6 and none with 10 (9 degrees of freedom per window standard deviation).
+MIN_WINDOW = 10
 
 
 class MotionGate:
@@ -65,6 +72,9 @@ class MotionGate:
         self._win_t: list[np.ndarray] = []
         self._win_y: list[np.ndarray] = []
         self._win = 2                  # rows per window, set from the rate
+        # Share of the samples that repeat the one before (held values), per axis: a
+        # window holds only win * (1 - held) independent samples.
+        self.held = np.zeros(N_AXES)
         # Squared steps between the means of consecutive still windows (the last
         # NOISE_WINDOWS): the noise of a window mean, coloured noise included.
         self._steps2 = np.empty((0, N_AXES))
@@ -90,7 +100,7 @@ class MotionGate:
         """
         if stamp_ns.size == 0:
             return
-        win = self._win = max(int(round(self.config.motion_window_s * rate_hz)), 2)
+        win = self._win = max(int(round(self.config.motion_window_s * rate_hz)), MIN_WINDOW)
         t, y = stamp_ns, samples
         held = sum(h.shape[0] for h in self._win_y)
         if held >= win:     # the window shrank (a refined rate): start from the held rows
@@ -251,11 +261,13 @@ class MotionGate:
         Mean-offset thresholds (6,) from a per-sample noise (6,) alone.
 
         ``motion_sigma`` times 1.5 times the white noise of a window's mean,
-        ``ref_std / sqrt(win)``: room for coloured noise until the steps between
-        still windows measure it (:meth:`thresholds`).
+        ``ref_std / sqrt(n)`` with ``n`` the window's distinct updates (its samples
+        less the held ones): room for coloured noise until the steps between still
+        windows measure it (:meth:`thresholds`).
         """
+        updates = np.maximum(self._win * (1.0 - self.held), 1.0)
         return np.minimum(self._caps,
-                          self.config.motion_sigma * 1.5 * ref_std / np.sqrt(self._win))
+                          self.config.motion_sigma * 1.5 * ref_std / np.sqrt(updates))
 
     def _quieter(self, std: np.ndarray, ref_std: np.ndarray) -> bool:
         std = np.maximum(std, _FLOOR * self._caps)

@@ -20,7 +20,7 @@ from imu_allan.pipeline.hygiene import HygieneStats, SessionConfig
 
 #: What a checkpoint calls itself, and the one layout this version reads.
 FORMAT = 'imu_allan.session'
-VERSION = 4
+VERSION = 5
 
 
 def save(session, path) -> None:

@@ -131,7 +131,7 @@ PARAMS: tuple[NodeParam, ...] = (
     NodeParam('max_spike_share', float, _S.max_spike_share, '', (0.0, 1.0),
               'A larger share of spike samples is no analysis (the status says so)'),
     NodeParam('motion_window_s', float, _S.motion_window_s, 's', (0.05, 60.0),
-              'Window of the motion detector'),
+              'Window of the motion detector (at least 10 samples: longer below 10 Hz)'),
     NodeParam('motion_sigma', float, _S.motion_sigma, 'sigmas', (1.0, 1.0e6),
               'A window mean this many sigmas of a still window mean from the still level'
               ' is motion (on the sensor noise scale)'),
