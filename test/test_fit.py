@@ -84,6 +84,11 @@ def test_noise_free_curve_is_recovered(noise, terms, expect):
     fit = _exact_case(noise, terms)
     for sym, value in expect.items():
         p = fit.optimised[sym]
+        if sym == 'K' and p.kind == 'upper_bound':
+            # Exact, but its interval reaches 0 (the EDF of 1 h do not show it beside
+            # the other terms): reported as the bound at the interval's upper end.
+            assert value <= p.value == p.ci95[1] and p.ci95[0] == 0.0, p
+            continue
         assert p.kind == 'estimate', (sym, p)
         assert_allclose(p.value, value, rtol=2e-3, err_msg=sym)
         assert p.ci95[0] < value < p.ci95[1]
