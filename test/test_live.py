@@ -84,6 +84,7 @@ def test_a_unit_mistake_is_logged_once_and_nothing_is_used(tmp_path):
     n = 3000
     stamps = 1_700_000_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 10_000_000  # 100 Hz
     samples = rng.standard_normal((n, 6)) * 1e-3
+    samples[:, :3] += 0.02          # a MEMS gyro's bias [rad/s]
     samples[:, :3] *= 57.3          # a driver that publishes deg/s
     samples[:, 5] += 9.81
     log = Log()

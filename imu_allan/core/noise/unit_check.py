@@ -26,6 +26,12 @@ The plausibility limits
   3x below the limit even at the noisiest, while the same gyros in deg/s read 4e-3 to
   5e-2: above it.  A gyro quieter than 5e-5 rad/s/sqrt(Hz) (tactical and navigation
   grade) read in deg/s stays below the limit: this check cannot see it.
+- Gyro white noise that refuses the record: ``GYRO_WHITE_REFUSE`` = 2e-2
+  rad/s/sqrt(Hz).  A real gyro is noisier than ``GYRO_WHITE_MAX``: the u-blox C102-F9R,
+  5.7e-3 rad/s/sqrt(Hz) (Maia et al. table 2); between the two the mistake is only a
+  warning, above (3.5x that gyro) the record is refused as deg/s.  An ADIS16405 in deg/s
+  reads 0.036; quieter gyros in deg/s (MPU-6050, BMI088) are refused by their bias, or
+  only warned about.
 - Gyro bias: ``GYRO_BIAS_MAX`` = 0.5 rad/s (29 deg/s), beyond the zero-rate offsets of
   MEMS gyros (+-20 deg/s for the MPU-6050, the widest on common datasheets) plus the
   Earth's rotation (7.3e-5 rad/s): a still gyro that reads more is in deg/s or moving.
@@ -48,6 +54,7 @@ G0_M_S2 = 9.80665
 ACCEL_NORM_M_S2 = (8.0, 11.6)
 #: Largest plausible gyro white noise [rad/s/sqrt(Hz)] and still bias [rad/s].
 GYRO_WHITE_MAX = 3e-3
+GYRO_WHITE_REFUSE = 2e-2
 GYRO_BIAS_MAX = 0.5
 #: Plausible IMU sample rates [Hz].
 RATE_HZ = (1.0, 10_000.0)
@@ -379,8 +386,10 @@ def _gyro_warning(bias: np.ndarray | None, white: np.ndarray | None,
                   counts: bool) -> tuple | None:
     """Return (text, fix) for a gyro too noisy or too offset for rad/s, or None."""
     reasons = []
+    sure = False        # a reason that names the fix (refuses the record)
     if white is not None and np.isfinite(white).any():
         n = float(np.nanmedian(white))
+        sure = n > GYRO_WHITE_REFUSE
         if n > GYRO_WHITE_MAX:
             reasons.append(f'its white noise {n:.3g} rad/s/sqrt(Hz) is above '
                            f'{GYRO_WHITE_MAX:g} (noisier than any MEMS gyro; {n / _DEG:.3g} '
@@ -388,12 +397,15 @@ def _gyro_warning(bias: np.ndarray | None, white: np.ndarray | None,
     if bias is not None and np.isfinite(bias).all():
         b = float(np.max(np.abs(bias)))
         if b > GYRO_BIAS_MAX:
+            sure = True
             reasons.append(f'its still bias {b:.3g} rad/s is above {GYRO_BIAS_MAX:g} rad/s')
     if not reasons:
         return None
     if counts:
         return ('the gyro does not look like rad/s: ' + '; '.join(reasons)
                 + ': its values are whole numbers, raw counts? (declare the value of one '
-                'count, e.g. --units gyro=0.05deg/s)', 'gyro=<value of one count>')
+                'count, e.g. --units gyro=0.05deg/s)',
+                'gyro=<value of one count>' if sure else '')
     return ('the gyro does not look like rad/s: ' + '; '.join(reasons)
-            + ': deg/s? (declare --units gyro=deg/s), or the IMU moved', 'gyro=deg/s')
+            + ': deg/s? (declare --units gyro=deg/s), or the IMU moved',
+            'gyro=deg/s' if sure else '')
