@@ -19,3 +19,13 @@ class NotEnoughStillData(InputError):
     """
 
     exit_code = 3
+
+
+class UnitMistake(InputError):
+    """
+    The first samples show a unit mistake that one ``--units`` declaration would fix.
+
+    The message names the mistake, the declaration, and how to confirm the values as
+    they are; ``imu-allan analyze`` exits with code 2 and writes no consumer file, the
+    node logs it as an error and publishes nothing.
+    """

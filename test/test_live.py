@@ -182,3 +182,39 @@ def test_two_imus_on_one_topic_are_never_merged_live():
                          text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().endswith('ok')
+
+
+def test_a_unit_mistake_is_logged_once_and_nothing_is_used(tmp_path):
+    import numpy as np
+
+    from imu_allan.io.bag_writer import serialize_imu
+    from imu_allan.ros.live import LiveInput
+    from imu_allan.ros.params import PARAMS
+
+    class Log:
+
+        def __init__(self):
+            self.lines = {'info': [], 'warning': [], 'error': []}
+
+        def __getattr__(self, level):
+            return self.lines[level].append
+
+    rng = np.random.default_rng(7)
+    n = 3000
+    stamps = 1_700_000_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 10_000_000  # 100 Hz
+    samples = rng.standard_normal((n, 6)) * 1e-3
+    samples[:, :3] += 0.02          # a MEMS gyro's bias [rad/s]
+    samples[:, :3] *= 57.3          # a driver that publishes deg/s
+    samples[:, 5] += 9.81
+    log = Log()
+    live = LiveInput({p.name: p.default for p in PARAMS}, tmp_path, log)
+    for k in range(0, n, 100):
+        for raw in serialize_imu(stamps[k:k + 100], samples[k:k + 100]):
+            live.append(raw.tobytes())
+        live.process()
+    assert len(log.lines['error']) == 1, log.lines
+    assert 'rerun with --units gyro=deg/s' in log.lines['error'][0]
+    assert live.session.unit_problem is not None and live.session.stats.n_used == 0
+    assert live.snapshot()[0].curve() is None
+    live.reset()                    # a new session judges again
+    assert live.session.unit_problem is None

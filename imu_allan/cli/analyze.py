@@ -46,24 +46,28 @@ def add_input_options(p: argparse.ArgumentParser, frame_id: bool = True) -> None
     p.add_argument('--units', default='', metavar='LIST',
                    help='units the input is written in, converted before the analysis: '
                         'gyro=deg/s, accel=g or accel=mg, time=ms|us|ns (a CSV t column, '
-                        'or bag stamps read as one count), e.g. gyro=deg/s,accel=g '
-                        '(default: rad/s, m/s^2 and the time unit of the format)')
+                        'or bag stamps read as one count), e.g. gyro=deg/s,accel=g; raw '
+                        'counts as the value of one count (gyro=0.05deg/s,accel=3.33mg); '
+                        'gyro=rad/s or accel=m/s^2 confirms SI values the unit check '
+                        'doubts (default: rad/s, m/s^2 and the time unit of the format)')
 
 
 def session_config_from_args(args) -> 'SessionConfig':
     """Return the SessionConfig of the options added by :func:`add_input_options`."""
+    from imu_allan.core.noise.unit_check import parse_units
     from imu_allan.pipeline.session import SessionConfig
     if not (math.isfinite(args.rate) and args.rate >= 0):
         raise InputError(f'--rate must be a finite number of Hz >= 0 (0: estimated), '
                          f'got {args.rate:g}')
-    return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion)
+    return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion,
+                         units_declared=','.join(parse_units(args.units).declared))
 
 
 def units_from_args(args) -> 'DeclaredUnits | None':
     """Return the units declared with ``--units`` (None when none was)."""
     from imu_allan.core.noise.unit_check import parse_units
     units = parse_units(args.units)
-    return None if units.is_si else units
+    return None if units.is_si and not units.declared else units
 
 
 def add_target_option(p: argparse.ArgumentParser) -> None:

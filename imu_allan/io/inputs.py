@@ -22,7 +22,7 @@ import numpy as np
 
 from imu_allan import AXES
 from imu_allan.core.noise.unit_check import DeclaredUnits
-from imu_allan.errors import InputError
+from imu_allan.errors import InputError, UnitMistake
 from imu_allan.io.progress import Progress
 from imu_allan.pipeline.session import Session, SessionConfig
 from imu_allan.pipeline.workers import start_workers
@@ -376,8 +376,11 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
     with open_input(path, topic, units, frame_id) as source:
         bar = Progress(path.name, source.n_messages) if show else None
         try:
-            session = stream_input(source, config, on_warning=warn, progress=bar, tap=tap,
-                                   prefetch=prefetch)
+            try:
+                session = stream_input(source, config, on_warning=warn, progress=bar,
+                                       tap=tap, prefetch=prefetch)
+            except UnitMistake as exc:  # named before any other judgement: no files
+                raise UnitMistake(f'{path}: {exc}') from None
             reader_warnings = list(source.warnings)
             for text in reader_warnings:
                 warn(text)

@@ -84,6 +84,11 @@ class SessionConfig:
         every gap.
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
+    units_declared : str
+        Comma-separated quantities ('gyro', 'accel', 'time') whose units the user
+        declared (``--units``): the unit check takes them as declared.  An undeclared
+        quantity whose first samples show a unit mistake with a named fix refuses the
+        session (:attr:`imu_allan.pipeline.session.Session.unit_problem`).
 
     """
 
@@ -109,18 +114,27 @@ class SessionConfig:
     min_still_s: float = 10.0
     max_fill_samples: int = 8
     exact_max_m: int = 0
+    units_declared: str = ''
 
     def __post_init__(self):
         if self.on_motion not in MOTION_POLICIES:
             raise InputError(f'on_motion must be one of {", ".join(MOTION_POLICIES)}, '
                              f'not {self.on_motion!r}')
+        if not set(self.declared_quantities) <= {'gyro', 'accel', 'time'}:
+            raise InputError(f'units_declared must name gyro, accel or time, not '
+                             f'{self.units_declared!r}')
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name == 'on_motion':
+            if f.name in ('on_motion', 'units_declared'):
                 continue
             if (isinstance(value, str) or not isinstance(value, (int, float))
                     or not math.isfinite(value) or value < 0):
                 raise InputError(f'{f.name} must be a finite number >= 0, not {value!r}')
+
+    @property
+    def declared_quantities(self) -> tuple:
+        """Return the quantities of ``units_declared`` as a tuple of names."""
+        return tuple(q for q in str(self.units_declared).split(',') if q)
 
 
 @dataclass

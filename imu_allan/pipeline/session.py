@@ -6,7 +6,9 @@ and passes them through three parts, each a plain object that owns its state:
 
 1. the stamp clock (:class:`~imu_allan.pipeline.clock.StampClock`) splits them into
    gap-free runs in stamp order (rate, gaps, duplicate, out-of-order and outlying
-   stamps, clock restarts, NaN/Inf rows);
+   stamps, clock restarts, NaN/Inf rows); the first rows of the runs are checked for
+   unit mistakes (:func:`~imu_allan.core.noise.unit_check.first_look`) before any other
+   judgement, so a deg/s gyro is named, not called moving;
 2. the sample gate (:class:`~imu_allan.pipeline.checks.SampleGate`) keeps the still
    rows (saturation, frozen axes, spikes, motion);
 3. the feed (:class:`~imu_allan.pipeline.feed.AccumulatorFeed`) accumulates them in one
@@ -21,8 +23,9 @@ from typing import Callable, Self
 import numpy as np
 
 from imu_allan.core.allan import AllanCurve
-from imu_allan.core.noise.unit_check import unit_warnings
-from imu_allan.errors import InputError, NotEnoughStillData
+from imu_allan.core.noise.unit_check import (first_look, FIRST_LOOK_ROWS, unit_error,
+                                             unit_warnings)
+from imu_allan.errors import InputError, NotEnoughStillData, UnitMistake
 from imu_allan.pipeline import session_state
 from imu_allan.pipeline.checks import SampleGate
 from imu_allan.pipeline.clock import StampClock
@@ -54,6 +57,10 @@ class Session:
         self.clock = StampClock(config, self.stats, self.log)
         self.feed = AccumulatorFeed(config, self.stats)
         self.gate = SampleGate(config, self.stats, self.log, self.feed)
+        #: The unit mistake that refuses this session (one line), or None.
+        self.unit_problem: str | None = None
+        # The first finite rows, until the unit check has judged them (None: judged).
+        self._first_rows: list[np.ndarray] | None = []
         if config.rate_hz > 0:
             self.feed.start(float(config.rate_hz))
 
@@ -69,7 +76,15 @@ class Session:
         samples : array_like
             Shape (n, 6), rates [rad/s] and accelerations [m/s^2] in AXES order.
 
+        Raises
+        ------
+        UnitMistake
+            When the first samples show a unit mistake (:attr:`unit_problem`), at this
+            block and every later one.
+
         """
+        if self.unit_problem is not None:
+            raise UnitMistake(self.unit_problem)
         stamp_ns, samples = _as_block(stamp_ns, samples)
         if stamp_ns.size == 0:
             return
@@ -83,7 +98,25 @@ class Session:
             self.feed.start(self.clock.rate_hz)
         elif broken:
             self.gate.end_segment()
+        if self._first_rows is not None:
+            self._first_rows.append(samples[np.isfinite(samples).all(axis=1)])
+            self._judge_units(FIRST_LOOK_ROWS)
         self.gate.take(stamp_ns, samples, self.clock.rate_hz)
+
+    def _judge_units(self, rows: int) -> None:
+        """Judge the units once ``rows`` finite rows are in; refuse a unit mistake."""
+        assert self._first_rows is not None
+        y = np.concatenate(self._first_rows)
+        if y.shape[0] < rows:
+            self._first_rows = [y]
+            return
+        self._first_rows = None
+        findings = first_look(self.clock.rate_hz, y[:FIRST_LOOK_ROWS])
+        problem = unit_error([f for f in findings
+                              if f.quantity not in self.config.declared_quantities])
+        if problem is not None:
+            self.unit_problem = problem
+            raise UnitMistake(problem)
 
     def break_segment(self) -> None:
         """
@@ -177,11 +210,16 @@ class Session:
         Raises
         ------
         InputError
-            When a larger share than ``max_spike_share`` of an axis' samples are spikes.
+            When the first samples show a unit mistake, or a larger share than
+            ``max_spike_share`` of an axis' samples are spikes.
         NotEnoughStillData
             When too little still data remains (see :attr:`still_problem`).
 
         """
+        if self._first_rows is not None:    # a short record: judged on what there is
+            self._judge_units(min(FIRST_LOOK_ROWS, 20))
+        if self.unit_problem is not None:
+            raise UnitMistake(self.unit_problem)
         # Motion first: vibration while driving also looks like spikes.
         problem = self.still_problem
         if problem is not None:

@@ -28,7 +28,7 @@ import numpy as np
 from imu_allan import AXES
 from imu_allan.core.allan import confidence_bounds
 from imu_allan.core.diagnose import RawKeeper
-from imu_allan.errors import InputError
+from imu_allan.errors import InputError, UnitMistake
 from imu_allan.io.imu_cdr import decode_imu_payloads, payload_frames
 from imu_allan.pipeline.analysis import CONFIDENCE
 from imu_allan.pipeline.session import Session
@@ -55,6 +55,7 @@ class SessionView:
     def __init__(self, session: Session):
         self._curve = session.curve(confidence=CONFIDENCE, bounds=False)
         self.stats = copy.deepcopy(session.stats)
+        self.config = session.config
         self.rate_hz = session.rate_hz
         self.duration_s = session.duration_s
         self.warnings = session.warnings
@@ -109,6 +110,8 @@ class LiveInput:
         # Block-averaged copy of the samples for the effect search's periodogram, and
         # the session it belongs to (a new session starts a new copy).
         self._raw: tuple[Session, RawKeeper] | None = None
+        # The session whose unit mistake was logged (logged once per session).
+        self._unit_logged: Session | None = None
         self.session = self._new_session(resume=values['resume'])
 
     @property
@@ -155,7 +158,15 @@ class LiveInput:
             if self._resume_hold is not None:
                 stamp_ns, samples = self._check_resume(stamp_ns, samples)
             if stamp_ns.size:
-                self.session.add(stamp_ns, samples)
+                try:
+                    self.session.add(stamp_ns, samples)
+                except UnitMistake as exc:
+                    # Nothing of this session is used or published; said once per session.
+                    if self._unit_logged is not self.session:
+                        self._unit_logged = self.session
+                        self.log.error(f'{exc}; nothing is published (fix the units of the '
+                                       'driver, then ~/reset)')
+                    return
                 self.session.release()      # live: no row waits for a whole spike chunk
                 self._keep_raw(samples)
 

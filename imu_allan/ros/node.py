@@ -316,7 +316,7 @@ class ImuAllanNode(Node):
 
     def _publish(self) -> None:
         if (self.session.duration_s < self.values['min_duration_s'] or self.fitting
-                or self.collection_stopped):
+                or self.collection_stopped or self.session.unit_problem is not None):
             return
         self.live.process()
         view, raw = self.live.snapshot()
@@ -335,6 +335,8 @@ class ImuAllanNode(Node):
 
         """
         self.live.process()
+        if self.session.unit_problem is not None:
+            return None
         return self._fit_and_publish(*self.live.snapshot())
 
     def _fit_and_publish(self, view: SessionView, raw: RawKeeper | None = None):
@@ -409,11 +411,14 @@ class ImuAllanNode(Node):
         Raises
         ------
         InputError
-            If there is not enough data for any Allan deviation yet.
+            If there is not enough data for any Allan deviation yet, or the data show a
+            unit mistake.
 
         """
         if self._fit_thread is not None:
             self._fit_thread.join()
+        if self.session.unit_problem is not None:
+            raise InputError(self.session.unit_problem)
         self.live.checkpoint(flush=True)
         view, raw = self.live.snapshot()
         # The same model as the periodic fit: raw copy, topic and plan included.

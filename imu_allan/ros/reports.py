@@ -131,6 +131,8 @@ class NodeReports:
             plan_text = ' | stopped collecting: every precision target met (stop_when_pinned)'
         text, values = text + plan_text, values + plan_kv
         level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
+        if s.unit_problem is not None:      # nothing is published until ~/reset
+            text, level = f'not collecting: {s.unit_problem}', DiagnosticStatus.ERROR
         return self.status('progress', level, text, values)
 
     def data_status(self) -> DiagnosticStatus:

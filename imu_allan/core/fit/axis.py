@@ -15,7 +15,7 @@ from imu_allan.core.allan import AllanCurve
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.nominal import nominal_fit
-from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported
+from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported, bound_by_curve
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter, _Slot, _Solution
 from imu_allan.core.noise.model import base_name, noise_from_terms, TERMS
@@ -252,6 +252,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
 
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
+    optimised = bound_by_curve(optimised, tau, avar, edf, notes)
     if dof > 0 and chi2_sf(chi2_value, dof) < P_CONSISTENT:
         notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
                      f'{dof} dof): a missing effect? (imu-allan diagnose)')

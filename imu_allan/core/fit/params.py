@@ -3,7 +3,10 @@ What a fit reports per parameter: estimates with intervals, or bounds.
 
 Supported terms get their value and 95 % profile-likelihood interval; candidates the data
 do not support get a one-sided 95 % upper bound from the chi-square profile of their
-level (or "not identified" where the record cannot constrain them).
+level (or "not identified" where the record cannot constrain them).  Then
+:func:`bound_by_curve` makes the bounds honest on a short record: an estimate of N, B or
+K whose interval reaches 0 is only an upper bound (its interval's upper end), and no
+bound of B or K lies above the bound the measured curve itself sets.
 """
 
 import math
@@ -198,3 +201,68 @@ def _one_sided_bound(c_obs: float, v0: float, v1: float, v2: float) -> float:
         if hi > 1e8 * scale:
             return math.inf
     return float(brentq(lambda c: prob(c) - 0.05, lo, hi, xtol=1e-6 * hi))
+
+
+def bound_by_curve(optimised: dict, tau: np.ndarray, avar: np.ndarray, edf: np.ndarray,
+                   notes: list) -> dict:
+    """
+    Turn estimates that may be 0 into bounds, and cap B and K at the curve's own bounds.
+
+    - An estimate of N, B or K whose 95 % interval reaches 0 does not show its term: it
+      is reported as the upper bound at the interval's upper end (B's T_B is then not
+      identified).
+    - No term exceeds the whole curve: K <= min sqrt(3 AVAR_hi / tau) (IEEE Std 952 C.1
+      slope +1/2) and B <= min sqrt(AVAR_hi) / 0.664 (annex C floor), AVAR_hi each
+      point's joint 95 % upper limit (:func:`imu_allan.core.fit.trust.avar_upper`).  A
+      profile bound above them (a short record, where the profile of a term the data
+      do not see runs up to hundreds of times the floor) is replaced by them.
+
+    Parameters
+    ----------
+    optimised : dict of str to Param
+        The reported parameters, by symbol.
+    tau : numpy.ndarray
+        (k,) fitted averaging times [s].
+    avar : numpy.ndarray
+        (k,) measured AVAR at them [unit^2].
+    edf : numpy.ndarray
+        (k,) their equivalent degrees of freedom.
+    notes : list of str
+        Appended with one line per change.
+
+    Returns
+    -------
+    dict of str to Param
+        ``optimised`` with the changed parameters (a new dict).
+
+    """
+    from imu_allan.core.fit.trust import curve_k_bound, floor_b_bound   # trust imports axis
+    out = dict(optimised)
+    for sym in ('N', 'B', 'K'):
+        p = out.get(sym)
+        if p is None or p.kind != 'estimate' or not p.ci95[0] <= 0.0:
+            continue
+        hi = float(p.ci95[1])
+        if math.isfinite(hi) and hi > 0:
+            out[sym] = Param(hi, (0.0, hi), 'upper_bound', p.unit)
+        else:
+            out[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified', p.unit)
+        notes.append(f'{sym}: its 95 % interval reaches 0 (the record does not show the '
+                     'term); only an upper bound')
+        if sym == 'B' and out.get('T_B') is not None and out['T_B'].kind != 'not_identified':
+            out['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified',
+                               out['T_B'].unit)
+    if not np.size(tau):
+        return out
+    caps = {'K': (curve_k_bound(tau, avar, edf), "the curve's own bound min "
+                  'sqrt(3 AVAR_hi / tau)'),
+            'B': (floor_b_bound(avar, edf), 'the ADEV floor bound min sqrt(AVAR_hi) / 0.664')}
+    for sym, (cap, what) in caps.items():
+        p = out.get(sym)
+        if p is None or p.kind != 'upper_bound' or not (math.isfinite(cap) and cap > 0):
+            continue
+        if not p.value <= cap:
+            out[sym] = Param(cap, (0.0, cap), 'upper_bound', p.unit)
+            notes.append(f'{sym}: the bound {p.value:.3g} lay above {what}, {cap:.3g}: '
+                         'capped there')
+    return out

@@ -147,7 +147,32 @@ def _floor_bound(fit: AxisFit) -> float:
     if not fit.tau_s.size:
         return math.nan
     i = _unfiltered(fit)
-    return float(np.sqrt(np.min(avar_upper(fit.avar_meas[i:], fit.edf[i:]))) / 0.664)
+    return floor_b_bound(fit.avar_meas[i:], fit.edf[i:])
+
+
+def floor_b_bound(avar: np.ndarray, edf: np.ndarray) -> float:
+    """
+    95 % upper bound of B from a curve's floor: min sqrt(AVAR_hi) / 0.664.
+
+    Every term only adds to AVAR, and a bias instability of level B alone peaks at
+    ADEV 0.664 B (IEEE Std 952-1997 annex C), so 0.664 B <= ADEV(tau) at its peak's tau:
+    a bound for a bias instability whose peak lies within the curve (the range the fit
+    searches T_B in); AVAR_hi is each point's joint upper limit (:func:`avar_upper`).
+
+    Parameters
+    ----------
+    avar : np.ndarray
+        Shape (k,), measured AVAR past the sensor's filter [unit^2].
+    edf : np.ndarray
+        Shape (k,), equivalent degrees of freedom of each point.
+
+    Returns
+    -------
+    float
+        The bound [unit].
+
+    """
+    return float(np.sqrt(np.min(avar_upper(avar, edf))) / 0.664)
 
 
 def conservative(fit: AxisFit, problems: list) -> AxisFit:
