@@ -437,25 +437,15 @@ def noise_components(noise: AxisNoise) -> list:
         As ``AxisFit.components``.
 
     """
+    # Every registry term by its own read-out (Term.instances), so a term added to the
+    # registry is planned too; labels as the fit numbers repeats (gauss_markov_2).
     out: list[tuple[str, float, tuple]] = []
-    if noise.Q:
-        out.append(('quantization', noise.Q ** 2, ()))
-    if noise.N:
-        out.append(('white', noise.N ** 2, ()))
-    if noise.B and noise.T_B:
-        out.append(('bias_instability', TERMS['bias_instability'].to_coef(noise.B, noise.T_B),
-                    (noise.T_B,)))
-    elif noise.B:
-        out.append(('flicker', noise.B ** 2, ()))
-    for i, gm in enumerate(g for g in noise.gauss_markov if g.B):
-        label = 'gauss_markov' if i == 0 else f'gauss_markov_{i + 1}'
-        out.append((label, TERMS['gauss_markov'].to_coef(gm.B, gm.T), (gm.T,)))
-    if noise.K:
-        out.append(('random_walk', noise.K ** 2, ()))
-    if noise.R:
-        out.append(('rate_ramp', noise.R ** 2, ()))
-    for i, s in enumerate(s for s in noise.sinusoids if s.A):
-        out.append(('sinusoid' if i == 0 else f'sinusoid_{i + 1}', s.A ** 2, (s.f0_hz,)))
+    for name, term in TERMS.items():
+        found = [v for v in term.instances(noise) if v[0]]
+        for i, values in enumerate(found):
+            phi = tuple(values[len(term.symbols) - len(term.nonlinear):])
+            out.append((name if i == 0 else f'{name}_{i + 1}', term.to_coef(values[0], *phi),
+                        phi))
     return out
 
 
