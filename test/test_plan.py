@@ -99,9 +99,9 @@ def test_a_bound_is_planned_at_its_bound_and_reads_at_least():
     k = plan.param('K')
     assert k.kind == 'at_least' and math.isinf(k.width_now)
     assert k.value == fit.optimised['K'].value
-    # N is pinned: its present width (the fit's interval) meets +-10 %.
+    # N meets its target: its present width (the fit's interval) meets +-10 %.
     n = plan.param('N')
-    assert n.kind == 'pinned' and n.time_s == 1200.0
+    assert n.kind == 'met' and n.time_s == 1200.0
     assert n.width_now == relative_width(fit.optimised['N'].value, fit.optimised['N'].ci95)
     assert 'K in >= ' in plan.progress_line() or 'K only bounded' in plan.progress_line()
 
@@ -120,10 +120,10 @@ def test_a_parameter_the_model_cannot_plan_is_still_to_come():
                                                                   'not_identified')
     plan = plan_fits({'gyro_z': fit}, rate, 660.0)['gyro_z']
     kinds = {p.name: p.kind for p in plan.params}
-    assert kinds == {'N': 'pinned', 'B': 'at_least', 'T_B': 'open', 'K': 'open',
-                     'sinusoid.A': 'pinned', 'sinusoid.f0_hz': 'pinned'}
+    assert kinds == {'N': 'met', 'B': 'at_least', 'T_B': 'open', 'K': 'open',
+                     'sinusoid.A': 'met', 'sinusoid.f0_hz': 'met'}
     assert [p.name for p in plan.params][:4] == ['N', 'B', 'T_B', 'K']
-    assert not plan.all_pinned() and not targets_met({'gyro_z': plan}, 1)
+    assert not plan.all_met() and not targets_met({'gyro_z': plan}, 1)
     assert math.isnan(plan.remaining_s())
     assert 'K not constrained yet' in plan.progress_line()
     assert 'B only bounded yet' in plan.progress_line()
@@ -299,7 +299,7 @@ def test_analysis_plan_in_summary_json_and_plan_command(tmp_path, capsys):
     assert set(result.plans) == {a for a, f in result.fits.items() if f is not None}
     doc = result.to_json()
     plan = doc['axes']['gyro_x']['plan']
-    assert plan['params']['N']['target'] == 0.05 and plan['params']['N']['kind'] == 'pinned'
+    assert plan['params']['N']['target'] == 0.05 and plan['params']['N']['kind'] == 'met'
     assert plan['params']['B']['kind'] in ('predicted', 'at_least', 'beyond')
     text = summary_text(result)
     assert 'record length to reach each target' in text
@@ -314,7 +314,7 @@ def test_analysis_plan_in_summary_json_and_plan_command(tmp_path, capsys):
     assert main(['plan', str(path), '--target', 'N=0.05']) == 0
     out = capsys.readouterr().out
     assert 'predicted from a record of 10.0 min at 50 Hz' in out
-    assert result.plans['gyro_x'].table_lines()[0] in out and 'gyro_x: pinned: N' in out
+    assert result.plans['gyro_x'].table_lines()[0] in out and 'gyro_x: met: N' in out
 
 
 def test_a_plan_from_a_model_that_does_not_hold_says_so():
@@ -338,6 +338,6 @@ def test_a_plan_from_a_model_that_does_not_hold_says_so():
     assert 'model does not hold on gyro_y' in progress_report(plans)[0]
     # Every target met, but the model does not hold: no self-stop on it.
     met = plans['gyro_x']._replace(params=tuple(
-        p._replace(kind='pinned') for p in plans['gyro_x'].params))
+        p._replace(kind='met') for p in plans['gyro_x'].params))
     assert targets_met({'gyro_x': met}, 1)
     assert not targets_met({'gyro_x': met._replace(caveat=plans['gyro_y'].caveat)}, 1)

@@ -361,15 +361,15 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
         if duration_s > 0 and p is None:
             now = float(np.interp(math.log(duration_s), np.log(grid), col))
         if math.isinf(target):
-            kind = 'pinned'             # no target: nothing to wait for
+            kind = 'met'             # no target: nothing to wait for
         elif name in bounded:
             kind = 'at_least'
         elif duration_s > 0 and now <= target:
-            kind = 'pinned'
+            kind = 'met'
         else:
             kind = 'predicted'
         when = _crossing(grid, col, target)
-        if kind == 'pinned':
+        if kind == 'met':
             when = duration_s
         elif kind == 'at_least' and duration_s > 0 and when <= duration_s:
             # At its bound the term would be resolved by now: it is smaller, by how
@@ -377,7 +377,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
             when = math.nan
         elif duration_s > 0:
             when = max(when, duration_s)
-        if kind != 'pinned' and p is not None and p.kind != 'estimate' and waits.get(name):
+        if kind != 'met' and p is not None and p.kind != 'estimate' and waits.get(name):
             when = max(waits[name]) if math.isnan(when) else max(when, *waits[name])
         if math.isinf(when) and kind != 'at_least':
             kind = 'beyond'
