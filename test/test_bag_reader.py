@@ -20,17 +20,18 @@ from rosbags.rosbag2 import StoragePlugin, Writer as Ros2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 
+from conftest import T0_NS
 from imu_allan.core import native
 from imu_allan.errors import InputError
-from imu_allan.io.bag_reader import ImuBlock, list_imu_topics, list_topics, open_imu
+from imu_allan.io.bag_reader import list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
+from imu_allan.io.bags.base import ImuBlock
 from imu_allan.io.imu_cdr import (CovariancePatch, decode_imu_cdr, decode_imu_payloads,
                                   imu_frame_id, set_imu_covariances_cdr)
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
-T0_NS = 1_700_000_000_000_000_000
 COMPILED = native.LIB
 
 

@@ -9,7 +9,8 @@ import pytest
 from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
 from imu_allan.pipeline.feed import BackgroundAccumulator
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 
 def _record(seed: int, n: int) -> tuple:

@@ -14,10 +14,12 @@ import pytest
 
 from imu_allan.core.allan import allan_curve, overlapping_avar
 from imu_allan.core.allan.accumulator import AllanAccumulator
-from imu_allan.core.fit import _CurveCovariance, fit_axis, fit_curve, nominal_fit
-from imu_allan.core.noise.model import avar_model, TERMS
-from imu_allan.core.noise.params import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.fit import fit_axis, fit_curve, nominal_fit
+from imu_allan.core.fit.covariance import CurveCovariance
+from imu_allan.core.noise.model import avar_model
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
+from imu_allan.core.noise.terms import TERMS
+from imu_allan.core.noise.values import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
 from imu_allan.errors import InputError
 from imu_allan.io.csv_io import read_csv
 
@@ -40,7 +42,7 @@ def test_covariance_model_matches_monte_carlo():
     rate, n, reps = 10.0, 8192, 300
     noise = AxisNoise(N=1e-3, B=3e-4, T_B=2.0, K=2e-5, Q=5e-5)
     m = 2 ** np.arange(12)
-    cov = _CurveCovariance(m, n + 1 - 2 * m, 1.0 / rate, n)
+    cov = CurveCovariance(m, n + 1 - 2 * m, 1.0 / rate, n)
     terms = [TERMS['white'], TERMS['bias_instability'], TERMS['random_walk'],
              TERMS['quantization']]
     coef = np.array([noise.N ** 2, GaussMarkov(noise.B, noise.T_B).psd, noise.K ** 2,

@@ -14,12 +14,13 @@ import yaml
 
 from imu_allan import AXES
 from imu_allan.core.fit import AxisFit, Param
-from imu_allan.core.noise.model import avar_flicker, avar_gauss_markov, GM_PEAK_TAU
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov
+from imu_allan.core.noise.shapes import avar_flicker, avar_gauss_markov, GM_PEAK_TAU
 from imu_allan.core.noise.simulate import state_space_matrices
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov
+from imu_allan.core.outputs.consumers import NOTES
 from imu_allan.core.outputs.exports import kalibr_yaml
 from imu_allan.core.outputs.kalman import (axis_densities, axis_noise_from, AxisDensities,
-                                           discretise, imu_covariance, kalman_model, NOTES)
+                                           discretise, imu_covariance, kalman_model)
 from imu_allan.errors import InputError
 
 GYRO = AxisNoise(N=1.2e-4, B=5e-5, T_B=80.0, K=2e-6)

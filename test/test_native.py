@@ -207,7 +207,7 @@ def test_repeat_runs_equal_the_numpy_twin(monkeypatch):
 def test_gauss_markov_stencil_sums_equal_the_numpy_twin():
     # Lags across the three branches of e^-x - 1 + x (series, expm1, exp), both signs.
     from imu_allan.core.fit.covariance import _STENCIL_WEIGHTS
-    from imu_allan.core.noise.model import gcov_gauss_markov
+    from imu_allan.core.noise.shapes import gcov_gauss_markov
     rng = np.random.default_rng(8)
     t_s = 40.0
     lags = t_s * np.geomspace(1e-6, 60.0, 9 * 3000) * rng.choice([-1.0, 1.0], 9 * 3000)
@@ -232,7 +232,7 @@ def test_pair_sums_equal_the_numpy_twin():
 def test_fit_is_the_same_without_the_library(monkeypatch):
     # The covariance quadrature's two kernels against their numpy twins, through a fit.
     from imu_allan.core.fit import covariance, fit_axis
-    from imu_allan.core.noise.model import avar_gauss_markov, avar_random_walk, avar_white
+    from imu_allan.core.noise.shapes import avar_gauss_markov, avar_random_walk, avar_white
     tau = np.unique(np.round(np.geomspace(1, 200_000, 30))) / 100.0
     avar = (avar_white(tau, 1e-3) + avar_gauss_markov(tau, 2e-5, 50.0)
             + avar_random_walk(tau, 1e-6))
@@ -249,7 +249,7 @@ def test_fit_is_the_same_without_the_library(monkeypatch):
 
 
 def test_gauss_markov_shape_equals_the_numpy_twin(monkeypatch):
-    from imu_allan.core.noise.model import _gm_shape
+    from imu_allan.core.noise.shapes import _gm_shape
     x = np.concatenate([np.geomspace(1e-9, 0.0499, 400), np.geomspace(0.05, 1e4, 400)])
     got = _gm_shape(x.reshape(20, 40)).ravel()
     assert _gm_shape(np.float64(0.3)).shape == () and _gm_shape(np.float64(3.0)).shape == ()

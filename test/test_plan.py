@@ -19,9 +19,11 @@ from imu_allan import AXES
 from imu_allan.cli import main
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.fit.result import Param
-from imu_allan.core.noise.model import avar_model, GM_PEAK_TAU
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, load_params, Sinusoid
+from imu_allan.core.noise.model import avar_model
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.shapes import GM_PEAK_TAU
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid
 from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
                                  planning_model)
 from imu_allan.core.plan.planner import as_read, inflated, inflation, ORDERING
@@ -31,7 +33,8 @@ from imu_allan.core.search import search_axis
 from imu_allan.errors import InputError
 from imu_allan.io.report import summary_text
 from imu_allan.pipeline.analysis import analyze
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 from imu_allan.ros.plan_report import targets_met
 
 
@@ -110,7 +113,7 @@ def test_a_parameter_the_model_cannot_plan_is_still_to_come():
     # 11 min of white noise and a 31 Hz line (the MPU-6050's gyro_z): the model has no
     # bias-instability or random-walk term, B is only bounded and K unconstrained.  The
     # plan once listed N and the line alone, read "every target met", and the node's
-    # stop_when_pinned would have stopped there.
+    # stop_when_met would have stopped there.
     rate, noise = 100.0, AxisNoise(N=1.7e-4, sinusoids=(Sinusoid(1.7e-3, 31.4),))
     y = simulate_axis(noise, rate, int(rate * 660), np.random.default_rng(0))
     c = allan_curve(y, rate, 'dense', confidence=0.95)
@@ -250,8 +253,8 @@ def test_the_plan_of_a_1_h_fit_agrees_with_the_plan_of_the_true_model():
 def test_curve_covariance_of_a_1000_h_record_at_1_khz():
     # The planner reaches 1000 h: 3.6e9 samples at 1 kHz, whose term counts multiplied
     # overflowed int64 and made Sigma indefinite (a traceback from a 20 min record).
-    from imu_allan.core.fit.api import CurveCovariance
-    from imu_allan.core.noise.model import TERMS
+    from imu_allan.core.fit.covariance import CurveCovariance
+    from imu_allan.core.noise.terms import TERMS
     from imu_allan.core.plan.precision import fit_taus
 
     def first_variance(n: int) -> float:

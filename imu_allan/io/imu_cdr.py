@@ -34,7 +34,7 @@ _HEAD = np.dtype({'names': ['enc0', 'enc1', 'frame_len_le', 'frame_len_be'],
                   'itemsize': 16})
 
 
-def _records(u8: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
+def read_records(u8: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """
     Read one structured record at each offset of a byte buffer.
 
@@ -59,10 +59,10 @@ def _records(u8: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
                   and (np.diff(starts) == starts[1] - starts[0]).all()):
         step = int(starts[1] - starts[0]) if n > 1 else dtype.itemsize
         return np.ndarray((n,), dtype, buffer=u8, offset=int(starts[0]), strides=(step,))
-    return _gather(u8, starts, dtype.itemsize).view(dtype).reshape(n)
+    return gather_bytes(u8, starts, dtype.itemsize).view(dtype).reshape(n)
 
 
-def _gather(u8: np.ndarray, starts: np.ndarray, nbytes: int) -> np.ndarray:
+def gather_bytes(u8: np.ndarray, starts: np.ndarray, nbytes: int) -> np.ndarray:
     """
     Copy ``nbytes`` bytes at each offset of a byte buffer into an (n, nbytes) array.
 
@@ -146,10 +146,10 @@ def _imu_layout(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     n = starts.size
     has_head = (lengths >= 16) & (starts + 16 <= u8.size)
     if has_head.all():
-        head = _records(u8, starts, _HEAD)
+        head = read_records(u8, starts, _HEAD)
     elif has_head.any():
         # Short payloads read a stand-in head; they are never marked as fitting below.
-        head = _records(u8, np.where(has_head, starts, starts[has_head][0]), _HEAD)
+        head = read_records(u8, np.where(has_head, starts, starts[has_head][0]), _HEAD)
     else:
         head = np.zeros(n, _HEAD)
     frame_len = head['frame_len_le'].astype(np.int64)
@@ -236,15 +236,15 @@ def _decode_plain(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, ros1:
         steps = np.diff(group)
         if group.size > 1 and steps[0] >= offset + _N_DOUBLES_BYTES and (steps == steps[0]).all():
             # Equally spaced payloads (one length, back to back): a zero-copy strided view.
-            fields = _records(u8, group, _fields_dtype(offset, is_big, ros1,
-                                                       offset + _N_DOUBLES_BYTES, False))
+            fields = read_records(u8, group, _fields_dtype(offset, is_big, ros1,
+                                                           offset + _N_DOUBLES_BYTES, False))
         else:
             # Gather only the 56 bytes needed (stamp, angular_velocity, linear_acceleration),
             # as three runs of bytes per message.
             packed = np.empty((group.size, 56), np.uint8)
-            packed[:, :8] = _gather(u8, group + 4, 8)
-            packed[:, 8:32] = _gather(u8, group + (offset + 104), 24)
-            packed[:, 32:] = _gather(u8, group + (offset + 200), 24)
+            packed[:, :8] = gather_bytes(u8, group + 4, 8)
+            packed[:, 8:32] = gather_bytes(u8, group + (offset + 104), 24)
+            packed[:, 32:] = gather_bytes(u8, group + (offset + 200), 24)
             fields = packed.view(_fields_dtype(offset, is_big, ros1, 56, True)).ravel()
         stamp_ns[idx] = (fields['sec'].astype(np.int64) * 1_000_000_000
                          + fields['nanosec'].astype(np.int64))
@@ -277,7 +277,7 @@ def decode_imu_cdr(payloads) -> tuple[np.ndarray, np.ndarray]:
     """
     if not len(payloads):
         return np.zeros(0, np.int64), np.zeros((0, 6))
-    stamp_ns, samples, ok = decode_imu_payloads(*_join(payloads), 'cdr')
+    stamp_ns, samples, ok = decode_imu_payloads(*join_payloads(payloads), 'cdr')
     if not ok.all():
         raise InputError(f'{ok.size - np.count_nonzero(ok)} of {ok.size} payloads are not '
                          'CDR sensor_msgs/msg/Imu messages')
@@ -310,7 +310,7 @@ def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
     """
     if not len(payloads):
         return []
-    u8, starts, lengths = _join(payloads)
+    u8, starts, lengths = join_payloads(payloads)
     u8 = u8.copy()  # writable
     offset, big, fits = _imu_layout(u8, starts, lengths, False)
     # The covariances follow orientation (4 doubles), its covariance (9) and
@@ -406,7 +406,7 @@ class CovariancePatch:
                          raw[at + 296:]))
 
 
-def _join(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def join_payloads(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Concatenate byte strings; return (buffer uint8, (n,) starts, (n,) lengths)."""
     lengths = np.fromiter(map(len, payloads), np.int64, len(payloads))
     starts = np.zeros(lengths.size, np.int64)

@@ -38,6 +38,8 @@ _RUN_TAIL = 60
 _FLOOR = 0.01
 
 
+# Long because a window is judged across blocks (held rows, a still reference that
+# re-anchors, event counts) and that state survives a checkpoint.
 class MotionGate:
     """
     Hold samples until their window is judged; pass the still ones to the feed.

@@ -38,6 +38,8 @@ _THIN = 4
 _MAD = 0.6744897501960817
 
 
+# Long because a verdict must not depend on how the rows arrive: rows wait for their
+# context, and that state survives a checkpoint.
 class SpikeFilter:
     """
     Find and interpolate spikes in a stream of gap-free runs.

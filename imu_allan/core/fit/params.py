@@ -15,8 +15,9 @@ from scipy.special import ndtr
 from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.result import _unit, Param
-from imu_allan.core.fit.solver import _design, _Fitter, _Slot, _Solution
-from imu_allan.core.noise.model import base_name, GM_PEAK_TAU, TERMS
+from imu_allan.core.fit.solver import _design, Fitter, Slot, Solution
+from imu_allan.core.noise.shapes import GM_PEAK_TAU
+from imu_allan.core.noise.terms import base_name, TERMS
 
 #: Parameters always reported, with the term they belong to.
 CORE_PARAMS = {'N': 'white', 'B': 'bias_instability', 'T_B': 'bias_instability',
@@ -26,7 +27,7 @@ _CORE_TERMS = ('white', 'filtered_white', 'bias_instability', 'random_walk')
 Z95_ONE_SIDED = 1.6448536269514722
 
 
-def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: float,
+def _estimates(fitter, slots: list, sol: Solution, supported: set, threshold: float,
                symbols: dict, unit: str, notes: list,
                pinned: list | None = None) -> tuple[dict, dict]:
     """
@@ -77,7 +78,7 @@ def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: f
     return optimised, values
 
 
-def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported: set,
+def _unsupported(fitter, slots_all: list, slots: list, sol: Solution, supported: set,
                  candidates: tuple, requested: bool, symbols: dict, unit: str,
                  optimised: dict, notes: list) -> None:
     """
@@ -93,7 +94,7 @@ def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported
             notes.append(f'{s.label}: not supported by the data (left out)')
             continue
         others = [i for i, x in enumerate(slots) if x.label != s.label]
-        rest = _Solution(sol.coef[others], tuple(sol.phi[i] for i in others), sol.j)
+        rest = Solution(sol.coef[others], tuple(sol.phi[i] for i in others), sol.j)
         if s.label not in [x.label for x in slots]:    # a requested extra term
             others, rest = list(range(len(slots))), sol
         bound = _upper_bound(fitter, [slots[i] for i in others], rest, s)
@@ -121,7 +122,7 @@ def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported
                 notes.append(f'{sym}: not modelled (term {base} not among the candidates)')
 
 
-def _upper_bound(fitter: _Fitter, slots: list, sol: _Solution, extra: _Slot) -> float:
+def _upper_bound(fitter: Fitter, slots: list, sol: Solution, extra: Slot) -> float:
     """
     One-sided 95 % upper bound of an unsupported term's level (its first symbol).
 

@@ -24,10 +24,10 @@ import math
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_ppf
-from imu_allan.core.fit.axis import _filtered_start
+from imu_allan.core.fit.axis import filtered_start
 from imu_allan.core.fit.judge import follows_curve, white_region, white_share
 from imu_allan.core.fit.result import AxisFit, Param
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.values import AxisNoise
 
 
 def trust_problems(fit: AxisFit, consistent: bool) -> list:
@@ -67,7 +67,7 @@ def _unfiltered(fit: AxisFit) -> int:
     """Index of the first fitted tau past the sensor's filter (the one rule of fit_axis)."""
     if fit.tau_s.size < 4:
         return 0
-    return _filtered_start(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0])
+    return filtered_start(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0])
 
 
 def _white(fit: AxisFit, trusted_model: bool = True):

@@ -36,7 +36,7 @@ import numpy as np
 
 from imu_allan import AXES
 from imu_allan.core.noise.model import avar_model
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.errors import InputError
 
 #: Default upper end of the horizon [s]: a GNSS/INS outage or a long VIO drift.

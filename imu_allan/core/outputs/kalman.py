@@ -39,10 +39,9 @@ from typing import Mapping
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.noise.model import GM_PEAK_TAU
+from imu_allan.core.noise.shapes import GM_PEAK_TAU
 from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise
-from imu_allan.core.outputs.consumers import NOTES  # noqa: F401
 from imu_allan.errors import InputError
 
 #: robot_localization ignores (clamps) variances below this [unit^2].

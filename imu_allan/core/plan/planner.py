@@ -19,15 +19,15 @@ from typing import Collection, Mapping, Sequence
 import numpy as np
 
 from imu_allan.core.allan.blas import single_thread_blas
-from imu_allan.core.fit.api import CurveCovariance, profile_threshold
-from imu_allan.core.noise.model import TERMS
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.fit.axis import profile_threshold
+from imu_allan.core.fit.covariance import CurveCovariance
+from imu_allan.core.noise.terms import TERMS
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
                                            expected_widths, fit_taus, interval_threshold,
                                            relative_width, Z95)
 from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
-from imu_allan.core.plan.separation import (LAMBDA_SEPARATED, mismatch, rivals, scaled,
-                                            SLOW_PROCESS)
+from imu_allan.core.plan.separation import LAMBDA_SEPARATED, mismatch, rivals, scaled, SLOW_PROCESS
 from imu_allan.core.search.choice import SLOWER_PROCESS_RIVAL
 
 #: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise).
@@ -234,7 +234,7 @@ def inflation(chi2: float, dof: int) -> float:
 
     The fit widens its profile intervals where its model explains the curve worse than
     Sigma allows (J / dof > 1: a real sensor's curve, an effect the model lacks):
-    :func:`imu_allan.core.fit.api.profile_threshold`.  The expected widths assume the
+    :func:`imu_allan.core.fit.axis.profile_threshold`.  The expected widths assume the
     dispersion a correct model shows on average (:func:`interval_threshold`); a longer
     record of the same sensor keeps the excess, so its widths are sinh(f z sd),
     f = sqrt(threshold of the fit / threshold expected), at least 1.
