@@ -59,7 +59,8 @@ from imu_allan.io.bag_reader import open_imu
 from imu_allan.io.bag_writer import write_imu_bag
 from imu_allan.io.report import write_outputs
 from imu_allan.pipeline.analysis import analyze
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 REPO = Path(__file__).resolve().parents[1]
 _PR_SET_CHILD_SUBREAPER = 36

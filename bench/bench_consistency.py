@@ -37,12 +37,13 @@ import numpy as np
 from scipy.stats import chi2
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.noise.params import AxisNoise, NoiseSpec
-from imu_allan.core.noise.simulate import simulate_axis, simulate_imu, white_noise
+from imu_allan.core.noise.generators import white_noise
+from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec
 from imu_allan.core.outputs.consistency import random_walk_filter
 from imu_allan.io.csv_io import read_csv
 from imu_allan.io.inputs import analyze_input
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 DATA = Path(__file__).resolve().parents[2] / 'shared' / 'realdata' / 'adis16405'
 HORIZONS_S = (1.0, 10.0, 30.0, 100.0)

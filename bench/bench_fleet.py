@@ -36,14 +36,14 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from imu_allan import AXES  # noqa: E402
-from imu_allan.core.noise.params import AxisNoise, NoiseSpec  # noqa: E402
 from imu_allan.core.noise.simulate import simulate_imu  # noqa: E402
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec  # noqa: E402
 from imu_allan.fleet.inputs import content_key, fleet_inputs  # noqa: E402
 from imu_allan.fleet.run import connect, run_fleet  # noqa: E402
 from imu_allan.fleet.store import FleetStore  # noqa: E402
 from imu_allan.fleet.task import analyze_job, FleetJob  # noqa: E402
 from imu_allan.io.bag_writer import write_imu_bag  # noqa: E402
-from imu_allan.pipeline.session import SessionConfig  # noqa: E402
+from imu_allan.pipeline.hygiene import SessionConfig  # noqa: E402
 
 
 def _spec() -> NoiseSpec:

@@ -106,7 +106,8 @@ def role_node(args) -> int:
     """Run the node with one executor until the stream ends; print a JSON line."""
     import rclpy
     from rclpy.parameter import Parameter
-    from imu_allan.ros.node import create_executor, ImuAllanNode
+    from imu_allan.ros.node import ImuAllanNode
+    from imu_allan.ros.spin import create_executor
     rclpy.init(args=[])
     out = tempfile.mkdtemp(prefix='bench_node_')
     fit_every = args.fit_every
@@ -157,7 +158,7 @@ def role_node(args) -> int:
             if now - marks['first'] >= args.seconds + 2.0:
                 done.set_result(True)
     node.create_timer(0.1, watch)
-    from imu_allan.ros.node import spin_until_shutdown
+    from imu_allan.ros.spin import spin_until_shutdown
     node.create_timer(0.5, lambda: done.done() and rclpy.shutdown())
     spin_until_shutdown(executor)
     w0, c0, n0, f0 = marks['warm']

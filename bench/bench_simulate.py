@@ -15,8 +15,9 @@ import time
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.noise.params import AxisNoise, load_params, NoiseSpec, Sinusoid
+from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_imu, simulate_state_space
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec, Sinusoid
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'xsens_mti7.yaml'
 

@@ -18,8 +18,8 @@ import re
 import numpy as np
 
 from imu_allan.core.allan import allan_curve
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, NoiseSpec
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, NoiseSpec
 from imu_allan.core.search import search_axis
 
 RATE_HZ = 10.0

@@ -15,8 +15,8 @@ import numpy as np
 from imu_allan import AXES
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.diagnose import diagnose_curve
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
 
 RATE_HZ = 50.0
 DURATION_S = 2000.0

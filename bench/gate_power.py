@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 RATE_HZ = 100.0
 SIGMA = np.array([6e-3] * 3 + [0.04] * 3)

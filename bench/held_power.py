@@ -37,7 +37,7 @@ from imu_allan import AXES
 from imu_allan.errors import InputError
 from imu_allan.io.csv_io import read_csv, write_csv
 from imu_allan.io.inputs import analyze_input
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 RATE_HZ = 100.0
 
@@ -121,7 +121,7 @@ def row(name: str, result, clean) -> str:
 
 def simulated(seeds: int, k: int = 3, n: int = 30_000) -> None:
     """Print held N over the updates' N (and both half-widths) for seeded sensors."""
-    from imu_allan.core.noise.params import AxisNoise
+    from imu_allan.core.noise.values import AxisNoise
     from imu_allan.core.noise.simulate import simulate_axis
     from imu_allan.pipeline.analysis import analyze
     from imu_allan.pipeline.session import Session

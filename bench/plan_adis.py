@@ -24,7 +24,7 @@ import numpy as np
 from validate_adis import stream
 
 from imu_allan import AXES
-from imu_allan.core.noise.model import base_name
+from imu_allan.core.noise.terms import base_name
 from imu_allan.core.plan.planner import plan_fits
 from imu_allan.core.plan.precision import relative_width
 from imu_allan.io.csv_io import read_csv

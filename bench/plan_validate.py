@@ -29,8 +29,9 @@ import time
 import numpy as np
 
 from imu_allan.core.allan import allan_curve
-from imu_allan.core.noise.params import AxisNoise, load_params
+from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_axis
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.plan import noise_components, planning_model
 from imu_allan.core.plan.planner import _crossing, plan_fits
 from imu_allan.core.plan.precision import CurveModel, relative_width
@@ -118,7 +119,7 @@ def early_summary(plans: list, p: str, target: float, t_act: float) -> tuple:
     """
     got = [pl.get((p, target), (math.inf, 'beyond')) for pl in plans]
     times = [math.inf if kind == 'at_least' else
-             t_act if kind == 'pinned' and t_act <= t else t for t, kind in got]
+             t_act if kind == 'met' and t_act <= t else t for t, kind in got]
     limits = [t for t, kind in got if kind == 'at_least']
     return (float(np.median(times)), len(got) - len(limits),
             sum(t <= 1.5 * t_act for t in limits), len(limits))

@@ -28,9 +28,11 @@ import numpy as np
 
 from imu_allan import AXIS_UNITS
 from imu_allan.core.allan import allan_curve
-from imu_allan.core.noise.model import adev_model, FLICKER_AVAR
-from imu_allan.core.noise.params import AxisNoise, load_params
+from imu_allan.core.noise.model import adev_model
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.shapes import FLICKER_AVAR
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.search import search_axis
 
 REPO = Path(__file__).resolve().parents[1]

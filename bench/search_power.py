@@ -27,9 +27,10 @@ import time
 import numpy as np
 
 from imu_allan.core.allan import allan_curve
-from imu_allan.core.noise.model import avar_model, avar_white
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.noise.model import avar_model
+from imu_allan.core.noise.shapes import avar_white
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
 from imu_allan.core.search import search_axis
 
 RATE_HZ = 50.0

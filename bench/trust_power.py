@@ -18,8 +18,8 @@ import numpy as np
 
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.diagnose.drivers import driver_filtered
-from imu_allan.core.noise.params import AxisNoise, NoiseSpec
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec
 from imu_allan.core.search import search_axis
 
 TRUTH = AxisNoise(N=9.2e-4, B=3e-4, T_B=50.0, K=1e-5)

@@ -18,11 +18,12 @@ import time
 import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
+from imu_allan.core.allan.raw import RawKeeper
 from imu_allan.core.fit.judge import white_region, white_share
 from imu_allan.core.search import search_axis
-from imu_allan.core.search.evidence import RawKeeper
 from imu_allan.io.csv_io import read_csv
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 DATA = Path(__file__).resolve().parents[2] / 'shared' / 'realdata' / 'adis16405'
 B_DATASHEET = 0.007 * math.pi / 180.0   # rad/s, in-run bias stability

@@ -41,8 +41,9 @@ import numpy as np
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.core.fit import fit_axis, fit_curve
-from imu_allan.core.noise.params import FLICKER_FLOOR, load_params
+from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_axis
+from imu_allan.core.noise.values import FLICKER_FLOOR
 from imu_allan.io.csv_io import read_csv
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,12 +1,21 @@
-"""Shared fixtures: the read-only real recordings in ../shared, when present."""
+"""
+Shared fixtures: a still IMU, the tests' start stamp, the real recordings in ../shared.
+
+Test files import the plain ones (``from conftest import REPO, still_imu, T0_NS``).
+"""
 
 import importlib.util
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / 'shared'
+#: Start of the tests' synthetic records [ns] (2023-11-14, a plausible ROS stamp).
+T0_NS = 1_700_000_000_000_000_000
+#: White-noise sd per sample of :func:`still_imu` [rad/s, m/s^2], gyro then accel.
+STILL_SIGMA = (1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1e-2)
 
 #: Test files that import pip-only extras at module level (no rosdep key for Ubuntu
 #: 24.04; package.xml leaves them out, docs/node.md says how to install them): without
@@ -31,3 +40,30 @@ def shared_dir() -> Path:
     if not (SHARED / 'realdata').is_dir() or not (SHARED / 'refdata').is_dir():
         pytest.skip('../shared (real recordings and reference data) is not present')
     return SHARED
+
+
+def still_imu(n: int, seed: int = 0, rate_hz: float = 100.0) -> tuple:
+    """
+    Return a still IMU: white noise of sd STILL_SIGMA, gravity on accel_z.
+
+    Parameters
+    ----------
+    n : int
+        Samples.
+    seed : int
+        Seed of ``np.random.default_rng``.
+    rate_hz : float
+        Sample rate [Hz]; stamps are exact multiples of the period from T0_NS.
+
+    Returns
+    -------
+    stamp_ns : numpy.ndarray
+        (n,) int64 [ns].
+    samples : numpy.ndarray
+        (n, 6) float64 [rad/s, m/s^2], axes as ``imu_allan.AXES``.
+
+    """
+    rng = np.random.default_rng(seed)
+    samples = rng.normal(0.0, STILL_SIGMA, (n, 6))
+    samples[:, 5] += 9.80665
+    return T0_NS + np.round(np.arange(n) * 1e9 / rate_hz).astype(np.int64), samples

@@ -9,9 +9,9 @@ import pytest
 from imu_allan.core import allan
 from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.core.allan.edf import curve_k_bound
-from imu_allan.core.fit.api import thin
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.fit.axis import thin
 from imu_allan.core.noise.simulate import simulate_axis
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.errors import InputError
 
 S32 = 'refdata/stable32_ocxo'

@@ -22,16 +22,17 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
+from conftest import T0_NS
 from imu_allan.errors import InputError
-from imu_allan.io.bag_reader import ImuBlock, list_imu_topics, list_topics, open_imu
+from imu_allan.io.bag_reader import list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
+from imu_allan.io.bags.base import ImuBlock
 from imu_allan.io.imu_cdr import (CovariancePatch, decode_imu_cdr, decode_imu_payloads,
                                   imu_frame_id, payload_frames, set_imu_covariances_cdr)
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
-T0_NS = 1_700_000_000_000_000_000
 
 
 def _recording(n: int, seed: int, rate_hz: float = 400.0):

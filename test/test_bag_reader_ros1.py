@@ -15,6 +15,7 @@ import pytest
 from rosbags.rosbag1 import Reader as Ros1Reader, Writer as Ros1Writer
 from rosbags.typesys import get_typestore, Stores
 
+from conftest import T0_NS
 from imu_allan.cli import main
 from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_imu
@@ -25,7 +26,6 @@ from imu_allan.io.bags import ros1
 REPO = Path(__file__).resolve().parents[1]
 IMU = 'sensor_msgs/msg/Imu'
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
-T0_NS = 1_700_000_000_000_000_000
 LATENCY_NS = 1000
 COMPRESSION = {'none': None, 'bz2': Ros1Writer.CompressionFormat.BZ2,
                'lz4': Ros1Writer.CompressionFormat.LZ4}

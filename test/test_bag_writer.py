@@ -18,6 +18,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
+from conftest import T0_NS
 from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import open_imu
 from imu_allan.io.bag_writer import csv_to_bag, serialize_imu, write_imu_bag
@@ -25,7 +26,6 @@ from imu_allan.io.bag_writer import csv_to_bag, serialize_imu, write_imu_bag
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
-T0_NS = 1_700_000_000_000_000_000
 
 
 def _recording(n: int, seed: int):
@@ -145,7 +145,6 @@ def test_bad_requests_raise_and_leave_nothing(tmp_path):
 
 
 def test_csv_to_bag_round_trip(tmp_path):
-    pytest.importorskip('imu_allan.io.csv_io')
     stamps, samples = _recording(200, seed=5)
     t_s = np.arange(200) * 0.01   # relative seconds, exactly representable steps
     csv = tmp_path / 'log.csv'

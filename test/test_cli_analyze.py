@@ -24,6 +24,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer as Ros2Writer
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
+from conftest import T0_NS
 from imu_allan import AXES
 from imu_allan.cli import main
 from imu_allan.core.noise.params import load_params
@@ -34,13 +35,12 @@ from imu_allan.io.csv_io import write_csv
 from imu_allan.io.inputs import open_input, stream_input
 from imu_allan.io.progress import Progress
 from imu_allan.pipeline.analysis import SHORT_RECORD
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 REPO = Path(__file__).resolve().parents[1]
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
-T0_NS = 1_700_000_000_000_000_000
 RATE = 100.0
 N = 9000   # 90 s at 100 Hz: a multiple of the 1 s motion window
 
@@ -488,7 +488,7 @@ def test_node_path_and_analyze_give_identical_numbers(tmp_path, rec, capsys):
     """
     from rosbags.rosbag2 import Reader
 
-    from imu_allan.core.search.evidence import RawKeeper
+    from imu_allan.core.allan.raw import RawKeeper
     from imu_allan.io.imu_cdr import decode_imu_cdr
     from imu_allan.pipeline.analysis import analyze
     from imu_allan.pipeline.session import Session

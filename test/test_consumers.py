@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.outputs.covering import cover_axes
 from imu_allan.core.outputs.exports import robot_localization_yaml
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml

@@ -6,9 +6,10 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
+from imu_allan.core.noise.generators import white_noise
 from imu_allan.core.noise.model import avar_model
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, Sinusoid
-from imu_allan.core.noise.simulate import simulate_axis, white_noise
+from imu_allan.core.noise.simulate import simulate_axis
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid
 from imu_allan.core.outputs.consistency import random_walk_filter
 from imu_allan.core.outputs.covering import cover_axis, horizon_taus, N_MARGIN
 from imu_allan.errors import InputError

@@ -17,9 +17,10 @@ import pytest
 
 from conftest import REPO
 from imu_allan.core.allan import allan_curve
+from imu_allan.core.allan.raw import RawKeeper
 from imu_allan.core.diagnose import (diagnose_curve, diagnose_session, EFFECTS, find_bands, gap,
                                      ln_adev_stderr)
-from imu_allan.core.search.evidence import periodogram_peak, RawKeeper
+from imu_allan.core.search.evidence import periodogram_peak
 from imu_allan.errors import InputError
 
 _SPEC = importlib.util.spec_from_file_location('diagnose_cases',
@@ -233,7 +234,8 @@ def test_analyze_and_diagnose_report_one_model():
     # The same session and raw copy through analyze (the node and the CLI) and through
     # diagnose: the final model of every axis is the same, effect included.
     from imu_allan.pipeline.analysis import analyze
-    from imu_allan.pipeline.session import Session, SessionConfig
+    from imu_allan.pipeline.hygiene import SessionConfig
+    from imu_allan.pipeline.session import Session
     y, axis, _ = cases.make_case('sinusoid', 3)
     stamps = np.round(np.arange(y.shape[0]) / cases.RATE_HZ * 1e9).astype(np.int64)
     session = Session(SessionConfig())

@@ -1,11 +1,14 @@
 """
-The README is a short front door, and every link in it and in docs/ resolves.
+The README is a short front door, and every link, path and name in it and in docs/ resolves.
 
 Relative links must name an existing file, and an anchor (``page.md#heading``) an
 existing heading of that page (GitHub's anchor rule: lower case, punctuation dropped,
-spaces to hyphens).
+spaces to hyphens).  The map of docs/architecture.md is true: every path of its tree
+exists and every module of the package is on it; every dotted name ``imu_allan.x.y``
+the docs cite imports.
 """
 
+import importlib
 import re
 
 import pytest
@@ -86,3 +89,104 @@ def test_no_reference_outside_the_repository():
     bad = [str(f.relative_to(REPO)) for f in files
            if 'DESIGN.md' in f.read_text()]
     assert not bad, bad
+
+
+#: A line of the tree in docs/architecture.md that names an entry: its indentation (two
+#: spaces per level) and a directory (``name/``) or a file (``name.ext``).
+TREE_ENTRY = re.compile(r'^( *)([\w.]+/|\w+\.\w+)(?:\s|$)')
+
+
+def _tree(text: str) -> dict:
+    """
+    Return {path: description} of the tree block, paths built from the indentation.
+
+    A line indented deeper than one level below the previous entry continues its
+    description.
+    """
+    block = text.split('```')[1]
+    out: dict = {}
+    stack: list = []
+    last, path = -2, ''
+    for line in block.split('\n'):
+        m = TREE_ENTRY.match(line)
+        if m and len(m.group(1)) <= last + 2 and len(m.group(1)) % 2 == 0:
+            stack = stack[:len(m.group(1)) // 2] + [m.group(2)]
+            last, path = len(m.group(1)), ''.join(stack)
+            out[path] = line[m.end():]
+        elif path:
+            out[path] += ' ' + line.strip()
+    return out
+
+
+def test_every_path_of_the_map_exists():
+    tree = _tree((REPO / 'docs' / 'architecture.md').read_text())
+    assert len(tree) > 50
+    missing = sorted(p for p in tree if not (REPO / p.rstrip('/')).exists())
+    assert not missing, missing
+
+
+def test_every_module_is_on_the_map():
+    # A module is an entry of the tree, or named in its directory's description.
+    tree = _tree((REPO / 'docs' / 'architecture.md').read_text())
+    absent = []
+    for path in sorted((REPO / 'imu_allan').rglob('*')):
+        if path.suffix not in ('.py', '.c') or path.name == '__init__.py':
+            continue
+        rel = str(path.relative_to(REPO))
+        folder = str(path.parent.relative_to(REPO)) + '/'
+        if rel not in tree and not re.search(rf'\b{path.stem}\b', tree.get(folder, '')):
+            absent.append(rel)
+    assert not absent, absent
+
+
+def test_tree_check_can_fail():
+    text = ('```\nimu_allan/\n  core/            numpy, see kernels\n'
+            '    fit.py           a file that is not there,\n'
+            '                     described on two lines\n  io/\n```\n')
+    tree = _tree(text)
+    assert list(tree) == ['imu_allan/', 'imu_allan/core/', 'imu_allan/core/fit.py',
+                          'imu_allan/io/']
+    assert 'two lines' in tree['imu_allan/core/fit.py']
+    assert 'kernels' in tree['imu_allan/core/']
+    assert not (REPO / 'imu_allan/core/fit.py').exists()
+
+
+#: A dotted name of the package cited in a doc: ``imu_allan.core.fit.fit_axis``.
+DOTTED = re.compile(r'\bimu_allan(?:\.[A-Za-z_]\w*)+')
+#: Endings that make a dotted name a file (``imu_allan.launch.py``), not a Python name.
+FILE_SUFFIXES = ('py', 'yaml', 'md', 'json')
+
+
+def _resolves(dotted: str) -> bool:
+    """Whether a dotted name imports: the longest module prefix, then attributes."""
+    parts = dotted.split('.')
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module('.'.join(parts[:i]))
+        except ImportError:
+            continue
+        for attr in parts[i:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def _cited(text: str) -> set:
+    return {m for m in DOTTED.findall(text) if m.rpartition('.')[2] not in FILE_SUFFIXES}
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_every_dotted_name_a_doc_cites_imports(page):
+    bad = sorted(name for name in _cited(page.read_text()) if not _resolves(name))
+    assert not bad, bad
+
+
+def test_dotted_name_check_can_fail():
+    found = _cited('`imu_allan.pipeline.Session`, imu_allan.core.fit.fit_axis, '
+                   'imu_allan.launch.py and imu_allan.AXES.')
+    assert found == {'imu_allan.pipeline.Session', 'imu_allan.core.fit.fit_axis',
+                     'imu_allan.AXES'}
+    assert not _resolves('imu_allan.pipeline.Session')
+    assert _resolves('imu_allan.core.fit.fit_axis') and _resolves('imu_allan.AXES')

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from imu_allan import AXES
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.outputs.covering import cover_axes, default_horizon
 from imu_allan.core.outputs.exports import (driver_noise, driver_yaml, IMU0_CONFIG,
                                             robot_localization_yaml)

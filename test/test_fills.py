@@ -6,11 +6,12 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
-from imu_allan.core.noise.params import AxisNoise, NoiseSpec
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec
 from imu_allan.core.search import search_axis
 from imu_allan.pipeline.fills import fill_rows, filled
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 RATE_HZ = 100.0
 T0_NS = 1_700_000_000_000_000_000

@@ -14,10 +14,12 @@ import pytest
 
 from imu_allan.core.allan import allan_curve, overlapping_avar
 from imu_allan.core.allan.accumulator import AllanAccumulator
-from imu_allan.core.fit import _CurveCovariance, fit_axis, fit_curve, nominal_fit
-from imu_allan.core.noise.model import avar_model, TERMS
-from imu_allan.core.noise.params import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.fit import fit_axis, fit_curve, nominal_fit
+from imu_allan.core.fit.covariance import CurveCovariance
+from imu_allan.core.noise.model import avar_model
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
+from imu_allan.core.noise.terms import TERMS
+from imu_allan.core.noise.values import AxisNoise, FLICKER_FLOOR, GaussMarkov, NoiseSpec, Sinusoid
 from imu_allan.errors import InputError
 from imu_allan.io.csv_io import read_csv
 
@@ -40,7 +42,7 @@ def test_covariance_model_matches_monte_carlo():
     rate, n, reps = 10.0, 8192, 300
     noise = AxisNoise(N=1e-3, B=3e-4, T_B=2.0, K=2e-5, Q=5e-5)
     m = 2 ** np.arange(12)
-    cov = _CurveCovariance(m, n + 1 - 2 * m, 1.0 / rate, n)
+    cov = CurveCovariance(m, n + 1 - 2 * m, 1.0 / rate, n)
     terms = [TERMS['white'], TERMS['bias_instability'], TERMS['random_walk'],
              TERMS['quantization']]
     coef = np.array([noise.N ** 2, GaussMarkov(noise.B, noise.T_B).psd, noise.K ** 2,
@@ -297,7 +299,7 @@ def test_a_record_too_short_gives_no_degenerate_bounds():
 def test_an_estimate_reaching_zero_is_a_bound_and_bounds_stay_under_the_curve():
     from imu_allan.core.fit.params import bound_by_curve
     from imu_allan.core.fit.result import Param
-    from imu_allan.core.fit.trust import curve_k_bound, floor_b_bound
+    from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
     tau = np.geomspace(0.01, 30.0, 12)
     avar = 1e-6 / tau + 1e-9 * tau             # white noise and a random walk
     edf = np.geomspace(5e3, 3.0, 12)
@@ -319,7 +321,7 @@ def test_a_3_min_real_record_reports_no_bound_above_its_own_curve(shared_dir):
     # Issue 35: on 2-3 min of the ADIS16405 the profile bounds of B and K ran up to
     # hundreds of times the curve's own bounds (accel_z K 6.8 m/s^2.5 beside a curve
     # bound of 2e-3), and estimates of K had intervals starting at 0.
-    from imu_allan.core.fit.trust import curve_k_bound, floor_b_bound
+    from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
     data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run1.csv.gz',
                     columns=['gyro_x', 'gyro_y', 'gyro_z', 'accel_x', 'accel_y', 'accel_z'])
     curve = allan_curve(data.samples[1000:19000], 100.0, confidence=0.95)  # past 7 s

@@ -15,9 +15,10 @@ import signal
 import numpy as np
 import pytest
 
+from conftest import T0_NS
 from imu_allan import AXES
-from imu_allan.core.noise.params import AxisNoise, NoiseSpec
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec
 from imu_allan.errors import InputError
 from imu_allan.fleet.inputs import content_key, fleet_inputs
 from imu_allan.fleet.report import fleet_summary, write_fleet_report
@@ -26,14 +27,13 @@ from imu_allan.fleet.store import FleetStore
 from imu_allan.fleet.task import analyze_job, FleetJob
 from imu_allan.fleet.views import changes, fleet_spread
 from imu_allan.io.bag_writer import write_imu_bag
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 RATE_HZ = 200.0
 DURATION_S = 120.0
 N_IMUS, N_NIGHTS = 4, 5
 #: IMU 2's white noise is raised 30 % from this night on.
 DEGRADED_IMU, DEGRADED_FROM = 2, 3
-T0_NS = 1_700_000_000 * 10 ** 9
 PATTERN = r'robot(?P<imu>\d+)'
 
 

@@ -39,6 +39,7 @@ from rosbags.rosbag1 import Reader as Ros1Reader, Writer as Ros1Writer
 from rosbags.rosbag2 import StoragePlugin, Writer as Ros2Writer
 from rosbags.typesys import get_typestore, Stores
 
+from conftest import T0_NS
 from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import open_imu
 from imu_allan.io.inputs import open_input
@@ -46,7 +47,6 @@ from imu_allan.io.inputs import open_input
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
-T0_NS = 1_700_000_000_000_000_000
 N_MESSAGES = 240
 KINDS = ('mcap_zstd', 'mcap_lz4', 'mcap_none', 'mcap_unchunked', 'sqlite3_rosbags',
          'sqlite3_512', 'ros1', 'csv')

@@ -6,7 +6,8 @@ import pytest
 
 from imu_allan import AXES
 from imu_allan.errors import InputError, NotEnoughStillData
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 RATE_HZ = 100.0
 SIGMA = np.array([6e-3] * 3 + [0.04] * 3)   # ADIS16405-like white noise per sample

@@ -14,12 +14,13 @@ import yaml
 
 from imu_allan import AXES
 from imu_allan.core.fit import AxisFit, Param
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov
 from imu_allan.core.noise.simulate import state_space_matrices
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov
+from imu_allan.core.outputs.consumers import NOTES
 from imu_allan.core.outputs.covering import cover_axes, default_horizon
 from imu_allan.core.outputs.exports import kalibr_yaml
 from imu_allan.core.outputs.kalman import (axis_densities, AxisDensities, discretise,
-                                           imu_covariance, kalman_model, NOTES)
+                                           imu_covariance, kalman_model)
 from imu_allan.core.outputs.reported import report_axis
 from imu_allan.errors import InputError
 

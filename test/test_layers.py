@@ -201,22 +201,236 @@ def test_cycle_check_can_fail():
     assert _cycles(graph) == [['a', 'b', 'c']]
 
 
-def _subpackage(module: str) -> str:
-    """imu_allan.core.<sub> inside the core, imu_allan.<layer> elsewhere."""
-    parts = module.split('.')
-    return '.'.join(parts[:3] if parts[1:2] == ['core'] else parts[:2])
+def _package(module: str, modules: dict) -> str:
+    """Return the package (directory) of a module: itself for a package's __init__."""
+    return module if modules[module].name == '__init__.py' else module.rpartition('.')[0]
 
 
-def test_no_private_name_imported_across_subpackages():
-    # A name with a leading underscore is its subpackage's own; another one calls a
-    # public API instead.
-    modules, bad = _modules(), []
+def _import_froms(name: str, path: Path, modules: dict):
+    """Yield (statement, module imported from) of every from-import, relative ones resolved."""
+    own = _package(name, modules) if name in modules else name.rpartition('.')[0]
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ''
+            if node.level:
+                parts = own.split('.')[:len(own.split('.')) - node.level + 1]
+                base = '.'.join(parts + ([node.module] if node.module else []))
+            yield node, base
+
+
+def _private(name: str) -> bool:
+    return name.startswith('_') and not name.startswith('__')
+
+
+def _private_imports(modules: dict) -> list:
+    """Private names imported outside the package that defines them, or re-published."""
+    bad = []
     for name, path in modules.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.ImportFrom) and not node.level and node.module and \
-                    node.module.startswith('imu_allan'):
-                for alias in node.names:
-                    private = alias.name.startswith('_') and not alias.name.startswith('__')
-                    if private and _subpackage(node.module) != _subpackage(name):
-                        bad.append(f'{name} imports {node.module}.{alias.name}')
+        privates = set()
+        for node, base in _import_froms(name, path, modules):
+            if base not in modules:
+                continue
+            for alias in node.names:
+                if _private(alias.name) and f'{base}.{alias.name}' not in modules:
+                    privates.add(alias.asname or alias.name)
+                    if _package(base, modules) != _package(name, modules):
+                        bad.append(f'{name} imports {base}.{alias.name}')
+        # A public alias of an imported private name publishes it a second time.
+        for node in ast.parse(path.read_text(), str(path)).body:
+            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Name) and \
+                    node.value.id in privates:
+                bad += [f'{name} publishes {node.value.id} as {t.id}' for t in node.targets
+                        if isinstance(t, ast.Name) and not _private(t.id)]
+    return bad
+
+
+def test_no_private_name_imported_outside_its_package():
+    # A name with a leading underscore belongs to the package (directory) that defines
+    # it; a name used beyond it is public in its one home, with a docstring.
+    bad = _private_imports(_modules())
     assert not bad, '\n'.join(bad)
+
+
+def test_private_check_can_fail(tmp_path):
+    root = tmp_path / 'imu_allan'
+    (root / 'a').mkdir(parents=True)
+    (root / 'b').mkdir()
+    files = {'imu_allan.a': 'a/__init__.py', 'imu_allan.a.x': 'a/x.py',
+             'imu_allan.a.y': 'a/y.py', 'imu_allan.b': 'b/__init__.py',
+             'imu_allan.b.z': 'b/z.py'}
+    text = {'a/x.py': 'def _f():\n    pass\n',
+            'a/y.py': 'from .x import _f\nf = _f\n',
+            'b/z.py': 'from ..a.x import _f\n'}
+    modules = {}
+    for module, rel in files.items():
+        (root / rel).write_text(text.get(rel, ''))
+        modules[module] = root / rel
+    assert _private_imports(modules) == ['imu_allan.a.y publishes _f as f',
+                                         'imu_allan.b.z imports imu_allan.a.x._f']
+
+
+def _top_statements(body: list):
+    for node in body:
+        yield node
+        for field in ('body', 'orelse', 'finalbody'):
+            if isinstance(node, (ast.If, ast.Try)):
+                yield from _top_statements(getattr(node, field, []))
+        if isinstance(node, ast.Try):
+            for handler in node.handlers:
+                yield from _top_statements(handler.body)
+
+
+def _defined(path: Path) -> set:
+    """Names a module binds itself at top level (def, class, assignment), not by import."""
+    out = set()
+    for node in _top_statements(ast.parse(path.read_text(), str(path)).body):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            out.update(n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name))
+    return out
+
+
+def _exported(path: Path) -> set:
+    """Return a package's ``__all__`` (its public API), empty when it has none."""
+    for node in ast.parse(path.read_text(), str(path)).body:
+        if isinstance(node, ast.Assign) and any(
+                isinstance(t, ast.Name) and t.id == '__all__' for t in node.targets):
+            return set(ast.literal_eval(node.value))
+    return set()
+
+
+def _second_paths(files: dict, modules: dict, api: bool) -> list:
+    """
+    Return the imports of a name from a module that does not define it (a second path).
+
+    ``files`` maps the importing module's dotted name to its path.  With ``api``, a
+    package's ``__init__`` that lists the name in ``__all__`` is a valid path too.
+    """
+    defined = {m: _defined(p) for m, p in modules.items()}
+    bad = []
+    for name, path in files.items():
+        for node, base in _import_froms(name, path, modules):
+            if base not in modules:
+                continue
+            for alias in node.names:
+                if f'{base}.{alias.name}' in modules or alias.name in defined[base]:
+                    continue
+                if api and modules[base].name == '__init__.py' and \
+                        alias.name in _exported(modules[base]):
+                    continue
+                bad.append(f'{path.name}:{node.lineno} imports {alias.name} from {base}, '
+                           'which does not define it')
+    return bad
+
+
+def test_one_import_path_per_name():
+    # Inside the package a name is imported from the module that defines it, never
+    # through a module that imports it; tests and benchmarks may also use a package's
+    # public API (its __all__).
+    modules = _modules()
+    bad = _second_paths(modules, modules, api=False)
+    outside = {f'{d}.{p.stem}': p for d in ('test', 'bench') for p in (REPO / d).glob('*.py')}
+    bad += _second_paths(outside, modules, api=True)
+    assert not bad, '\n'.join(bad)
+
+
+def test_second_path_check_can_fail(tmp_path):
+    root = tmp_path / 'imu_allan'
+    root.mkdir()
+    (root / '__init__.py').write_text("from .x import F\n__all__ = ['F']\n")
+    (root / 'x.py').write_text('F = 1\n')
+    (root / 'y.py').write_text('from imu_allan.x import F\n')
+    (root / 'z.py').write_text('from imu_allan.y import F\nfrom imu_allan import F\n')
+    modules = {'imu_allan': root / '__init__.py', 'imu_allan.x': root / 'x.py',
+               'imu_allan.y': root / 'y.py', 'imu_allan.z': root / 'z.py'}
+    strict = _second_paths({'imu_allan.z': root / 'z.py'}, modules, api=False)
+    assert [b.split(' imports ')[0] for b in strict] == ['z.py:1', 'z.py:2']
+    assert len(_second_paths({'t.z': root / 'z.py'}, modules, api=True)) == 1
+
+
+#: A class longer than this many lines says why in a comment right above it.
+LONG_CLASS_LINES = 150
+
+
+def _long_classes_without_why(path: Path) -> list:
+    lines = path.read_text().split('\n')
+    bad = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ClassDef) and \
+                node.end_lineno - node.lineno + 1 > LONG_CLASS_LINES:
+            first = min([node.lineno] + [d.lineno for d in node.decorator_list])
+            if first < 2 or not lines[first - 2].lstrip().startswith('#'):
+                bad.append(f'{path.name}: {node.name}')
+    return bad
+
+
+def test_every_long_class_says_why():
+    bad = [b for path in sorted(PKG.rglob('*.py')) for b in _long_classes_without_why(path)]
+    assert not bad, bad
+
+
+def test_long_class_check_can_fail(tmp_path):
+    body = '    x = 1\n' * LONG_CLASS_LINES
+    src = tmp_path / 'c.py'
+    src.write_text(f'class A:\n{body}\n\n# Long because ...\n@dataclass\nclass B:\n{body}\n'
+                   f'class C:\n    x = 1\n')
+    assert _long_classes_without_why(src) == ['c.py: A']
+
+
+#: Test files named by a topic that spans modules, not by the module they test.
+TEST_TOPICS = {
+    'colcon': 'the colcon build and install', 'docs': 'links, paths and names in docs/',
+    'flake8': 'lint', 'mypy': 'types', 'pep257': 'docstrings', 'layers': 'this file',
+    'gate': "the session's input checks together (clock, spikes, motion)",
+    'fuzz_readers': 'every reader on damaged files', 'launch': 'launch/imu_allan.launch.py',
+    'package_xml': 'package.xml', 'paper': "the reference paper's numbers",
+    'realdata': 'the real recordings end to end', 'registry': 'a toy term through the package',
+    'speed_paths': 'no compiled code, no timing in comments, one BLAS thread',
+}
+
+
+def _unmirrored(test_names: list, module_names: set) -> list:
+    """Return the test files named neither test_<module>[_<aspect>].py nor by a topic."""
+    return [t for t in test_names if t not in TEST_TOPICS and not any(
+        t == m or t.startswith(m + '_') for m in module_names)]
+
+
+def test_test_files_mirror_the_source():
+    # test_<module or subpackage>[_<aspect>].py (test_fit.py for core/fit/, test_cli_adev.py
+    # for cli/adev.py), or a topic of TEST_TOPICS.
+    names = {part for m in _modules() for part in m.split('.')[1:]}
+    tests = sorted(p.stem[len('test_'):] for p in (REPO / 'test').glob('test_*.py'))
+    assert not _unmirrored(tests, names)
+    assert set(TEST_TOPICS) <= set(tests), 'a topic without its test file'
+
+
+def test_mirror_check_can_fail():
+    assert _unmirrored(['fit', 'cli_adev', 'docs', 'fitting', 'misc'], {'fit', 'cli'}) == \
+        ['fitting', 'misc']
+
+
+def _skips_own_modules(path: Path) -> list:
+    """Return the project modules a test file imports through pytest.importorskip."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Call) and getattr(node.func, 'attr', '') == 'importorskip' \
+                and node.args and isinstance(node.args[0], ast.Constant) \
+                and str(node.args[0].value).split('.')[0] == 'imu_allan':
+            out.append(node.args[0].value)
+    return out
+
+
+def test_no_test_skips_over_its_own_package():
+    # Only optional extras may be missing; a project module that fails to import is a
+    # failure, not a skip.
+    bad = {p.name: _skips_own_modules(p) for p in sorted((REPO / 'test').glob('*.py'))}
+    assert not {k: v for k, v in bad.items() if v}
+
+
+def test_skip_check_can_fail(tmp_path):
+    src = tmp_path / 't.py'
+    src.write_text("import pytest\nm = pytest.importorskip('imu_allan.io.csv_io')\n"
+                   "c = pytest.importorskip('cv2')\n")
+    assert _skips_own_modules(src) == ['imu_allan.io.csv_io']

@@ -79,7 +79,7 @@ def test_the_node_path_gives_analyzes_parameters_on_a_full_adis_run(shared_dir, 
     from imu_allan.io.csv_io import read_csv
     from imu_allan.io.inputs import analyze_input
     from imu_allan.pipeline.analysis import analyze
-    from imu_allan.pipeline.session import SessionConfig
+    from imu_allan.pipeline.hygiene import SessionConfig
     from imu_allan.ros.live import LiveInput
     from imu_allan.ros.params import PARAMS
 

@@ -15,11 +15,12 @@ import pytest
 from scipy.integrate import quad
 from scipy.optimize import minimize_scalar
 
-from imu_allan.core.noise.model import (adev_model, avar_flicker, avar_gauss_markov, avar_model,
-                                        avar_quantization, avar_random_walk, avar_rate_ramp,
-                                        avar_sinusoid, avar_terms, avar_white, base_name,
-                                        noise_from_terms, TERMS)
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, Sinusoid
+from imu_allan.core.noise.model import adev_model, avar_model, avar_terms
+from imu_allan.core.noise.shapes import (avar_flicker, avar_gauss_markov, avar_quantization,
+                                         avar_random_walk, avar_rate_ramp, avar_sinusoid,
+                                         avar_white)
+from imu_allan.core.noise.terms import base_name, noise_from_terms, TERMS
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid
 
 E = math.e
 

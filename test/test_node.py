@@ -35,6 +35,7 @@ from sensor_msgs.msg import Imu  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from conftest import T0_NS  # noqa: E402
 from imu_allan import AXES  # noqa: E402, I100
 from imu_allan.core.noise.params import parse_params  # noqa: E402
 from imu_allan.core.noise.simulate import simulate_imu  # noqa: E402
@@ -42,11 +43,12 @@ from imu_allan.core.outputs.kalman import UNKNOWN_VARIANCE  # noqa: E402
 from imu_allan.errors import InputError  # noqa: E402
 from imu_allan.io.bag_writer import serialize_imu  # noqa: E402
 from imu_allan.pipeline.analysis import analyze  # noqa: E402
-from imu_allan.pipeline.session import Session, SessionConfig  # noqa: E402
+from imu_allan.pipeline.hygiene import SessionConfig  # noqa: E402
+from imu_allan.pipeline.session import Session  # noqa: E402
 from imu_allan.pipeline.spikes import CHUNK, CONTEXT  # noqa: E402
-from imu_allan.ros.node import create_executor, ImuAllanNode  # noqa: E402
+from imu_allan.ros.node import ImuAllanNode  # noqa: E402
+from imu_allan.ros.spin import create_executor  # noqa: E402
 
-T0_NS = 1_700_000_000 * 10 ** 9
 WINDOW = 1000
 NODE = '/imu_allan'
 #: A fast-moving model: T_B under a second, so 200 s at 200 Hz pin N, B and T_B.

@@ -8,9 +8,9 @@ import pytest
 import yaml
 
 from imu_allan import AXES
-from imu_allan.core.noise.params import (AxisNoise, dump_params, GaussMarkov, load_params,
-                                         NoiseSpec, parse_params, save_params, Sinusoid)
+from imu_allan.core.noise.params import dump_params, load_params, parse_params, save_params
 from imu_allan.core.noise.units import format_quoted, parse_unit, quoted, to_si
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
 from imu_allan.errors import InputError
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'

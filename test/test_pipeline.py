@@ -7,21 +7,13 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_equal
 import pytest
 
+from conftest import still_imu, T0_NS
 from imu_allan.core.allan import overlapping_avar
 from imu_allan.errors import InputError
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 RATE_HZ = 100.0
-T0_NS = 1_700_000_000_000_000_000
-
-
-def _record(n: int, seed: int = 0, rate_hz: float = RATE_HZ):
-    """Still IMU: white noise, gravity on accel_z; stamps (n,) [ns], samples (n, 6)."""
-    rng = np.random.default_rng(seed)
-    y = rng.normal(0.0, [1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1e-2], (n, 6))
-    y[:, 5] += 9.80665
-    t = T0_NS + np.round(np.arange(n) * 1e9 / rate_hz).astype(np.int64)
-    return t, y
 
 
 def _feed(session: Session, t, y, block: int = 333) -> Session:
@@ -32,7 +24,7 @@ def _feed(session: Session, t, y, block: int = 333) -> Session:
 
 
 def test_clean_stream_equals_batch_and_warns_nothing():
-    t, y = _record(60_000)
+    t, y = still_imu(60_000)
     s = _feed(Session(), t, y)
     assert s.warnings == []
     assert s.stats.n_used == t.size
@@ -44,7 +36,7 @@ def test_clean_stream_equals_batch_and_warns_nothing():
 
 
 def test_gap_splits_the_segment_and_is_counted():
-    t, y = _record(30_000)
+    t, y = still_imu(30_000)
     keep = np.ones(t.size, dtype=bool)
     keep[10_000:10_250] = False                       # 2.5 s of lost messages
     s = _feed(Session(), t[keep], y[keep])
@@ -61,7 +53,7 @@ def test_gap_splits_the_segment_and_is_counted():
 
 
 def test_nan_rows_duplicates_and_out_of_order_are_dropped_and_counted():
-    t, y = _record(5_000)
+    t, y = still_imu(5_000)
     y[100, 2] = np.nan
     y[200, 4] = np.inf
     t2 = np.insert(t, 300, t[299])                    # a re-sent message
@@ -77,7 +69,7 @@ def test_nan_rows_duplicates_and_out_of_order_are_dropped_and_counted():
 
 
 def test_rate_change_is_reported():
-    t, y = _record(20_000)
+    t, y = still_imu(20_000)
     t = t.copy()
     t[10_000:] = t[10_000] + np.round(np.arange(10_000) * 1e9 / 125.0).astype(np.int64)
     s = _feed(Session(), t, y, block=500)
@@ -88,7 +80,7 @@ def test_rate_change_is_reported():
 def test_bursty_arrival_stamps_are_irregular_not_gaps():
     # Host arrival stamps: bursts of 2 ms steps, then a long wait (MPU-6050 style).
     rng = np.random.default_rng(3)
-    t, y = _record(30_000)
+    t, y = still_imu(30_000)
     jitter = rng.uniform(-8e6, 8e6, t.size).astype(np.int64)
     jitter[::50] += 300_000_000                       # every 0.5 s, one 0.3 s late burst
     t = np.maximum.accumulate(t + jitter) + np.arange(t.size)  # keep them increasing
@@ -103,7 +95,7 @@ def test_a_warning_quotes_no_rate_but_the_one_the_analysis_uses():
     # The irregular-stamp warning used to quote the first window's rate (110.457 Hz
     # for the MPU-6050), while the analysis used the whole record's mean (99.317 Hz).
     rng = np.random.default_rng(5)
-    t, y = _record(30_000)
+    t, y = still_imu(30_000)
     jitter = rng.uniform(-8e6, 8e6, t.size).astype(np.int64)
     jitter[::50] += 300_000_000
     jitter[:3_000] //= 4                          # calmer at first: another mean step
@@ -117,7 +109,7 @@ def test_a_warning_quotes_no_rate_but_the_one_the_analysis_uses():
 
 
 def test_saturated_and_frozen_axes():
-    t, y = _record(5_000)
+    t, y = still_imu(5_000)
     y[1000:1010, 0] = 8.7266                          # clipped at 500 deg/s
     y[:, 4] = 0.25                                    # dead axis
     s = _feed(Session(SessionConfig(gyro_range_rad_s=8.7266)), t, y)
@@ -128,7 +120,7 @@ def test_saturated_and_frozen_axes():
 
 
 def _moving_record():
-    t, y = _record(40_000)
+    t, y = still_imu(40_000)
     y[15_000:16_000, 2] += 0.5                        # a 10 s turn at 0.5 rad/s
     return t, y
 
@@ -175,7 +167,7 @@ def test_a_session_flushed_before_its_rate_is_known_is_empty():
 def test_checkpoint_round_trip_continues_identically(tmp_path, cut):
     # 20_050 stops inside a motion window (100 samples at 100 Hz): the 50 samples held
     # for its check, and a frozen run across the cut, must survive the checkpoint.
-    t, y = _record(40_000)
+    t, y = still_imu(40_000)
     y[cut - 150:cut + 100, 0] = y[cut - 150, 0]  # 250 identical values (limit 200)
     whole = _feed(Session(), t, y)
     first = Session()
@@ -192,7 +184,7 @@ def test_checkpoint_round_trip_continues_identically(tmp_path, cut):
 
 
 def test_checkpoint_refuses_another_rate(tmp_path):
-    t, y = _record(5_000)
+    t, y = still_imu(5_000)
     _feed(Session(), t, y).save_state(tmp_path / 'state.npz')
     with pytest.raises(InputError, match='not resuming'):
         Session.load_state(tmp_path / 'state.npz', SessionConfig(rate_hz=200.0))
@@ -208,7 +200,7 @@ def test_checkpoint_refuses_another_rate(tmp_path):
 def test_a_damaged_checkpoint_is_one_clear_error(tmp_path, damage):
     # Every part checks its own state when it is restored: never a ZeroDivisionError,
     # KeyError or a motion scan reading past an array's end.
-    t, y = _record(5_050)
+    t, y = still_imu(5_050)
     _feed(Session(), t, y).save_state(tmp_path / 'state.npz')
     with np.load(tmp_path / 'state.npz') as z:
         arrays = {k: z[k] for k in z.files}
@@ -257,7 +249,7 @@ def test_an_unreadable_checkpoint_is_one_clear_error(tmp_path, content):
 
 
 def test_a_checkpoint_of_another_format_version_is_refused(tmp_path):
-    t, y = _record(5_000)
+    t, y = still_imu(5_000)
     _feed(Session(), t, y).save_state(tmp_path / 'state.npz')
     with np.load(tmp_path / 'state.npz') as z:
         arrays = {k: z[k] for k in z.files}
@@ -271,7 +263,7 @@ def test_a_checkpoint_of_another_format_version_is_refused(tmp_path):
 
 def test_a_checkpoint_with_the_retired_accumulator_thread_setting_resumes(tmp_path):
     # Checkpoints of the version that had the accumulator's thread hold its setting.
-    t, y = _record(10_000)
+    t, y = still_imu(10_000)
     first = Session()
     for k in range(0, 5_000, 500):
         first.add(t[k:k + 500], y[k:k + 500])
@@ -320,7 +312,7 @@ def test_stamp_rate_ignores_lost_messages_and_averages_bursts():
     # What a resume checks its first samples with: 300 lost messages among 50 must not
     # read as another rate, and bursty host stamps give their mean rate, not the
     # short steps inside a burst.
-    t, _ = _record(400, rate_hz=200.0)
+    t, _ = still_imu(400, rate_hz=200.0)
     s = Session()
     assert_allclose(s.stamp_rate_hz(np.r_[t[:10], t[310:350]]), 200.0, rtol=1e-9)
     assert_allclose(s.stamp_rate_hz(t[::-1][:50]), 200.0, rtol=1e-9)
@@ -343,7 +335,7 @@ def _feed_random_blocks(session: Session, t, y, seed: int, max_block: int) -> Se
 @pytest.mark.parametrize('lost_from', [100, 10_000])    # inside the rate window, or later
 @pytest.mark.parametrize('block', [1, 333, 40_000])
 def test_short_gap_in_regular_stamps_is_counted_not_taken_for_jitter(lost_from, block):
-    t, y = _record(40_000, rate_hz=200.0)
+    t, y = still_imu(40_000, rate_hz=200.0)
     keep = np.ones(t.size, dtype=bool)
     keep[lost_from:lost_from + 100] = False             # 0.5 s of lost messages
     s = _feed(Session(), t[keep], y[keep], block=block)
@@ -359,7 +351,7 @@ def test_short_gap_in_regular_stamps_is_counted_not_taken_for_jitter(lost_from, 
 def test_short_gap_in_jittery_regular_stamps_is_counted():
     # Stamps off by up to 10 % of a period: still a clock, so a 0.5 s gap is a gap.
     rng = np.random.default_rng(5)
-    t, y = _record(40_000, rate_hz=200.0)
+    t, y = still_imu(40_000, rate_hz=200.0)
     t = t + rng.uniform(-500_000, 500_000, t.size).astype(np.int64)
     keep = np.ones(t.size, dtype=bool)
     keep[20_000:20_100] = False
@@ -371,7 +363,7 @@ def test_short_gap_in_jittery_regular_stamps_is_counted():
 
 
 def test_bursty_stamps_stay_irregular_with_a_gap_of_a_few_seconds():
-    t, y = _record(30_000)
+    t, y = still_imu(30_000)
     t = _bursty(t)
     t[20_000:] += 3_000_000_000                          # 3 s > irregular_gap_s
     s = _feed(Session(), t, y, block=30_000)
@@ -383,7 +375,7 @@ def test_bursty_stamps_stay_irregular_with_a_gap_of_a_few_seconds():
 
 @pytest.mark.parametrize('block', [1, 500, 7_000, 20_000])
 def test_rate_change_inside_a_block_is_reported_once(block):
-    t, y = _record(20_000, rate_hz=200.0)
+    t, y = still_imu(20_000, rate_hz=200.0)
     t = t.copy()
     # 220 Hz from sample 7_000 on: one block of 20_000 spans both rates.
     t[7_000:] = t[7_000] + np.round(np.arange(13_000) * 1e9 / 220.0).astype(np.int64)
@@ -398,7 +390,7 @@ def test_rate_change_inside_a_block_is_reported_once(block):
 
 
 def test_rate_back_and_forth_counts_each_episode():
-    t, y = _record(30_000, rate_hz=200.0)
+    t, y = still_imu(30_000, rate_hz=200.0)
     period = np.full(t.size - 1, 5_000_000)
     period[10_000:15_000] = 4_000_000                    # 250 Hz for 5_000 samples
     t = t[0] + np.concatenate(([0], np.cumsum(period)))
@@ -412,7 +404,7 @@ def test_rate_back_and_forth_counts_each_episode():
 
 def _messy(kind: str):
     """Return a record with a gap, NaN rows, a re-sent message, and a 5 % faster rate."""
-    t, y = _record(50_000, seed=7, rate_hz=200.0)
+    t, y = still_imu(50_000, seed=7, rate_hz=200.0)
     t = t.copy()
     t[30_000:] = t[30_000] + np.round(np.arange(20_000) * 1e9 / 210.0).astype(np.int64)
     if kind == 'irregular':
@@ -448,7 +440,7 @@ def test_any_block_sizes_give_identical_results(kind):
 def test_jittered_regular_stamps_give_identical_stats_for_any_blocks():
     # Ordinary windows are judged together; the jitter sums must still come out the
     # same, to the last bit, however the record is cut.
-    t, y = _record(30_000, seed=11, rate_hz=200.0)
+    t, y = still_imu(30_000, seed=11, rate_hz=200.0)
     rng = np.random.default_rng(12)
     t = t + rng.integers(-50_000, 50_000, t.size)         # +-1 % of the 5 ms period
     whole = _feed(Session(), t, y, block=t.size)
@@ -473,7 +465,7 @@ def _resume(tmp_path, t, y, cut: int, lost: int = 0, node_style: bool = False) -
 
 @pytest.mark.parametrize('kind', ['regular', 'irregular', 'irregular_after_resume'])
 def test_resume_gives_the_rate_of_an_uninterrupted_session(tmp_path, kind):
-    t, y = _record(40_000, seed=9, rate_hz=200.0)
+    t, y = still_imu(40_000, seed=9, rate_hz=200.0)
     if kind == 'irregular':
         t = _bursty(t)
     elif kind == 'irregular_after_resume':
@@ -495,7 +487,7 @@ def test_axes_searched_in_worker_processes_give_the_same_result():
     # imu-allan analyze searches one input's axes in two processes; the node in its own.
     from imu_allan.pipeline.analysis import analyze
 
-    t, y = _record(20_000, seed=21, rate_hz=100.0)
+    t, y = still_imu(20_000, seed=21, rate_hz=100.0)
     s = _feed(Session(), t, y, block=5_000)
     one, two = analyze(s, workers=1), analyze(s, workers=2)
     for axis in one.fits:
@@ -566,7 +558,7 @@ def test_a_held_record_keeps_the_noise_of_its_updates():
     # held curve is low by (k^2 - 1) / (2 k m) well above the update period; the fit
     # corrects it and starts where the correction is small: its intervals widen (the
     # shortest taus are not used) and hold the values of the updates themselves.
-    from imu_allan.core.noise.params import AxisNoise
+    from imu_allan.core.noise.values import AxisNoise
     from imu_allan.core.noise.simulate import simulate_axis
     from imu_allan.pipeline.analysis import analyze
 

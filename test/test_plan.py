@@ -20,9 +20,11 @@ from imu_allan import AXES
 from imu_allan.cli import main
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.fit.result import Param
-from imu_allan.core.noise.model import avar_model, GM_PEAK_TAU
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, load_params, Sinusoid
+from imu_allan.core.noise.model import avar_model
+from imu_allan.core.noise.params import load_params
+from imu_allan.core.noise.shapes import GM_PEAK_TAU
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid
 from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
                                  planning_model)
 from imu_allan.core.plan.planner import as_read, inflated, inflation, ORDERING
@@ -32,7 +34,8 @@ from imu_allan.core.search import search_axis
 from imu_allan.errors import InputError
 from imu_allan.io.report import summary_text
 from imu_allan.pipeline.analysis import analyze
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 from imu_allan.ros.plan_report import targets_met
 
 
@@ -100,9 +103,9 @@ def test_a_bound_is_planned_at_its_bound_and_reads_at_least():
     k = plan.param('K')
     assert k.kind == 'at_least' and math.isinf(k.width_now)
     assert k.value == fit.optimised['K'].value
-    # N is pinned: its present width (the fit's interval) meets +-10 %.
+    # N meets its target: its present width (the fit's interval) meets +-10 %.
     n = plan.param('N')
-    assert n.kind == 'pinned' and n.time_s == 1200.0
+    assert n.kind == 'met' and n.time_s == 1200.0
     assert n.width_now == relative_width(fit.optimised['N'].value, fit.optimised['N'].ci95)
     assert 'K in >= ' in plan.progress_line() or 'K only bounded' in plan.progress_line()
 
@@ -111,7 +114,7 @@ def test_a_parameter_the_model_cannot_plan_is_still_to_come():
     # 11 min of white noise and a 31 Hz line (the MPU-6050's gyro_z): the model has no
     # bias-instability or random-walk term, B is only bounded and K unconstrained.  The
     # plan once listed N and the line alone, read "every target met", and the node's
-    # stop_when_pinned would have stopped there.
+    # stop_when_met would have stopped there.
     rate, noise = 100.0, AxisNoise(N=1.7e-4, sinusoids=(Sinusoid(1.7e-3, 31.4),))
     y = simulate_axis(noise, rate, int(rate * 660), np.random.default_rng(0))
     c = allan_curve(y, rate, 'dense', confidence=0.95)
@@ -121,10 +124,10 @@ def test_a_parameter_the_model_cannot_plan_is_still_to_come():
                                                                   'not_identified')
     plan = plan_fits({'gyro_z': fit}, rate, 660.0)['gyro_z']
     kinds = {p.name: p.kind for p in plan.params}
-    assert kinds == {'N': 'pinned', 'B': 'at_least', 'T_B': 'open', 'K': 'open',
-                     'sinusoid.A': 'pinned', 'sinusoid.f0_hz': 'pinned'}
+    assert kinds == {'N': 'met', 'B': 'at_least', 'T_B': 'open', 'K': 'open',
+                     'sinusoid.A': 'met', 'sinusoid.f0_hz': 'met'}
     assert [p.name for p in plan.params][:4] == ['N', 'B', 'T_B', 'K']
-    assert not plan.all_pinned() and not targets_met({'gyro_z': plan}, 1)
+    assert not plan.all_met() and not targets_met({'gyro_z': plan}, 1)
     assert math.isnan(plan.remaining_s())
     assert 'K not constrained yet' in plan.progress_line()
     assert 'B only bounded yet' in plan.progress_line()
@@ -251,8 +254,8 @@ def test_the_plan_of_a_1_h_fit_agrees_with_the_plan_of_the_true_model():
 def test_curve_covariance_of_a_1000_h_record_at_1_khz():
     # The planner reaches 1000 h: 3.6e9 samples at 1 kHz, whose term counts multiplied
     # overflowed int64 and made Sigma indefinite (a traceback from a 20 min record).
-    from imu_allan.core.fit.api import CurveCovariance
-    from imu_allan.core.noise.model import TERMS
+    from imu_allan.core.fit.covariance import CurveCovariance
+    from imu_allan.core.noise.terms import TERMS
     from imu_allan.core.plan.precision import fit_taus
 
     def first_variance(n: int) -> float:
@@ -321,7 +324,7 @@ def test_analysis_plan_in_summary_json_and_plan_command(tmp_path, capsys):
     assert set(result.plans) == {a for a, f in result.fits.items() if f is not None}
     doc = result.to_json()
     plan = doc['axes']['gyro_x']['plan']
-    assert plan['params']['N']['target'] == 0.05 and plan['params']['N']['kind'] == 'pinned'
+    assert plan['params']['N']['target'] == 0.05 and plan['params']['N']['kind'] == 'met'
     assert plan['params']['B']['kind'] in ('predicted', 'at_least', 'beyond')
     text = summary_text(result)
     assert 'record length to reach each target' in text
@@ -336,7 +339,7 @@ def test_analysis_plan_in_summary_json_and_plan_command(tmp_path, capsys):
     assert main(['plan', str(path), '--target', 'N=0.05']) == 0
     out = capsys.readouterr().out
     assert 'predicted from a record of 10.0 min at 50 Hz' in out
-    assert result.plans['gyro_x'].table_lines()[0] in out and 'gyro_x: pinned: N' in out
+    assert result.plans['gyro_x'].table_lines()[0] in out and 'gyro_x: met: N' in out
 
 
 def test_a_plan_from_a_model_that_does_not_hold_says_so():
@@ -360,6 +363,6 @@ def test_a_plan_from_a_model_that_does_not_hold_says_so():
     assert 'model does not hold on gyro_y' in progress_report(plans)[0]
     # Every target met, but the model does not hold: no self-stop on it.
     met = plans['gyro_x']._replace(params=tuple(
-        p._replace(kind='pinned') for p in plans['gyro_x'].params))
+        p._replace(kind='met') for p in plans['gyro_x'].params))
     assert targets_met({'gyro_x': met}, 1)
     assert not targets_met({'gyro_x': met._replace(caveat=plans['gyro_y'].caveat)}, 1)

@@ -17,7 +17,7 @@ import pytest
 
 from imu_allan.cli import main
 from imu_allan.io.inputs import open_input, stream_input
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 
 def _cli(argv, capsys):

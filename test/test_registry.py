@@ -1,12 +1,14 @@
 """
 The term registry is the only dispatch: one entry adds a term everywhere.
 
-A term added by its entry alone is fitted, simulated, searched, exported and documented.
+A term added by its entry alone is fitted, simulated, searched, exported, planned and
+documented.
 The toy term is registered for one test only (the ``toy`` fixture): the diff that adds a
 real term is its entry in imu_allan/core/noise/terms.py plus tests like these.  The
 docs' copy of the registry table is checked against the registry itself.
 """
 
+import json
 import math
 
 import numpy as np
@@ -16,11 +18,12 @@ import yaml
 
 from conftest import REPO
 from imu_allan import AXES
+from imu_allan.cli import main
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.fit import fit_axis
 from imu_allan.core.noise.generators import white_noise
 from imu_allan.core.noise.model import avar_model, avar_terms, term_table
-from imu_allan.core.noise.params import dump_params, parse_params
+from imu_allan.core.noise.params import dump_params, parse_params, save_params
 from imu_allan.core.noise.shapes import _gcov_white, _PSD_PHASE
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
 from imu_allan.core.noise.terms import Key, Term, TERMS
@@ -116,3 +119,23 @@ def test_a_toy_term_is_documented(toy):
     row = next(line for line in term_table().splitlines() if line.startswith('| `toy`'))
     assert row == ('| `toy` | toy white noise | W [u*s^0.5] | list `toy`: W | yes | '
                    'R (adds to S_N) |')
+
+
+def _plan_json(capsys, path) -> dict:
+    assert main(['plan', '--params', str(path), '--rate', str(RATE_HZ),
+                 '--format', 'json']) == 0
+    return json.loads(capsys.readouterr().out)['axes']['gyro_x']['params']
+
+
+def test_a_toy_term_is_planned(toy, tmp_path, capsys):
+    # `imu-allan plan --params` plans every registry term the file holds: the toy's W
+    # gets its own row, and its white noise beside K delays K's plan.
+    save_params(NoiseSpec(name='toy imu', axes={'gyro_x': toy}), tmp_path / 'toy.yaml')
+    save_params(NoiseSpec(name='K alone', axes={'gyro_x': AxisNoise(K=K)}),
+                tmp_path / 'k.yaml')
+    params = _plan_json(capsys, tmp_path / 'toy.yaml')
+    alone = _plan_json(capsys, tmp_path / 'k.yaml')
+    assert sorted(params) == ['K', 'toy.W']
+    assert_allclose(params['toy.W']['value'], W, rtol=1e-12)
+    assert params['toy.W']['kind'] == 'predicted' and math.isfinite(params['toy.W']['time_s'])
+    assert params['K']['time_s'] > alone['K']['time_s']

@@ -16,13 +16,15 @@ import yaml
 from conftest import REPO
 from imu_allan import AXES, GYRO_AXES
 from imu_allan.core.fit import Param
-from imu_allan.core.noise.params import AxisNoise, load_params
+from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.outputs.covering import N_MARGIN
 from imu_allan.core.outputs.reported import report_axes, report_axis
 from imu_allan.io.report import kalman_yaml, summary_text
 from imu_allan.pipeline.analysis import analyze
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 
 RATE_HZ = 50.0
 
@@ -113,7 +115,7 @@ def test_covering_pair_is_never_below_the_reported_pair_at_any_horizon(result):
 
 
 def test_a_bare_model_reports_its_values_and_what_the_filter_leaves_out():
-    from imu_allan.core.noise.params import GaussMarkov, Sinusoid
+    from imu_allan.core.noise.values import GaussMarkov, Sinusoid
     noise = AxisNoise(N=1e-4, B=5e-5, T_B=80.0, K=2e-6,
                       gauss_markov=(GaussMarkov(B=1e-5, T=500.0),),
                       sinusoids=(Sinusoid(A=1e-4, f0_hz=20.0),))

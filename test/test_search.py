@@ -16,9 +16,10 @@ import pytest
 from imu_allan.core.allan import allan_curve, overlapping_avar
 from imu_allan.core.diagnose import filtered_white_noise
 from imu_allan.core.fit.judge import shows_quantization
-from imu_allan.core.noise.model import avar_random_walk, avar_white, TERMS
-from imu_allan.core.noise.params import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
+from imu_allan.core.noise.shapes import avar_random_walk, avar_white
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.noise.terms import TERMS
+from imu_allan.core.noise.values import AxisNoise, GaussMarkov, NoiseSpec, Sinusoid
 from imu_allan.core.search import search_axis
 from imu_allan.core.search.evidence import _stencil_cov, ramp_test
 
@@ -192,7 +193,7 @@ def test_quantization_needs_its_slope():
 
 def test_adis16405_gyros_give_the_white_level_of_the_curve(shared_dir):
     """Run 6 of the real ADIS16405: N within 5 % of the curve's white level."""
-    from imu_allan.core.search.evidence import RawKeeper
+    from imu_allan.core.allan.raw import RawKeeper
     from imu_allan.io.csv_io import read_csv
     rec = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run6.csv.gz')
     y = np.asarray(rec.samples, dtype=np.float64)[:, :3]

@@ -18,8 +18,8 @@ from imu_allan import AXES
 from imu_allan.core.allan import allan_curve
 from imu_allan.core.allan.edf import curve_k_bound
 from imu_allan.core.diagnose.drivers import driver_filtered
-from imu_allan.core.noise.params import AxisNoise, NoiseSpec
 from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec
 from imu_allan.core.search import search_axis
 from imu_allan.pipeline.analysis import AnalysisResult
 
@@ -131,7 +131,7 @@ def test_the_curve_k_bound_covers_the_truth_and_ignores_an_edf_jump():
 
 def test_adis_rival_models_lie_inside_the_reported_intervals(shared_dir):
     """ADIS16405 run 1 accel_z: a second Gauss-Markov process rivals flicker noise."""
-    from imu_allan.core.search.evidence import RawKeeper
+    from imu_allan.core.allan.raw import RawKeeper
     from imu_allan.io.csv_io import read_csv
     rec = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run1.csv.gz')
     y = np.asarray(rec.samples, dtype=np.float64)[:, 5:6]

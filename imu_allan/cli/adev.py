@@ -16,7 +16,8 @@ import sys
 import numpy as np
 
 from imu_allan import AXIS_UNITS
-from imu_allan.core.allan import allan_curve, METHODS, tau_grid, TAU_KINDS
+from imu_allan.core.allan.curve import allan_curve
+from imu_allan.core.allan.taus import METHODS, tau_grid, TAU_KINDS
 from imu_allan.errors import InputError
 from imu_allan.io.csv_io import read_csv
 

@@ -29,7 +29,7 @@ from imu_allan.pipeline.workers import start_workers, worker_pool
 
 if TYPE_CHECKING:
     from imu_allan.core.noise.unit_check import DeclaredUnits
-    from imu_allan.pipeline.session import SessionConfig
+    from imu_allan.pipeline.hygiene import SessionConfig
 
 
 def add_input_options(p: argparse.ArgumentParser, frame_id: bool = True) -> None:
@@ -55,7 +55,7 @@ def add_input_options(p: argparse.ArgumentParser, frame_id: bool = True) -> None
 def session_config_from_args(args) -> 'SessionConfig':
     """Return the SessionConfig of the options added by :func:`add_input_options`."""
     from imu_allan.core.noise.unit_check import parse_units
-    from imu_allan.pipeline.session import SessionConfig
+    from imu_allan.pipeline.hygiene import SessionConfig
     if not (math.isfinite(args.rate) and args.rate >= 0):
         raise InputError(f'--rate must be a finite number of Hz >= 0 (0: estimated), '
                          f'got {args.rate:g}')
@@ -146,7 +146,7 @@ def spread_table(results: list, labels: list) -> tuple:
 
     """
     import numpy as np
-    from imu_allan.core.fit import json_num   # scipy: not on the one-input path
+    from imu_allan.core.fit.result import json_num  # scipy: not on the one-input path
 
     head = ['axis', 'param', 'unit'] + list(labels) + ['mean', 'std', 'CV %', 'min', 'max',
                                                        'n']

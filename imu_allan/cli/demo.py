@@ -109,7 +109,8 @@ def run(args) -> int:
     from imu_allan.core.noise.simulate import simulate_imu
     from imu_allan.core.noise.units import format_quoted, sensor_of
     from imu_allan.io.bag_writer import serialize_imu
-    from imu_allan.ros.node import create_executor, ImuAllanNode
+    from imu_allan.ros.node import ImuAllanNode
+    from imu_allan.ros.spin import create_executor
 
     if not (math.isfinite(args.speed) and args.speed > 0):
         raise InputError(f'--speed must be a positive number of messages/s, got {args.speed:g}')

@@ -16,12 +16,12 @@ import sys
 
 from imu_allan.cli.analyze import add_input_options, session_config_from_args, units_from_args
 from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
-from imu_allan.core.diagnose import (base_terms, DEFAULT_BASE, diagnose_session, EFFECTS,
-                                     N_REPLICAS)
+from imu_allan.core.diagnose.engine import base_terms, DEFAULT_BASE, diagnose_session, EFFECTS
+from imu_allan.core.diagnose.replicas import N_REPLICAS
 from imu_allan.errors import InputError
 from imu_allan.io.inputs import open_input, raw_tap, stream_input
 from imu_allan.io.progress import Progress
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

@@ -52,9 +52,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _models_from_numbers(args) -> tuple[dict, float, str]:
     """Per axis the planner's model, the rate and a label, from --params or the flags."""
-    from imu_allan.core.noise.params import AxisNoise, load_params
+    from imu_allan.core.noise.params import load_params
     from imu_allan.core.noise.units import to_si
-    from imu_allan.core.plan import noise_components, planning_model
+    from imu_allan.core.noise.values import AxisNoise
+    from imu_allan.core.plan.planner import noise_components, planning_model
 
     if not (args.rate and args.rate > 0):
         raise InputError('planning from datasheet numbers needs the sample rate: --rate HZ')
@@ -98,7 +99,7 @@ def run(args) -> int:
         plans, rate, duration = result.plans, result.rate_hz, result.duration_s
         label = str(path)
     else:
-        from imu_allan.core.plan import plan_axes
+        from imu_allan.core.plan.planner import plan_axes
         models, rate, label = _models_from_numbers(args)
         plans, duration = plan_axes(models, rate, 0.0, targets), 0.0
     if args.format == 'json':

@@ -28,7 +28,7 @@ from imu_allan.errors import InputError
 from imu_allan.fleet.inputs import content_key, FleetInput, stat_key
 from imu_allan.fleet.store import FleetStore
 from imu_allan.fleet.task import analyze_job, failed_rows, FleetJob
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 #: glibc's heap settings (bytes): blocks below this stay on the heap, and the heap keeps
 #: this much freed memory (the environment's names for mallopt M_MMAP_THRESHOLD and

@@ -15,7 +15,7 @@ from typing import NamedTuple
 from imu_allan import __version__, AXES, AXIS_UNITS
 from imu_allan.errors import InputError
 from imu_allan.fleet.store import PARAMS
-from imu_allan.pipeline.session import SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
 
 #: Share of the samples dropped as motion above which an input is rejected.
 MAX_MOTION_SHARE = 0.2

@@ -35,9 +35,9 @@ from typing import Iterator
 import numpy as np
 
 from imu_allan.errors import InputError
-from imu_allan.io.bags.base import (_Backend, _Piece, _Topic, DEFAULT_BLOCK_SIZE, ImuBlock,
-                                    PathLike, TopicInfo)
-from imu_allan.io.bags.rosbag2_dir import _open_backend
+from imu_allan.io.bags.base import (Backend, DEFAULT_BLOCK_SIZE, ImuBlock, PathLike, Piece,
+                                    Topic, TopicInfo)
+from imu_allan.io.bags.rosbag2_dir import open_backend
 from imu_allan.io.imu_cdr import IMU_MSGTYPES
 
 #: Topics named in an error message before 'and N more'.
@@ -46,11 +46,11 @@ __all__ = ['DEFAULT_BLOCK_SIZE', 'ImuBlock', 'ImuSource', 'list_imu_topics', 'li
            'open_imu', 'TopicInfo']
 
 
-def _is_imu(topic: _Topic) -> bool:
+def _is_imu(topic: Topic) -> bool:
     return topic.msgtype in IMU_MSGTYPES
 
 
-def _describe(topics: list[_Topic]) -> str:
+def _describe(topics: list[Topic]) -> str:
     """List topics for an error message: '/a (type, 10 messages), ...'."""
     parts = []
     for topic in topics[:_MAX_LISTED]:
@@ -117,6 +117,8 @@ def list_imu_topics(path: PathLike) -> list[TopicInfo]:
         backend.close()
 
 
+# Long because it is one reading of one IMU: its blocks, counts, source choice and the
+# warnings they give, so no count is made twice.
 class ImuSource:
     """
     The Imu messages of one topic of a bag, read block by block.
@@ -153,7 +155,7 @@ class ImuSource:
 
     """
 
-    def __init__(self, path: Path, backend: _Backend, topic: _Topic,
+    def __init__(self, path: Path, backend: Backend, topic: Topic,
                  warnings: list[str], frame_id: str | None = None) -> None:
         self.path = path
         self.frame_counts: dict[str, int] = {}
@@ -197,7 +199,7 @@ class ImuSource:
         """
         if block_size < 1:
             raise ValueError('block_size must be positive')
-        pending: list[_Piece] = []
+        pending: list[Piece] = []
         n_pending = 0
         self._counts = [0, 0, 0, 0]   # good, undecodable, zero stamps, no orientation
         self.frame_counts = {}
@@ -213,7 +215,7 @@ class ImuSource:
             yield _split(pending, n_pending)[0]
         self._account()
 
-    def _guarded(self) -> Iterator[_Piece]:
+    def _guarded(self) -> Iterator[Piece]:
         """Yield the backend's pieces, counted; a library failure ends the read with a warning."""
         mixed = False
         try:
@@ -239,7 +241,7 @@ class ImuSource:
                              f'(header.frame_id): {self._sources()}; choose one with '
                              '--frame-id NAME')
 
-    def _one_source(self, piece: _Piece) -> _Piece:
+    def _one_source(self, piece: Piece) -> Piece:
         """
         Count a piece's messages per frame_id; keep those of the IMU read.
 
@@ -335,7 +337,7 @@ class ImuSource:
 _MAX_HELD = 1 << 20
 
 
-def _in_stamp_order(pieces: Iterator[_Piece]) -> Iterator[_Piece]:
+def _in_stamp_order(pieces: Iterator[Piece]) -> Iterator[Piece]:
     """
     Yield the messages of consecutive pieces in header-stamp order.
 
@@ -344,7 +346,7 @@ def _in_stamp_order(pieces: Iterator[_Piece]) -> Iterator[_Piece]:
     chunks, log times that jitter against the stamps) merge without loss.  At most
     ``_MAX_HELD`` messages wait: an isolated far-future stamp cannot hold the rest.
     """
-    held: _Piece | None = None
+    held: Piece | None = None
     for piece in pieces:
         piece = _sorted(piece)
         if held is None:
@@ -361,31 +363,31 @@ def _in_stamp_order(pieces: Iterator[_Piece]) -> Iterator[_Piece]:
         yield held
 
 
-def _sorted(piece: _Piece) -> _Piece:
+def _sorted(piece: Piece) -> Piece:
     if piece.stamp_ns.size < 2 or (np.diff(piece.stamp_ns) >= 0).all():
         return piece
     return _take(piece, np.argsort(piece.stamp_ns, kind='stable'))
 
 
-def _take(piece: _Piece, index) -> _Piece:
+def _take(piece: Piece, index) -> Piece:
     unoriented = None if piece.unoriented is None else piece.unoriented[index]
-    return _Piece(piece.recv_ns[index], piece.stamp_ns[index], piece.samples[index], 0,
-                  unoriented=unoriented)
+    return Piece(piece.recv_ns[index], piece.stamp_ns[index], piece.samples[index], 0,
+                 unoriented=unoriented)
 
 
-def _concat(pieces: list[_Piece]) -> _Piece:
-    return _Piece(np.concatenate([p.recv_ns for p in pieces]),
-                  np.concatenate([p.stamp_ns for p in pieces]),
-                  np.concatenate([p.samples for p in pieces]), 0)
+def _concat(pieces: list[Piece]) -> Piece:
+    return Piece(np.concatenate([p.recv_ns for p in pieces]),
+                 np.concatenate([p.stamp_ns for p in pieces]),
+                 np.concatenate([p.samples for p in pieces]), 0)
 
 
-def _split(pieces: list[_Piece], n: int) -> tuple[ImuBlock, _Piece | None]:
+def _split(pieces: list[Piece], n: int) -> tuple[ImuBlock, Piece | None]:
     """Concatenate pieces and cut the first n messages off as a block."""
     joined = pieces[0] if len(pieces) == 1 else _concat(pieces)
     block = ImuBlock(joined.stamp_ns[:n], joined.recv_ns[:n], joined.samples[:n])
     if joined.recv_ns.size == n:
         return block, None
-    return block, _Piece(joined.recv_ns[n:], joined.stamp_ns[n:], joined.samples[n:], 0)
+    return block, Piece(joined.recv_ns[n:], joined.stamp_ns[n:], joined.samples[n:], 0)
 
 
 def open_imu(path: PathLike, topic: str | None = None,
@@ -429,7 +431,7 @@ def open_imu(path: PathLike, topic: str | None = None,
     return ImuSource(Path(path), backend, chosen, warnings, frame_id)
 
 
-def _warn_other_types(path: Path, backend: _Backend, chosen: _Topic,
+def _warn_other_types(path: Path, backend: Backend, chosen: Topic,
                       warnings: list[str]) -> None:
     """Name the messages of other types on the chosen topic, which are not read."""
     for other in backend.topics():
@@ -440,10 +442,10 @@ def _warn_other_types(path: Path, backend: _Backend, chosen: _Topic,
                             f'{chosen.msgtype} is read)')
 
 
-def _guarded_open(path: PathLike, warnings: list[str]) -> _Backend:
+def _guarded_open(path: PathLike, warnings: list[str]) -> Backend:
     """Open a bag; any library failure becomes a one-line InputError."""
     try:
-        return _open_backend(path, warnings)
+        return open_backend(path, warnings)
     except (InputError, MemoryError, KeyboardInterrupt):
         raise
     except Exception as err:   # noqa: B902 - a damaged file can make any library raise
@@ -451,7 +453,7 @@ def _guarded_open(path: PathLike, warnings: list[str]) -> _Backend:
         raise InputError(f'{path}: unreadable bag ({type(err).__name__}: {text})') from None
 
 
-def _choose_topic(path: Path, backend: _Backend, name: str | None) -> _Topic:
+def _choose_topic(path: Path, backend: Backend, name: str | None) -> Topic:
     topics = backend.topics()
     if not topics:
         raise InputError(f'{path}: empty bag (no topics)')

@@ -33,7 +33,7 @@ _HEAD = np.dtype({'names': ['enc0', 'enc1', 'frame_len_le', 'frame_len_be'],
                   'itemsize': 16})
 
 
-def _records(u8: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
+def read_records(u8: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """
     Read one structured record at each offset of a byte buffer.
 
@@ -58,10 +58,10 @@ def _records(u8: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
                   and (np.diff(starts) == starts[1] - starts[0]).all()):
         step = int(starts[1] - starts[0]) if n > 1 else dtype.itemsize
         return np.ndarray((n,), dtype, buffer=u8, offset=int(starts[0]), strides=(step,))
-    return _gather(u8, starts, dtype.itemsize).view(dtype).reshape(n)
+    return gather_bytes(u8, starts, dtype.itemsize).view(dtype).reshape(n)
 
 
-def _gather(u8: np.ndarray, starts: np.ndarray, nbytes: int) -> np.ndarray:
+def gather_bytes(u8: np.ndarray, starts: np.ndarray, nbytes: int) -> np.ndarray:
     """
     Copy ``nbytes`` bytes at each offset of a byte buffer into an (n, nbytes) array.
 
@@ -145,10 +145,10 @@ def _imu_layout(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     n = starts.size
     has_head = (lengths >= 16) & (starts + 16 <= u8.size)
     if has_head.all():
-        head = _records(u8, starts, _HEAD)
+        head = read_records(u8, starts, _HEAD)
     elif has_head.any():
         # Short payloads read a stand-in head; they are never marked as fitting below.
-        head = _records(u8, np.where(has_head, starts, starts[has_head][0]), _HEAD)
+        head = read_records(u8, np.where(has_head, starts, starts[has_head][0]), _HEAD)
     else:
         head = np.zeros(n, _HEAD)
     frame_len = head['frame_len_le'].astype(np.int64)
@@ -248,7 +248,7 @@ def orientation_unknown(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     offset, big, fits = _imu_layout(u8, starts, lengths, encoding == 'ros1')
     # orientation_covariance[0] follows the 4 doubles of the quaternion: byte 32.
     at = np.flatnonzero(fits)
-    raw = _gather(u8, starts[at] + offset[at] + 32, 8)
+    raw = gather_bytes(u8, starts[at] + offset[at] + 32, 8)
     value = np.where(big[at], raw.view('>f8').ravel(), raw.view('<f8').ravel())
     unknown[at] = value == -1.0
     return unknown
@@ -269,15 +269,15 @@ def _decode_plain(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, ros1:
         steps = np.diff(group)
         if group.size > 1 and steps[0] >= offset + _N_DOUBLES_BYTES and (steps == steps[0]).all():
             # Equally spaced payloads (one length, back to back): a zero-copy strided view.
-            fields = _records(u8, group, _fields_dtype(offset, is_big, ros1,
-                                                       offset + _N_DOUBLES_BYTES, False))
+            fields = read_records(u8, group, _fields_dtype(offset, is_big, ros1,
+                                                           offset + _N_DOUBLES_BYTES, False))
         else:
             # Gather only the 56 bytes needed (stamp, angular_velocity, linear_acceleration),
             # as three runs of bytes per message.
             packed = np.empty((group.size, 56), np.uint8)
-            packed[:, :8] = _gather(u8, group + 4, 8)
-            packed[:, 8:32] = _gather(u8, group + (offset + 104), 24)
-            packed[:, 32:] = _gather(u8, group + (offset + 200), 24)
+            packed[:, :8] = gather_bytes(u8, group + 4, 8)
+            packed[:, 8:32] = gather_bytes(u8, group + (offset + 104), 24)
+            packed[:, 32:] = gather_bytes(u8, group + (offset + 200), 24)
             fields = packed.view(_fields_dtype(offset, is_big, ros1, 56, True)).ravel()
         stamp_ns[idx] = (fields['sec'].astype(np.int64) * 1_000_000_000
                          + fields['nanosec'].astype(np.int64))
@@ -310,7 +310,7 @@ def decode_imu_cdr(payloads) -> tuple[np.ndarray, np.ndarray]:
     """
     if not len(payloads):
         return np.zeros(0, np.int64), np.zeros((0, 6))
-    stamp_ns, samples, ok = decode_imu_payloads(*_join(payloads), 'cdr')
+    stamp_ns, samples, ok = decode_imu_payloads(*join_payloads(payloads), 'cdr')
     if not ok.all():
         raise InputError(f'{ok.size - np.count_nonzero(ok)} of {ok.size} payloads are not '
                          'CDR sensor_msgs/msg/Imu messages')
@@ -343,7 +343,7 @@ def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
     """
     if not len(payloads):
         return []
-    u8, starts, lengths = _join(payloads)
+    u8, starts, lengths = join_payloads(payloads)
     u8 = u8.copy()  # writable
     offset, big, fits = _imu_layout(u8, starts, lengths, False)
     # The covariances follow orientation (4 doubles), its covariance (9) and
@@ -425,7 +425,7 @@ def payload_frames(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
                            'big' if encoding != 'ros1' and u8[first + 1] == 0 else 'little')
     width = 4 + max(min(size0, int(lengths[0]) - 16), 0)
     if (lengths >= 12 + width).all():
-        heads = _records(u8, starts, _key_dtype(width))
+        heads = read_records(u8, starts, _key_dtype(width))
         if all((heads[name] == heads[name][0]).all() for name in heads.dtype.names or ()):
             # A CDR string's length counts its NUL.
             size = max(width - 4 - (encoding != 'ros1'), 0)
@@ -457,7 +457,7 @@ def payload_frames_slow(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
                         encoding: str) -> tuple[list[str], np.ndarray | None]:
     """Return what :func:`payload_frames` returns, message by message (several frames)."""
     n = starts.size
-    raw = _gather(u8, starts + 12, 4)
+    raw = gather_bytes(u8, starts + 12, 4)
     size = raw.copy().view('<u4').reshape(n).astype(np.int64)
     if encoding != 'ros1':
         # Encapsulation 0x0000 is big-endian CDR; the CDR length counts the NUL.
@@ -470,7 +470,7 @@ def payload_frames_slow(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     if (size == first).all():
         if first == 0:
             return [''], None
-        rows = _gather(u8, starts + 16, first)
+        rows = gather_bytes(u8, starts + 16, first)
         if (rows == rows[0]).all():
             return [rows[0].tobytes().decode('utf-8', errors='replace')], None
     names: dict[str, int] = {}
@@ -480,7 +480,7 @@ def payload_frames_slow(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
         if length == 0:
             index[at] = names.setdefault('', len(names))
             continue
-        rows = _gather(u8, starts[at] + 16, length).view(np.dtype((np.void, length)))
+        rows = gather_bytes(u8, starts[at] + 16, length).view(np.dtype((np.void, length)))
         distinct, inverse = np.unique(rows.reshape(-1), return_inverse=True)
         codes = np.array([names.setdefault(bytes(d).decode('utf-8', errors='replace'),
                                            len(names)) for d in distinct], np.int64)
@@ -525,7 +525,7 @@ class CovariancePatch:
                          raw[at + 296:]))
 
 
-def _join(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def join_payloads(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Concatenate byte strings; return (buffer uint8, (n,) starts, (n,) lengths)."""
     lengths = np.fromiter(map(len, payloads), np.int64, len(payloads))
     starts = np.zeros(lengths.size, np.int64)

@@ -24,7 +24,8 @@ from imu_allan import AXES
 from imu_allan.core.noise.unit_check import DeclaredUnits
 from imu_allan.errors import InputError, UnitMistake
 from imu_allan.io.progress import Progress
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 from imu_allan.pipeline.workers import start_workers
 
 CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')

@@ -21,7 +21,7 @@ import yaml
 import zstandard
 
 from imu_allan import __version__
-from imu_allan.io.bags.base import _MCAP_MAGIC
+from imu_allan.io.bags.base import MCAP_MAGIC
 from imu_allan.io.imu_cdr import imu_msgdef, IMU_MSGTYPE
 
 
@@ -86,7 +86,7 @@ def _write_mcap(mcap_path: Path, topic: str, batches, info: dict) -> None:
     chunk_indexes = []
     n_messages, t_first, t_last = 0, 0, 0
     with open(mcap_path, 'xb') as out:
-        out.write(_MCAP_MAGIC)
+        out.write(MCAP_MAGIC)
         Header(profile='ros2', library=f'imu_allan {__version__}').write(builder)
         schema.write(builder)
         channel.write(builder)
@@ -153,4 +153,4 @@ def _write_mcap(mcap_path: Path, topic: str, batches, info: dict) -> None:
         Footer(summary_start=summary_start, summary_offset_start=offset_start,
                summary_crc=crc).write(builder)
         out.write(builder.end())
-        out.write(_MCAP_MAGIC)
+        out.write(MCAP_MAGIC)

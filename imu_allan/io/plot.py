@@ -13,7 +13,7 @@ from matplotlib.ticker import LogFormatter, NullLocator
 import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
-from imu_allan.core.noise.model import base_name, TERMS
+from imu_allan.core.noise.terms import base_name, TERMS
 from imu_allan.io import FIGURE_FORMATS
 
 _COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}

@@ -16,7 +16,8 @@ from pathlib import Path
 import yaml
 
 from imu_allan.atomic import write_atomic
-from imu_allan.core.noise.params import dump_params, NoiseSpec
+from imu_allan.core.noise.params import dump_params
+from imu_allan.core.noise.values import NoiseSpec
 from imu_allan.io import FIGURE_FORMATS
 from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
 

@@ -15,13 +15,14 @@ from typing import Any, Callable
 import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
-from imu_allan.core.allan import AllanCurve, confidence_bounds
+from imu_allan.core.allan.curve import AllanCurve
+from imu_allan.core.allan.edf import confidence_bounds
 from imu_allan.core.allan.hold import held_fit_curve
 from imu_allan.core.allan.raw import raw_evidence
-from imu_allan.core.fit import AxisFit, json_floats
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.fit.result import AxisFit, json_floats
 from imu_allan.core.noise.unit_check import unit_warnings
 from imu_allan.core.noise.units import format_quoted, sensor_of
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.outputs.covering import cover_axes, default_horizon, DEFAULT_HORIZON_S
 from imu_allan.core.outputs.exports import driver_yaml, kalibr_yaml, robot_localization_yaml
 from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
@@ -523,7 +524,7 @@ def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:
 
 def _plan_job(job: tuple) -> dict:
     """Plan some axes: (fits, rate_hz, duration_s, targets) -> {axis: AxisPlan}."""
-    from imu_allan.core.plan import plan_fits     # scipy: in the workers only
+    from imu_allan.core.plan.planner import plan_fits  # scipy: in the workers only
 
     return plan_fits(*job)
 

@@ -44,6 +44,8 @@ _FLOOR = 0.01
 MIN_WINDOW = 10
 
 
+# Long because a window is judged across blocks (held rows, a still reference that
+# re-anchors, event counts) and that state survives a checkpoint.
 class MotionGate:
     """
     Hold samples until their window is judged; pass the still ones to the feed.

@@ -22,7 +22,7 @@ from typing import Callable, Self
 
 import numpy as np
 
-from imu_allan.core.allan import AllanCurve
+from imu_allan.core.allan.curve import AllanCurve
 from imu_allan.core.noise.unit_check import (first_look, FIRST_LOOK_ROWS, unit_error,
                                              unit_warnings)
 from imu_allan.errors import InputError, NotEnoughStillData, UnitMistake
@@ -36,6 +36,9 @@ from imu_allan.pipeline.hygiene import (HygieneStats, MOTION_POLICIES, N_AXES, S
 __all__ = ['HygieneStats', 'MOTION_POLICIES', 'Session', 'SessionConfig']
 
 
+# Long because it is the one path for live and offline data: it wires the clock, the
+# gate and the feed and answers the node's and the CLI's questions; the work is in
+# those parts.
 class Session:
     """
     Input checks plus streaming Allan accumulation for the six IMU axes.

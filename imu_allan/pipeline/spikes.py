@@ -53,6 +53,8 @@ _MAD = 0.6744897501960817
 HOLD_MIN = 0.1
 
 
+# Long because a verdict must not depend on how the rows arrive: rows wait for their
+# context, and that state survives a checkpoint.
 class SpikeFilter:
     """
     Find and interpolate spikes in a stream of gap-free runs.

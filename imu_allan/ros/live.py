@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.allan import confidence_bounds
-from imu_allan.core.diagnose import RawKeeper
+from imu_allan.core.allan.edf import confidence_bounds
+from imu_allan.core.allan.raw import RawKeeper
 from imu_allan.errors import InputError, UnitMistake
 from imu_allan.io.imu_cdr import decode_imu_payloads, payload_frames
 from imu_allan.pipeline.analysis import CONFIDENCE

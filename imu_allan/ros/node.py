@@ -39,15 +39,15 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
-from imu_allan.core.diagnose import RawKeeper
-from imu_allan.core.plan import parse_targets
+from imu_allan.core.allan.raw import RawKeeper
+from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.io.imu_cdr import imu_frame_id
 from imu_allan.io.report import write_outputs
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.live import LiveInput, SessionView
-from imu_allan.ros.params import as_declared_type, BY_NAME, default_output_dir, PARAMS
+from imu_allan.ros.params import as_declared_type, BY_NAME, default_output_dir, PARAMS, RENAMED
 from imu_allan.ros.plan_report import targets_met
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 from imu_allan.ros.reports import matrix_msg, NodeReports
@@ -113,6 +113,11 @@ class ImuAllanNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('imu_allan', **kwargs)
+        for was, now in RENAMED.items():
+            if was in self._parameter_overrides:
+                value = self._parameter_overrides.pop(was).value
+                self._parameter_overrides.setdefault(now, Parameter(now, value=value))
+                self.get_logger().warning(f'the parameter {was} is now {now}: rename it')
         # Overrides from -p name:=value and parameter files: 600 for a double becomes 600.0
         # (rclpy keeps them in _parameter_overrides and refuses an int for a double).
         for name, override in list(self._parameter_overrides.items()):
@@ -253,7 +258,7 @@ class ImuAllanNode(Node):
 
     @property
     def collection_stopped(self) -> bool:
-        """Whether stop_when_pinned stopped the collection (cleared by ~/reset)."""
+        """Whether stop_when_met stopped the collection (cleared by ~/reset)."""
         return self.reports.collection_stopped
 
     def _stamped(self, statuses: list) -> DiagnosticArray:
@@ -351,7 +356,7 @@ class ImuAllanNode(Node):
         self.relay.update(result.imu_covariances())
         self.pub_params.publish(self._stamped(self.reports.fitted(result, view)))
         if planned:
-            self._stop_if_pinned(result, view.duration_s)
+            self._stop_if_met(result, view.duration_s)
         self.pub_q.publish(matrix_msg(*result.process_noise()))
         self.pub_r.publish(matrix_msg(*result.measurement_noise()))
         self.pub_kalibr.publish(String(data=result.kalibr_yaml()))
@@ -380,17 +385,17 @@ class ImuAllanNode(Node):
             result = replace(result, plans=self.reports.plans)
         return result, plan and result is not None
 
-    def _stop_if_pinned(self, result, duration_s: float) -> None:
-        """With stop_when_pinned: stop collecting once every target is met, and say so."""
+    def _stop_if_met(self, result, duration_s: float) -> None:
+        """With stop_when_met: stop collecting once every target is met, and say so."""
         fitted = sum(f is not None for f in result.fits.values())
-        if (not self.values['stop_when_pinned'] or self.collection_stopped
+        if (not self.values['stop_when_met'] or self.collection_stopped
                 or duration_s < self.values['min_duration_s']
                 or not targets_met(result.plans, fitted)):
             return
         self.reports.collection_stopped = True
         self.get_logger().info(
             f'every precision target met on every axis after {duration_s:.0f} s: '
-            'stopped collecting (stop_when_pinned); the results stay published, '
+            'stopped collecting (stop_when_met); the results stay published, '
             '~/reset starts over')
 
     def _checkpoint(self) -> None:

@@ -14,7 +14,7 @@ import sys
 from imu_allan.core.allan.raw import RAW_ROWS
 from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
-from imu_allan.pipeline.session import MOTION_POLICIES, SessionConfig
+from imu_allan.pipeline.hygiene import MOTION_POLICIES, SessionConfig
 
 
 @dataclass(frozen=True)
@@ -68,13 +68,17 @@ class NodeParam:
 
 
 _S = SessionConfig()
+#: Old parameter names still read for one release (the node warns to rename them): the
+#: plan's 'pinned' (every target met) is now 'met', as 'pinned' is a fit's time at an end
+#: of its search range.
+RENAMED = {'stop_when_pinned': 'stop_when_met'}
 
 PARAMS: tuple[NodeParam, ...] = (
     NodeParam('rate_hz', float, _S.rate_hz, 'Hz', (0.0, 100000.0),
               'Nominal IMU rate; 0 estimates it from the first stamps'),
     NodeParam('min_duration_s', float, 3600.0, 's', (1.0, 1.0e6),
               'Recording length before results are published'),
-    NodeParam('stop_when_pinned', bool, False, '', (),
+    NodeParam('stop_when_met', bool, False, '', (),
               'Stop collecting once every axis meets every precision target '
               '(min_duration_s stays a floor)'),
     NodeParam('plan_targets', str, '', '', (),

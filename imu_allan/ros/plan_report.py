@@ -1,16 +1,16 @@
 """
-What the node says about its plan: per axis, pinned parameters and the time to the rest.
+What the node says about its plan: per axis, what meets its target, and when the rest will.
 
 No rclpy here (the node turns the key/value pairs into KeyValue messages): the plans
 come with the analysis (:func:`imu_allan.pipeline.analysis.analyze` with ``plan``,
 :mod:`imu_allan.core.plan`).  The node calls :func:`plan_values` where it builds the
 ~/noise_parameters statuses, :func:`progress_report` where it reports progress, and
-:func:`targets_met` after each fit when ``stop_when_pinned`` is set.
+:func:`targets_met` after each fit when ``stop_when_met`` is set.
 """
 
 import math
 
-from imu_allan.core.plan import AxisPlan, hours
+from imu_allan.core.plan.result import AxisPlan, hours
 
 
 def _num(x: float) -> str:
@@ -23,7 +23,7 @@ def plan_values(plan: AxisPlan | None) -> list:
 
     Per parameter P: ``P_width_now`` and ``P_target`` (relative 95 % half-widths),
     ``P_time_to_target_s`` (record length at which the target is met) and ``P_plan``
-    (pinned, predicted, at_least, beyond or open); then ``plan_remaining_s``, ``plan`` (one
+    (met, predicted, at_least, beyond or open); then ``plan_remaining_s``, ``plan`` (one
     line) and, where the model behind the plan does not hold, ``plan_caveat``.  Empty
     without a plan.
     """
@@ -52,11 +52,11 @@ def progress_report(plans: dict) -> tuple[str, list]:
     Returns
     -------
     text : str
-        '' without plans; else e.g. ' | gyro_x pinned: N; B, T_B in 2.1 h more | ...',
-        or ' | every target met' when all axes are pinned; the axes whose model does not
+        '' without plans; else e.g. ' | gyro_x met: N; B, T_B in 2.1 h more | ...',
+        or ' | every target met' when all axes meet them; the axes whose model does not
         hold are named at the end.
     values : list of (str, str)
-        ``<axis>_pinned`` (the pinned parameters), ``<axis>_remaining_s`` per axis and
+        ``<axis>_met`` (the parameters that meet their target), ``<axis>_remaining_s`` per axis and
         ``plan_remaining_s`` (the longest).
 
     """
@@ -65,10 +65,10 @@ def progress_report(plans: dict) -> tuple[str, list]:
     values = []
     parts = []
     for axis, plan in plans.items():
-        pinned = [p.name for p in plan.params if p.kind == 'pinned']
-        values += [(f'{axis}_pinned', ','.join(pinned)),
+        met = [p.name for p in plan.params if p.kind == 'met']
+        values += [(f'{axis}_met', ','.join(met)),
                    (f'{axis}_remaining_s', _num(plan.remaining_s()))]
-        if not plan.all_pinned():
+        if not plan.all_met():
             parts.append(f'{axis} {plan.progress_line()}')
     remaining = [p.remaining_s() for p in plans.values()]
     longest = math.nan if any(math.isnan(r) for r in remaining) else max(remaining)
@@ -90,4 +90,4 @@ def targets_met(plans: dict, n_axes_fitted: int) -> bool:
     a model that a longer record will likely change.
     """
     return bool(plans) and len(plans) >= n_axes_fitted and all(
-        p.all_pinned() and not p.caveat for p in plans.values())
+        p.all_met() and not p.caveat for p in plans.values())

@@ -53,7 +53,7 @@ class NodeReports:
         self._progress_mark = (self.started, 0.0)
         #: The last plan per axis (:mod:`imu_allan.core.plan`), set by the node.
         self.plans: dict = {}
-        #: Set when stop_when_pinned stopped the collection (cleared by ~/reset).
+        #: Set when stop_when_met stopped the collection (cleared by ~/reset).
         self.collection_stopped = False
 
     @property
@@ -128,7 +128,7 @@ class NodeReports:
             text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
         plan_text, plan_kv = progress_report(self.plans)
         if self.collection_stopped:
-            plan_text = ' | stopped collecting: every precision target met (stop_when_pinned)'
+            plan_text = ' | stopped collecting: every precision target met (stop_when_met)'
         text, values = text + plan_text, values + plan_kv
         level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
         if s.unit_problem is not None:      # nothing is published until ~/reset

@@ -11,7 +11,8 @@ answers at once; the summary follows on ~/diagnosis.
 import threading
 from typing import Callable
 
-from imu_allan.core.diagnose import diagnose_session, RawKeeper
+from imu_allan.core.allan.raw import RawKeeper
+from imu_allan.core.diagnose.engine import diagnose_session
 from imu_allan.errors import InputError
 from imu_allan.ros.live import LiveInput
 

@@ -71,8 +71,10 @@ variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
 
 import numpy as np
 
-from imu_allan.core.allan import AllanCurve, alpha_from_slope, confidence_bounds, edf_overlapping
 from imu_allan.core.allan.accumulator_state import _Persistence
+from imu_allan.core.allan.curve import AllanCurve
+from imu_allan.core.allan.edf import confidence_bounds, edf_overlapping
+from imu_allan.core.allan.noise_id import alpha_from_slope
 from imu_allan.core.allan.taus import dense_m_grid
 from imu_allan.errors import InputError
 

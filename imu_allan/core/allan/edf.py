@@ -353,3 +353,28 @@ def curve_k_bound(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> float:
 
     """
     return float(np.sqrt(np.min(3.0 * avar_upper(avar, edf) / tau)))
+
+
+def floor_b_bound(avar: np.ndarray, edf: np.ndarray) -> float:
+    """
+    95 % upper bound of B from a curve's floor: min sqrt(AVAR_hi) / 0.664.
+
+    Every term only adds to AVAR, and a bias instability of level B alone peaks at
+    ADEV 0.664 B (IEEE Std 952-1997 annex C), so 0.664 B <= ADEV(tau) at its peak's tau:
+    a bound for a bias instability whose peak lies within the curve (the range the fit
+    searches T_B in); AVAR_hi is each point's joint upper limit (:func:`avar_upper`).
+
+    Parameters
+    ----------
+    avar : np.ndarray
+        Shape (k,), measured AVAR past the sensor's filter [unit^2].
+    edf : np.ndarray
+        Shape (k,), equivalent degrees of freedom of each point.
+
+    Returns
+    -------
+    float
+        The bound [unit].
+
+    """
+    return float(np.sqrt(np.min(avar_upper(avar, edf))) / 0.664)

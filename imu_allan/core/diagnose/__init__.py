@@ -47,14 +47,14 @@ Modules: :mod:`.gap` (the gap and its bands), :mod:`.replicas` (the model's simu
 curve), :mod:`.engine` (the steps above), :mod:`.result` (what is reported).
 """
 
+from imu_allan.core.allan.raw import RawKeeper
 from imu_allan.core.diagnose.engine import (base_terms, DEFAULT_BASE, diagnose_axis,
                                             diagnose_curve, diagnose_session, EFFECTS)
 from imu_allan.core.diagnose.gap import (Band, find_bands, gap, GAP_OK, gap_z, ln_adev_stderr,
                                          P_INCONSISTENT, Z_BAND)
-from imu_allan.core.diagnose.replicas import (filtered_white_noise, N_REPLICAS,
-                                              simulate_fit_avar)
+from imu_allan.core.diagnose.replicas import N_REPLICAS, simulate_fit_avar
 from imu_allan.core.diagnose.result import AxisDiagnosis, DiagnoseResult, Finding, summary_line
-from imu_allan.core.search.evidence import RawKeeper
+from imu_allan.core.noise.generators import filtered_white_noise
 
 __all__ = ['AxisDiagnosis', 'Band', 'base_terms', 'DEFAULT_BASE', 'diagnose_axis',
            'diagnose_curve', 'diagnose_session', 'DiagnoseResult', 'EFFECTS',

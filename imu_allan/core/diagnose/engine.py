@@ -10,15 +10,17 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from imu_allan import AXES, AXIS_UNITS
-from imu_allan.core.allan import AllanCurve, edf_overlapping
+from imu_allan.core.allan.curve import AllanCurve
+from imu_allan.core.allan.edf import edf_overlapping
+from imu_allan.core.allan.raw import raw_evidence, RawKeeper
 from imu_allan.core.diagnose.gap import find_bands, gap, gap_z, ln_adev_stderr
 from imu_allan.core.diagnose.replicas import N_REPLICAS, simulate_fit_avar
 from imu_allan.core.diagnose.result import AxisDiagnosis, DiagnoseResult, Finding, summary_line
-from imu_allan.core.fit import AxisFit
+from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.noise.terms import (BASE_ALIASES, EFFECT_ALIASES, effect_name, effect_names,
                                         TERMS)
-from imu_allan.core.search import search_axis, SEARCH_EFFECTS
-from imu_allan.core.search.evidence import raw_evidence, RawKeeper
+from imu_allan.core.search import search_axis
+from imu_allan.core.search.rules import SEARCH_EFFECTS
 from imu_allan.errors import InputError
 
 

@@ -11,9 +11,8 @@ quantization, ramp, sinusoids) is added by its registry entry's ``simulate``.  P
 
 import numpy as np
 
-from imu_allan.core.allan import overlapping_avar
-from imu_allan.core.fit import AxisFit
-from imu_allan.core.noise.generators import filtered_white_noise  # noqa: F401
+from imu_allan.core.allan.kernels import overlapping_avar
+from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.noise.simulate import simulate_state_space
 from imu_allan.core.noise.terms import base_name, noise_from_terms, TERMS
 

@@ -10,7 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 from imu_allan.core.diagnose.gap import GAP_OK
-from imu_allan.core.fit import AxisFit, json_floats, json_num
+from imu_allan.core.fit.result import AxisFit, json_floats, json_num
 from imu_allan.core.noise.terms import TERMS
 
 

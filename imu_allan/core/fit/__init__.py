@@ -34,7 +34,7 @@ Optimised (generalised least squares on the Allan variance, GMWM-style):
   first the paper's weights 2 avar^2 / edf, then the *expected* Sigma (Sigma(theta)
   averaged over the GLS uncertainty of the coefficients, which keeps a record's own
   low long-tau points from raising their own weight) to convergence, and a last step
-  at the plug-in Sigma(theta) of that solution (:meth:`_Fitter.irls`).
+  at the plug-in Sigma(theta) of that solution (:meth:`Fitter.irls`).
 * Term selection: every subset of the candidate terms is fitted with the weights of the
   full model; the subset minimising J + 2 p (AIC; J the GLS chi-square, p the number
   of parameters; the one selection rule and its penalties:
@@ -66,14 +66,12 @@ from imu_allan.core.fit.result import AxisFit, json_floats, json_num, KINDS, Par
 
 if TYPE_CHECKING:
     from imu_allan.core.fit.axis import DEFAULT_TERMS, fit_axis, fit_curve, Z95
-    from imu_allan.core.fit.covariance import _CurveCovariance
     from imu_allan.core.fit.nominal import nominal_fit
     from imu_allan.core.fit.params import CORE_PARAMS, Z95_ONE_SIDED
 
 #: The fitting machinery (scipy.optimize) is imported on first use: a process that only
 #: reports fits made elsewhere (``imu-allan analyze``'s main process) never loads it.
-_LAZY = {'DEFAULT_TERMS': 'axis', 'fit_axis': 'axis', 'fit_curve': 'axis',
-         'Z95': 'axis', '_CurveCovariance': 'covariance',
+_LAZY = {'DEFAULT_TERMS': 'axis', 'fit_axis': 'axis', 'fit_curve': 'axis', 'Z95': 'axis',
          'nominal_fit': 'nominal', 'CORE_PARAMS': 'params', 'Z95_ONE_SIDED': 'params'}
 
 
@@ -84,5 +82,4 @@ def __getattr__(name: str):
 
 
 __all__ = ['AxisFit', 'CORE_PARAMS', 'DEFAULT_TERMS', 'fit_axis', 'fit_curve',
-           'json_floats', 'json_num', 'KINDS', 'nominal_fit', 'Param', 'Z95', 'Z95_ONE_SIDED',
-           '_CurveCovariance']
+           'json_floats', 'json_num', 'KINDS', 'nominal_fit', 'Param', 'Z95', 'Z95_ONE_SIDED']

@@ -11,14 +11,14 @@ from typing import Sequence
 
 import numpy as np
 
-from imu_allan.core.allan import AllanCurve
+from imu_allan.core.allan.curve import AllanCurve
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.nominal import nominal_fit
 from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported, bound_by_curve
 from imu_allan.core.fit.result import AxisFit
-from imu_allan.core.fit.solver import _design, _fit_fixed_w, _Fitter, _Slot, _Solution
-from imu_allan.core.noise.model import base_name, noise_from_terms, TERMS
+from imu_allan.core.fit.solver import _design, fit_fixed_weights, Fitter, Slot, Solution
+from imu_allan.core.noise.terms import base_name, noise_from_terms, TERMS
 from imu_allan.core.rules import FILTER_MIN_TAU_SHARE, KEEP_PENALTY, P_CONSISTENT
 from imu_allan.errors import InputError
 
@@ -27,21 +27,39 @@ DEFAULT_TERMS = ('quantization', 'white', 'bias_instability', 'random_walk')
 Z95 = 1.959963984540054
 
 
-def _slot(label: str, tau: np.ndarray, rate_hz: float) -> _Slot:
+def term_slot(label: str, tau: np.ndarray, rate_hz: float) -> Slot:
+    """
+    Return a term label's slot: its registry entry and the search range over these taus.
+
+    Parameters
+    ----------
+    label : str
+        Term label, possibly numbered ('gauss_markov_2').
+    tau : numpy.ndarray
+        (k,) averaging times of the fit [s].
+    rate_hz : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    Slot
+
+    """
     term = TERMS[base_name(label)]
     if not term.nonlinear:
-        return _Slot(label, term, ())
+        return Slot(label, term, ())
     if term.bounds is None:
         raise InputError(f'no search range for the nonlinear parameters of term {label}')
     # The registry entry's search range (e.g. a Gauss-Markov bump inside the record).
-    return _Slot(label, term, tuple(term.bounds(tau, rate_hz)))
+    return Slot(label, term, tuple(term.bounds(tau, rate_hz)))
 
 
-def _n_params(slots: Sequence[_Slot]) -> int:
+def n_params(slots: Sequence[Slot]) -> int:
+    """Return the parameters of a model: one level plus the nonlinear ones per slot."""
     return sum(1 + len(s.bounds) for s in slots)
 
 
-def _symbols(slots: Sequence[_Slot]) -> dict:
+def _symbols(slots: Sequence[Slot]) -> dict:
     """Map every (label, symbol) pair of the candidate slots to its reported name."""
     out, used = {}, set()
     for s in slots:
@@ -54,7 +72,30 @@ def _symbols(slots: Sequence[_Slot]) -> dict:
     return out
 
 
-def _check_inputs(tau, avar, edf, rate_hz, n_samples):
+def check_curve(tau, avar, edf, rate_hz, n_samples):
+    """
+    Return the usable points of a curve, sorted by tau.
+
+    Parameters
+    ----------
+    tau, avar, edf : array_like
+        (k,) averaging times [s], Allan variances [unit^2] and their EDF [-].
+    rate_hz : float
+        Sample rate [Hz].
+    n_samples : int
+        Samples behind the curve.
+
+    Returns
+    -------
+    tau, avar, edf : numpy.ndarray
+        (k',) the finite points with positive variance and EDF, tau ascending.
+
+    Raises
+    ------
+    InputError
+        For arrays of different shapes, a bad rate or fewer than 4 samples.
+
+    """
     tau = np.atleast_1d(np.asarray(tau, dtype=np.float64))
     avar = np.atleast_1d(np.asarray(avar, dtype=np.float64))
     edf = np.atleast_1d(np.asarray(edf, dtype=np.float64))
@@ -71,7 +112,7 @@ def _check_inputs(tau, avar, edf, rate_hz, n_samples):
     return tau[ok][order], avar[ok][order], edf[ok][order]
 
 
-def _thin(tau: np.ndarray, per_octave: float = 2.0) -> np.ndarray:
+def thin(tau: np.ndarray, per_octave: float = 2.0) -> np.ndarray:
     """Return the indices that keep at most ``per_octave`` points per octave of tau."""
     keep, last = [], -np.inf
     for i, t in enumerate(np.log2(tau)):
@@ -81,7 +122,7 @@ def _thin(tau: np.ndarray, per_octave: float = 2.0) -> np.ndarray:
     return np.array(keep, dtype=np.int64)
 
 
-def _filtered_start(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> int:
+def filtered_start(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> int:
     """
     Return the index of the first tau to fit: leading taus bent by the sensor's filter.
 
@@ -181,7 +222,7 @@ def fit_axis(curve_tau_s, avar, edf, rate_hz: float, n_samples: int, *,
 def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
               select=True, phi0=None, sigma0=None) -> AxisFit:
     """Body of :func:`fit_axis` (same arguments)."""
-    tau, avar, edf = _check_inputs(curve_tau_s, avar, edf, rate_hz, n_samples)
+    tau, avar, edf = check_curve(curve_tau_s, avar, edf, rate_hz, n_samples)
     if method not in ('overlapping', 'nonoverlapping'):
         raise InputError(f'the fit needs an Allan curve (overlapping or nonoverlapping), '
                          f'got method {method!r}')
@@ -195,11 +236,11 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     if len(set(candidates)) != len(candidates):
         raise InputError('each term may appear once; number repeats, e.g. gauss_markov_2')
     nominal = nominal_fit(tau, avar, edf, unit)
-    keep = _thin(tau)
+    keep = thin(tau)
     tau, avar, edf = tau[keep], avar[keep], edf[keep]
     notes: list[str] = []
     # With the filtered_white term the filter is part of the model, not cut away.
-    first = 0 if 'filtered_white' in candidates else _filtered_start(tau, avar, rate_hz)
+    first = 0 if 'filtered_white' in candidates else filtered_start(tau, avar, rate_hz)
     if first:
         notes.append(f'tau < {tau[first]:.3g} s left out: flatter than white noise there '
                      "(the sensor's low-pass filter)")
@@ -209,8 +250,8 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     dt = 1.0 / float(rate_hz)
     m = np.maximum(np.round(tau * rate_hz), 1).astype(np.int64)
     n_terms = np.maximum(int(n_samples) + 1 - 2 * m, 1)
-    fitter = _Fitter(tau, avar, edf, m, n_terms, dt, int(n_samples), method)
-    slots_all = [_slot(lbl, tau, rate_hz) for lbl in candidates]
+    fitter = Fitter(tau, avar, edf, m, n_terms, dt, int(n_samples), method)
+    slots_all = [term_slot(lbl, tau, rate_hz) for lbl in candidates]
     start = None
     if phi0:
         start = [tuple(phi0.get(s.label, [math.sqrt(lo * hi) for lo, hi in s.bounds]))
@@ -236,15 +277,15 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
         sol, sigma = fitter.irls(slots, phi0=[phi_full[s.label] for s in slots],
                                  sigma0=full_sigma)
     # J at exactly these weights (from the search's model: a polish, not a new search).
-    sol = _fit_fixed_w(fitter.data, slots, sol.phi, local=start is not None)
+    sol = fit_fixed_weights(fitter.data, slots, sol.phi, local=start is not None)
     relabelled = (_dominant_bias_instability(slots, sol, fitter.data.scale) if not select
                   else slots)
     swap = {a.label: b.label for a, b in zip(slots, relabelled) if a.label != b.label}
     supported = {swap.get(lb, lb) for lb in supported}
     slots = relabelled
     chi2_value = float(sol.j)
-    dof = int(tau.size - _n_params(slots))
-    threshold = _profile_threshold(chi2_value, dof)
+    dof = int(tau.size - n_params(slots))
+    threshold = profile_threshold(chi2_value, dof)
 
     pinned: list[str] = []
     optimised, values = _estimates(fitter, slots, sol, supported, threshold, symbols, unit,
@@ -297,12 +338,12 @@ def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple
     for r in range(1, len(slots_all) + 1 if select else 1):
         for subset in combinations(range(len(slots_all)), r):
             slots = [slots_all[i] for i in subset]
-            if _n_params(slots) >= tau.size:
+            if n_params(slots) >= tau.size:
                 continue
-            sol = _fit_fixed_w(fitter.data, slots, [phi_full[s.label] for s in slots])
+            sol = fit_fixed_weights(fitter.data, slots, [phi_full[s.label] for s in slots])
             if np.any(sol.coef <= 0):
                 continue  # a zero term: the same fit as a smaller subset
-            ic = criterion(sol.j, _n_params(slots), KEEP_PENALTY)
+            ic = criterion(sol.j, n_params(slots), KEEP_PENALTY)
             if best is None or ic < best[0]:
                 best = (ic, subset)
     if best is None:
@@ -310,7 +351,7 @@ def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple
     return full_sol, full_sigma, phi_full, {slots_all[i].label for i in best[1]}
 
 
-def _profile_threshold(chi2_value: float, dof: int) -> float:
+def profile_threshold(chi2_value: float, dof: int) -> float:
     """Rise of the GLS chi-square that bounds a 95 % profile interval."""
     # Sigma is the model's own covariance of the curve (checked against Monte Carlo in
     # test_fit.py), so the scale is known and the threshold is the chi-square quantile
@@ -326,7 +367,7 @@ def _profile_threshold(chi2_value: float, dof: int) -> float:
         return chi2_ppf(0.95, 1)
 
 
-def _dominant_bias_instability(slots: list, sol: _Solution, scale: float) -> list:
+def _dominant_bias_instability(slots: list, sol: Solution, scale: float) -> list:
     """
     Give the label 'bias_instability' (B, T_B) to the Gauss-Markov term with the largest B.
 

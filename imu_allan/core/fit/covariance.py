@@ -9,7 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
-from imu_allan.core.noise.model import Term
+from imu_allan.core.noise.terms import Term
 
 # Lag-sum quadrature: lags within _EXACT of a kink are summed exactly, the rest is
 # integrated with Gauss-Legendre on pieces that grow _GROWTH-fold away from the kinks.
@@ -209,7 +209,7 @@ def _layout(m: np.ndarray, n_terms: np.ndarray, reach: np.ndarray,
     return lo_a[order], hi_b[order], is_piece[order], per_pair
 
 
-class _CurveCovariance:
+class CurveCovariance:
     """Sigma(c, phi) of the overlapping Allan estimates of one curve (module docstring)."""
 
     def __init__(self, m: np.ndarray, n_terms: np.ndarray, dt: float, n_samples: int):
@@ -312,12 +312,12 @@ _COV_CACHE_SIZE = 1
 
 
 def _shared_covariance(m: np.ndarray, n_terms: np.ndarray, dt: float,
-                       n_samples: int) -> _CurveCovariance:
-    """Return the cached :class:`_CurveCovariance` of a curve geometry (small LRU)."""
+                       n_samples: int) -> CurveCovariance:
+    """Return the cached :class:`CurveCovariance` of a curve geometry (small LRU)."""
     key = (m.tobytes(), n_terms.tobytes(), float(dt), int(n_samples))
     cov = _COV_CACHE.pop(key, None)
     if cov is None:
-        cov = _CurveCovariance(m, n_terms, dt, n_samples)
+        cov = CurveCovariance(m, n_terms, dt, n_samples)
     _COV_CACHE[key] = cov            # most recent last
     while len(_COV_CACHE) > _COV_CACHE_SIZE:
         _COV_CACHE.pop(next(iter(_COV_CACHE)))

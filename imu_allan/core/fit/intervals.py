@@ -9,7 +9,7 @@ threshold of the minimum (profile likelihood, Venzon & Moolgavkar, Applied Stati
 import math
 from typing import Sequence
 
-from imu_allan.core.fit.solver import _Data, _fit_fixed_w, _Fix, _Slot, _Solution
+from imu_allan.core.fit.solver import _Data, fit_fixed_weights, Fix, Slot, Solution
 
 #: First trial of a profile interval: 2 % from the estimate (then a quadratic guess).
 _FIRST_STEP = 0.02
@@ -17,7 +17,7 @@ _FIRST_STEP = 0.02
 _MAX_REACH = math.log(1e7)
 
 
-def _profile_interval(data: _Data, slots: Sequence[_Slot], sol: _Solution, slot: int,
+def _profile_interval(data: _Data, slots: Sequence[Slot], sol: Solution, slot: int,
                       symbol: str, value: float, threshold: float,
                       hard: tuple = (0.0, math.inf)) -> tuple[float, float]:
     """
@@ -35,7 +35,7 @@ def _profile_interval(data: _Data, slots: Sequence[_Slot], sol: _Solution, slot:
     last = {'phi': sol.phi}
 
     def excess(v):
-        fit = _fit_fixed_w(data, slots, last['phi'], _Fix(slot, symbol, v), local=True)
+        fit = fit_fixed_weights(data, slots, last['phi'], Fix(slot, symbol, v), local=True)
         last['phi'] = fit.phi
         return fit.j - target
 

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf
-from imu_allan.core.fit.axis import _slot
+from imu_allan.core.fit.axis import term_slot
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design
 from imu_allan.core.rules import FOLLOW_SHARE, P_CONSISTENT, QUANTIZATION_SLOPE
@@ -102,7 +102,7 @@ def white_share(fit: AxisFit) -> np.ndarray | None:
     """Share of the white term in the fitted AVAR at each of the fit's taus."""
     for label, c_si, phi in fit.components:
         if label in ('white', 'filtered_white'):
-            slot = _slot(label, fit.tau_s, 1.0 / max(fit.tau_s.min(), 1e-9))
+            slot = term_slot(label, fit.tau_s, 1.0 / max(fit.tau_s.min(), 1e-9))
             part = c_si * _design([slot], fit.tau_s, [phi])[:, 0]
             return part / np.maximum(fit.avar_fit, 1e-300)
     return None

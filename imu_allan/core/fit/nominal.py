@@ -10,7 +10,7 @@ import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.fit.result import _unit, Param
-from imu_allan.core.noise.model import FLICKER_AVAR, GM_PEAK_TAU
+from imu_allan.core.noise.shapes import FLICKER_AVAR, GM_PEAK_TAU
 
 
 def _chi2_factors(edf: float) -> tuple[float, float]:

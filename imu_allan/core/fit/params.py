@@ -15,11 +15,13 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtr
 
+from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
 from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.result import _unit, Param
-from imu_allan.core.fit.solver import _design, _Fitter, _Slot, _Solution
-from imu_allan.core.noise.model import base_name, GM_PEAK_TAU, TERMS
+from imu_allan.core.fit.solver import _design, Fitter, Slot, Solution
+from imu_allan.core.noise.shapes import GM_PEAK_TAU
+from imu_allan.core.noise.terms import base_name, TERMS
 from imu_allan.core.rules import PIN_MARGIN
 
 #: Parameters always reported, with the term they belong to.
@@ -30,7 +32,7 @@ _CORE_TERMS = ('white', 'filtered_white', 'bias_instability', 'random_walk')
 Z95_ONE_SIDED = 1.6448536269514722
 
 
-def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: float,
+def _estimates(fitter, slots: list, sol: Solution, supported: set, threshold: float,
                symbols: dict, unit: str, notes: list,
                pinned: list | None = None) -> tuple[dict, dict]:
     """
@@ -84,7 +86,7 @@ def _estimates(fitter, slots: list, sol: _Solution, supported: set, threshold: f
     return optimised, values
 
 
-def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported: set,
+def _unsupported(fitter, slots_all: list, slots: list, sol: Solution, supported: set,
                  candidates: tuple, requested: bool, symbols: dict, unit: str,
                  optimised: dict, notes: list) -> None:
     """
@@ -100,7 +102,7 @@ def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported
             notes.append(f'{s.label}: not supported by the data (left out)')
             continue
         others = [i for i, x in enumerate(slots) if x.label != s.label]
-        rest = _Solution(sol.coef[others], tuple(sol.phi[i] for i in others), sol.j)
+        rest = Solution(sol.coef[others], tuple(sol.phi[i] for i in others), sol.j)
         if s.label not in [x.label for x in slots]:    # a requested extra term
             others, rest = list(range(len(slots))), sol
         bound = _upper_bound(fitter, [slots[i] for i in others], rest, s)
@@ -131,7 +133,7 @@ def _unsupported(fitter, slots_all: list, slots: list, sol: _Solution, supported
                 notes.append(f'{sym}: not modelled (term {base} not among the candidates)')
 
 
-def _upper_bound(fitter: _Fitter, slots: list, sol: _Solution, extra: _Slot) -> float:
+def _upper_bound(fitter: Fitter, slots: list, sol: Solution, extra: Slot) -> float:
     """
     One-sided 95 % upper bound of an unsupported term's level (its first symbol).
 
@@ -236,7 +238,6 @@ def bound_by_curve(optimised: dict, tau: np.ndarray, avar: np.ndarray, edf: np.n
         ``optimised`` with the changed parameters (a new dict).
 
     """
-    from imu_allan.core.fit.trust import curve_k_bound, floor_b_bound   # trust imports axis
     out = dict(optimised)
     for sym in ('N', 'B', 'K'):
         p = out.get(sym)
@@ -244,14 +245,16 @@ def bound_by_curve(optimised: dict, tau: np.ndarray, avar: np.ndarray, edf: np.n
             continue
         hi = float(p.ci95[1])
         if math.isfinite(hi) and hi > 0:
-            out[sym] = Param(hi, (0.0, hi), 'upper_bound', p.unit)
+            out[sym] = Param(hi, (0.0, hi), 'upper_bound', p.unit, p.source,
+                             'its 95 % interval reaches 0: upper bound')
         else:
-            out[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified', p.unit)
+            out[sym] = Param(math.nan, (math.nan, math.nan), 'not_identified', p.unit,
+                             p.source, 'its 95 % interval reaches 0')
         notes.append(f'{sym}: its 95 % interval reaches 0 (the record does not show the '
                      'term); only an upper bound')
         if sym == 'B' and out.get('T_B') is not None and out['T_B'].kind != 'not_identified':
             out['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified',
-                               out['T_B'].unit)
+                               out['T_B'].unit, 'fitted', 'B is only an upper bound')
     if not np.size(tau):
         return out
     caps = {'K': (curve_k_bound(tau, avar, edf), "the curve's own bound min "
@@ -262,7 +265,8 @@ def bound_by_curve(optimised: dict, tau: np.ndarray, avar: np.ndarray, edf: np.n
         if p is None or p.kind != 'upper_bound' or not (math.isfinite(cap) and cap > 0):
             continue
         if not p.value <= cap:
-            out[sym] = Param(cap, (0.0, cap), 'upper_bound', p.unit)
+            out[sym] = Param(cap, (0.0, cap), 'upper_bound', p.unit, 'curve',
+                             f'the bound lay above {what}: capped there')
             notes.append(f'{sym}: the bound {p.value:.3g} lay above {what}, {cap:.3g}: '
                          'capped there')
     return out

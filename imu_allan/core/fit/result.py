@@ -11,8 +11,8 @@ from typing import NamedTuple
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_sf
-from imu_allan.core.noise.model import base_name, TERMS
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.terms import base_name, TERMS
+from imu_allan.core.noise.values import AxisNoise
 
 #: Kinds of a reported parameter.
 KINDS = ('estimate', 'upper_bound', 'lower_bound', 'not_identified')
@@ -71,6 +71,8 @@ def _no_curve() -> np.ndarray:
     return np.empty(0)
 
 
+# Long because it is the one record of a fit every output reads: its fields, their
+# JSON and the trust verdict stay together.
 @dataclass(frozen=True)
 class AxisFit:
     """

@@ -13,11 +13,11 @@ from scipy.optimize import nnls
 
 from imu_allan.core.fit.covariance import _shared_covariance
 from imu_allan.core.fit.polish import _polish_1d, _polish_lm
-from imu_allan.core.noise.model import Term
+from imu_allan.core.noise.terms import Term
 
 
 @dataclass(frozen=True)
-class _Slot:
+class Slot:
     """One term of a model: its label, registry entry and nonlinear search bounds."""
 
     label: str
@@ -25,7 +25,9 @@ class _Slot:
     bounds: tuple  # ((lo, hi), ...) per nonlinear parameter
 
 
-class _Solution(NamedTuple):
+class Solution(NamedTuple):
+    """A fit at fixed weights: scaled coefficients, nonlinear parameters, chi-square J."""
+
     coef: np.ndarray       # (p,) linear coefficients (scaled units)
 
     phi: tuple             # per slot, tuple of nonlinear values
@@ -65,7 +67,7 @@ class _Data:
         return self.inv @ a
 
 
-def _design(slots: Sequence[_Slot], tau: np.ndarray, phi: Sequence[tuple]) -> np.ndarray:
+def _design(slots: Sequence[Slot], tau: np.ndarray, phi: Sequence[tuple]) -> np.ndarray:
     """Design matrix (k, p): AVAR shape of each slot per unit coefficient."""
     return np.column_stack([s.term.shape(tau, *nl) for s, nl in zip(slots, phi)])
 
@@ -85,7 +87,7 @@ def _solve_linear(data: _Data, a: np.ndarray, fixed: np.ndarray | None = None):
     return coef, rnorm ** 2, yw - aw @ coef
 
 
-class _Fix(NamedTuple):
+class Fix(NamedTuple):
     """A parameter held fixed while the rest is fitted (profile intervals)."""
 
     slot: int              # index of the slot
@@ -93,7 +95,7 @@ class _Fix(NamedTuple):
     value: float           # SI value of that symbol
 
 
-def _families(slots: Sequence[_Slot]) -> list:
+def _families(slots: Sequence[Slot]) -> list:
     """Group the interchangeable slots (two Gauss-Markov terms, two sinusoids)."""
     groups: dict[str, list[int]] = {}
     for i, s in enumerate(slots):
@@ -115,13 +117,13 @@ class _Problem:
     columns already computed.  Interchangeable terms fit the curve the same either way
     round, so x is evaluated sorted within each family (a smooth objective); a profile
     that holds one of them must keep their roles, and there a quadratic penalty keeps
-    their order (``held``).  See :func:`_fit_fixed_w` for ``fix``.
+    their order (``held``).  See :func:`fit_fixed_weights` for ``fix``.
     """
 
-    def __init__(self, data: _Data, slots: Sequence[_Slot], phi0, fix: _Fix | None):
+    def __init__(self, data: _Data, slots: Sequence[Slot], phi0, fix: Fix | None):
         self.data, self.slots, self.phi0 = data, slots, phi0
         self.fixed_nl: dict = {}
-        self.fixed_level: _Fix | None = None
+        self.fixed_level: Fix | None = None
         if fix is not None:
             term = slots[fix.slot].term
             if fix.symbol in term.nonlinear:
@@ -288,16 +290,16 @@ class _Problem:
                         x[d] = _polish_1d(self.objective, lo, hi, x[d], vals[best])
         return x
 
-    def solution(self, x) -> _Solution:
+    def solution(self, x) -> Solution:
         """Return the solution at x."""
         phi = self.unpack(self.ordered(x)[0])
         coef, j, _ = self.solve(phi)
-        return _Solution(coef, phi, j)
+        return Solution(coef, phi, j)
 
 
-def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | None = None,
-                 fix: _Fix | None = None, local: bool = False,
-                 grid_slots: Sequence[int] | None = None) -> _Solution:
+def fit_fixed_weights(data: _Data, slots: Sequence[Slot], phi0: Sequence[tuple] | None = None,
+                      fix: Fix | None = None, local: bool = False,
+                      grid_slots: Sequence[int] | None = None) -> Solution:
     """
     Fit one model at the current weights: NNLS inside a search over phi.
 
@@ -324,7 +326,7 @@ def _fit_fixed_w(data: _Data, slots: Sequence[_Slot], phi0: Sequence[tuple] | No
     sol = problem.solution(x)
     if fix is None:
         coef, phi = _canonical(slots, sol.coef, sol.phi)
-        sol = _Solution(coef, phi, sol.j)
+        sol = Solution(coef, phi, sol.j)
     return sol
 
 
@@ -336,7 +338,7 @@ _EXP_H = math.exp(_H)
 _ORDER_WEIGHT = 1e4
 
 
-def _canonical(slots: Sequence[_Slot], coef: np.ndarray, phi: tuple) -> tuple:
+def _canonical(slots: Sequence[Slot], coef: np.ndarray, phi: tuple) -> tuple:
     """
     Order interchangeable terms by their nonlinear parameter.
 
@@ -354,7 +356,7 @@ def _canonical(slots: Sequence[_Slot], coef: np.ndarray, phi: tuple) -> tuple:
     return coef, tuple(phi_list)
 
 
-class _Fitter:
+class Fitter:
     """Everything a fit of one curve needs: data, covariance model, candidate slots."""
 
     def __init__(self, tau, avar, edf, m, n_terms, dt, n_samples, method):
@@ -365,7 +367,7 @@ class _Fitter:
         self.cov = _shared_covariance(m, n_terms, dt, n_samples)
         self.method = method
 
-    def sigma(self, slots, sol: _Solution, expected: bool = False) -> np.ndarray:
+    def sigma(self, slots, sol: Solution, expected: bool = False) -> np.ndarray:
         """
         Model covariance of the curve (scaled units) at a solution.
 
@@ -406,7 +408,7 @@ class _Fitter:
         aw = self.data.whiten(a)
         return np.linalg.pinv(aw.T @ aw)
 
-    def _sinusoid_cross(self, slots, sol: _Solution) -> np.ndarray:
+    def _sinusoid_cross(self, slots, sol: Solution) -> np.ndarray:
         """
         Spread a sinusoid adds by beating with the noise (scaled units).
 
@@ -436,7 +438,7 @@ class _Fitter:
 
     def irls(self, slots, phi0=None, sigma0: np.ndarray | None = None,
              max_iter: int = 8, local: bool = False,
-             grid_slots: Sequence[int] | None = None) -> tuple[_Solution, np.ndarray]:
+             grid_slots: Sequence[int] | None = None) -> tuple[Solution, np.ndarray]:
         """
         Fit one model by iteratively re-weighted GLS; return the fit and Sigma at it.
 
@@ -458,8 +460,8 @@ class _Fitter:
         self.data.set_sigma(np.diag(2.0 * y ** 2 / self.edf0) if sigma0 is None else sigma0)
         # local: the nonlinear parameters start at a fitted model's (an effect search
         # step) and are polished, not searched again over their whole ranges.
-        sol = _fit_fixed_w(self.data, slots, phi0, local=local and phi0 is not None,
-                           grid_slots=grid_slots)
+        sol = fit_fixed_weights(self.data, slots, phi0, local=local and phi0 is not None,
+                                grid_slots=grid_slots)
         last_sigma, moves = None, [math.inf]
         for it in range(max_iter):
             if not np.any(sol.coef > 0):
@@ -472,8 +474,8 @@ class _Fitter:
             self.data.set_sigma(sigma)
             # The first re-weighting may move the model to another basin (the paper's
             # weights and the model's covariance differ most); later ones polish it.
-            new = _fit_fixed_w(self.data, slots, sol.phi, local=local or it > 0,
-                               grid_slots=grid_slots)
+            new = fit_fixed_weights(self.data, slots, sol.phi, local=local or it > 0,
+                                    grid_slots=grid_slots)
             before = _design(slots, self.data.tau, sol.phi) @ sol.coef
             after = _design(slots, self.data.tau, new.phi) @ new.coef
             sol = new

@@ -25,12 +25,12 @@ import math
 
 import numpy as np
 
-from imu_allan.core.allan.edf import avar_upper, curve_k_bound
+from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
 from imu_allan.core.allan.quantiles import chi2_ppf
-from imu_allan.core.fit.axis import _filtered_start
+from imu_allan.core.fit.axis import filtered_start
 from imu_allan.core.fit.judge import follows_curve, white_region, white_share
 from imu_allan.core.fit.result import AxisFit, Param
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.noise.values import AxisNoise
 
 
 def trust_problems(fit: AxisFit, consistent: bool) -> list:
@@ -70,7 +70,7 @@ def _unfiltered(fit: AxisFit) -> int:
     """Index of the first fitted tau past the sensor's filter (the one rule of fit_axis)."""
     if fit.tau_s.size < 4:
         return 0
-    return _filtered_start(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0])
+    return filtered_start(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0])
 
 
 def _white(fit: AxisFit, trusted_model: bool = True):
@@ -148,31 +148,6 @@ def _floor_bound(fit: AxisFit) -> float:
         return math.nan
     i = _unfiltered(fit)
     return floor_b_bound(fit.avar_meas[i:], fit.edf[i:])
-
-
-def floor_b_bound(avar: np.ndarray, edf: np.ndarray) -> float:
-    """
-    95 % upper bound of B from a curve's floor: min sqrt(AVAR_hi) / 0.664.
-
-    Every term only adds to AVAR, and a bias instability of level B alone peaks at
-    ADEV 0.664 B (IEEE Std 952-1997 annex C), so 0.664 B <= ADEV(tau) at its peak's tau:
-    a bound for a bias instability whose peak lies within the curve (the range the fit
-    searches T_B in); AVAR_hi is each point's joint upper limit (:func:`avar_upper`).
-
-    Parameters
-    ----------
-    avar : np.ndarray
-        Shape (k,), measured AVAR past the sensor's filter [unit^2].
-    edf : np.ndarray
-        Shape (k,), equivalent degrees of freedom of each point.
-
-    Returns
-    -------
-    float
-        The bound [unit].
-
-    """
-    return float(np.sqrt(np.min(avar_upper(avar, edf))) / 0.664)
 
 
 def conservative(fit: AxisFit, problems: list) -> AxisFit:

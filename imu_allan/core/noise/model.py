@@ -8,13 +8,8 @@ The closed forms live in :mod:`imu_allan.core.noise.shapes`, the terms in
 
 import numpy as np
 
-from imu_allan.core.noise.shapes import (_as_tau, _gm_shape, avar_flicker,  # noqa: F401
-                                         avar_gauss_markov, avar_quantization,
-                                         avar_random_walk, avar_rate_ramp, avar_sinusoid,
-                                         avar_white, FLICKER_AVAR, gcov_gauss_markov,
-                                         GM_PEAK_TAU, GM_PSD_FACTOR)
-from imu_allan.core.noise.terms import (base_name, noise_from_terms, Term,  # noqa: F401
-                                        TERMS, terms_of)
+from imu_allan.core.noise.shapes import _as_tau
+from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise
 
 

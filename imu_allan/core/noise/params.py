@@ -30,9 +30,7 @@ from pathlib import Path
 from imu_allan import AXES
 from imu_allan.core.noise.terms import Term, TERMS
 from imu_allan.core.noise.units import quoted, sensor_of, to_si
-from imu_allan.core.noise.values import (AxisNoise, FLICKER_FLOOR,  # noqa: F401
-                                         GaussMarkov, GM_PEAK_FACTOR, NoiseSpec, Sinusoid,
-                                         TermValue)
+from imu_allan.core.noise.values import AxisNoise, NoiseSpec
 from imu_allan.errors import InputError
 
 _GROUPS = {'gyro': AXES[:3], 'accel': AXES[3:]}

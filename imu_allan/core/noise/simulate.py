@@ -29,10 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.noise.generators import (_check_grid, flicker_noise,  # noqa: F401
-                                             gauss_markov_noise, quantization_noise,
-                                             random_walk_noise, rate_ramp, sinusoid,
-                                             white_noise)
+from imu_allan.core.noise.generators import _check_grid
 from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise, NoiseSpec
 from imu_allan.errors import InputError

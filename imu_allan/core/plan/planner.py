@@ -18,15 +18,15 @@ from typing import Collection, Mapping, Sequence
 
 import numpy as np
 
-from imu_allan.core.fit.api import CurveCovariance, profile_threshold
-from imu_allan.core.noise.model import TERMS
-from imu_allan.core.noise.params import AxisNoise
+from imu_allan.core.fit.axis import profile_threshold
+from imu_allan.core.fit.covariance import CurveCovariance
+from imu_allan.core.noise.terms import TERMS
+from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
                                            expected_widths, fit_taus, interval_threshold,
                                            relative_width, Z95)
 from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
-from imu_allan.core.plan.separation import (LAMBDA_SEPARATED, mismatch, rivals, scaled,
-                                            SLOW_PROCESS)
+from imu_allan.core.plan.separation import LAMBDA_SEPARATED, mismatch, rivals, scaled, SLOW_PROCESS
 from imu_allan.core.search.choice import SLOWER_PROCESS_RIVAL
 
 #: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise).
@@ -233,7 +233,7 @@ def inflation(chi2: float, dof: int) -> float:
 
     The fit widens its profile intervals where its model explains the curve worse than
     Sigma allows (J / dof > 1: a real sensor's curve, an effect the model lacks):
-    :func:`imu_allan.core.fit.api.profile_threshold`.  The expected widths assume the
+    :func:`imu_allan.core.fit.axis.profile_threshold`.  The expected widths assume the
     dispersion a correct model shows on average (:func:`interval_threshold`); a longer
     record of the same sensor keeps the excess, so its widths are sinh(f z sd),
     f = sqrt(threshold of the fit / threshold expected), at least 1.
@@ -360,15 +360,15 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
         if duration_s > 0 and p is None:
             now = float(np.interp(math.log(duration_s), np.log(grid), col))
         if math.isinf(target):
-            kind = 'pinned'             # no target: nothing to wait for
+            kind = 'met'             # no target: nothing to wait for
         elif name in bounded:
             kind = 'at_least'
         elif duration_s > 0 and now <= target:
-            kind = 'pinned'
+            kind = 'met'
         else:
             kind = 'predicted'
         when = _crossing(grid, col, target)
-        if kind == 'pinned':
+        if kind == 'met':
             when = duration_s
         elif kind == 'at_least' and duration_s > 0 and when <= duration_s:
             # At its bound the term would be resolved by now: it is smaller, by how
@@ -376,7 +376,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
             when = math.nan
         elif duration_s > 0:
             when = max(when, duration_s)
-        if kind != 'pinned' and p is not None and p.kind != 'estimate' and waits.get(name):
+        if kind != 'met' and p is not None and p.kind != 'estimate' and waits.get(name):
             when = max(waits[name]) if math.isnan(when) else max(when, *waits[name])
         if math.isinf(when) and kind != 'at_least':
             kind = 'beyond'
@@ -436,25 +436,15 @@ def noise_components(noise: AxisNoise) -> list:
         As ``AxisFit.components``.
 
     """
+    # Every registry term by its own read-out (Term.instances), so a term added to the
+    # registry is planned too; labels as the fit numbers repeats (gauss_markov_2).
     out: list[tuple[str, float, tuple]] = []
-    if noise.Q:
-        out.append(('quantization', noise.Q ** 2, ()))
-    if noise.N:
-        out.append(('white', noise.N ** 2, ()))
-    if noise.B and noise.T_B:
-        out.append(('bias_instability', TERMS['bias_instability'].to_coef(noise.B, noise.T_B),
-                    (noise.T_B,)))
-    elif noise.B:
-        out.append(('flicker', noise.B ** 2, ()))
-    for i, gm in enumerate(g for g in noise.gauss_markov if g.B):
-        label = 'gauss_markov' if i == 0 else f'gauss_markov_{i + 1}'
-        out.append((label, TERMS['gauss_markov'].to_coef(gm.B, gm.T), (gm.T,)))
-    if noise.K:
-        out.append(('random_walk', noise.K ** 2, ()))
-    if noise.R:
-        out.append(('rate_ramp', noise.R ** 2, ()))
-    for i, s in enumerate(s for s in noise.sinusoids if s.A):
-        out.append(('sinusoid' if i == 0 else f'sinusoid_{i + 1}', s.A ** 2, (s.f0_hz,)))
+    for name, term in TERMS.items():
+        found = [v for v in term.instances(noise) if v[0]]
+        for i, values in enumerate(found):
+            phi = tuple(values[len(term.symbols) - len(term.nonlinear):])
+            out.append((name if i == 0 else f'{name}_{i + 1}', term.to_coef(values[0], *phi),
+                        phi))
     return out
 
 

@@ -22,8 +22,9 @@ import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.allan.taus import tau_grid
-from imu_allan.core.fit.api import CurveCovariance, thin
-from imu_allan.core.noise.model import base_name, Term, TERMS
+from imu_allan.core.fit.axis import thin
+from imu_allan.core.fit.covariance import CurveCovariance
+from imu_allan.core.noise.terms import base_name, Term, TERMS
 
 #: Two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
@@ -156,7 +157,7 @@ def interval_threshold(dof: int) -> float:
     """
     Return the expected rise of the chi-square that bounds the fit's 95 % profile intervals.
 
-    The fit (:func:`imu_allan.core.fit.api.profile_threshold`) uses chi2(0.95; 1) when
+    The fit (:func:`imu_allan.core.fit.axis.profile_threshold`) uses chi2(0.95; 1) when
     its J_min <= dof and F(0.95; 1, dof) J_min / dof otherwise.  Under the model J_min
     ~ chi2_dof, so the threshold averages to F(0.95; 1, dof) E[max(1, X)], X =
     chi2_dof / dof, with E[max(1, X)] = P(chi2_dof <= dof) + P(chi2_{dof+2} > dof)

@@ -10,7 +10,7 @@ from typing import NamedTuple
 from imu_allan.core.fit.result import json_num
 
 #: Kinds of a parameter's plan.
-PLAN_KINDS = ('pinned', 'predicted', 'at_least', 'beyond', 'open')
+PLAN_KINDS = ('met', 'predicted', 'at_least', 'beyond', 'open')
 
 
 def hours(t_s: float) -> str:
@@ -57,7 +57,7 @@ class ParamPlan(NamedTuple):
     time_s : float
         Record length at which the width reaches the target [s]; inf beyond 1000 h.
     kind : str
-        'pinned' (target met now), 'predicted', 'at_least' (planned at an upper
+        'met' (target met now), 'predicted', 'at_least' (planned at an upper
         bound: a smaller true value takes longer), 'beyond' (not within 1000 h) or
         'open' (the fit reports it, but its model has no term to plan it with: K the
         record cannot constrain, T_B of a bias instability only bounded).
@@ -140,16 +140,16 @@ class AxisPlan(NamedTuple):
         parameter the record should already have resolved at that bound.  With a
         parameter planned at a bound the time is a lower limit.
         """
-        times = [p.time_s for p in self.params if p.kind != 'pinned']
+        times = [p.time_s for p in self.params if p.kind != 'met']
         if not times:
             return 0.0
         if any(math.isnan(t) for t in times):
             return math.nan
         return max(max(times) - self.duration_s, 0.0)
 
-    def all_pinned(self) -> bool:
+    def all_met(self) -> bool:
         """Whether every parameter meets its target now."""
-        return all(p.kind == 'pinned' for p in self.params)
+        return all(p.kind == 'met' for p in self.params)
 
     def param(self, name: str) -> ParamPlan | None:
         """Return the plan of one parameter, None when absent."""
@@ -163,11 +163,11 @@ class AxisPlan(NamedTuple):
                 'remaining_s': json_num(self.remaining_s()), 'caveat': self.caveat}
 
     def progress_line(self) -> str:
-        """One line: which parameters are pinned, and the time to each of the rest."""
-        pinned = [p.name for p in self.params if p.kind == 'pinned']
+        """One line: which parameters meet their target, and the time to each of the rest."""
+        met = [p.name for p in self.params if p.kind == 'met']
         rest = []
         for p in self.params:
-            if p.kind == 'pinned':
+            if p.kind == 'met':
                 continue
             if p.kind == 'at_least' and math.isnan(p.time_s):
                 rest.append(f'{p.name} only bounded yet')
@@ -178,7 +178,7 @@ class AxisPlan(NamedTuple):
             more = hours(max(p.time_s - self.duration_s, 0.0))
             at_least = p.kind == 'at_least' and math.isfinite(p.time_s)
             rest.append(f'{p.name} in {">= " if at_least else ""}{more}')
-        text = f'pinned: {", ".join(pinned) or "none"}'
+        text = f'met: {", ".join(met) or "none"}'
         text += '; ' + ', '.join(rest) if rest else ''
         return text + (' (model does not hold: times may be short)' if self.caveat else '')
 
@@ -189,7 +189,7 @@ class AxisPlan(NamedTuple):
         for p in self.params:
             need = hours(p.time_s)
             if math.isfinite(p.time_s):
-                need = {'pinned': 'met', 'at_least': '>= ' + need}.get(p.kind, need)
+                need = {'at_least': '>= ' + need}.get(p.kind, need)
             if p.kind == 'at_least' and math.isnan(p.time_s):
                 need = 'bound only'
             elif p.kind == 'open':

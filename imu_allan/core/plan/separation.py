@@ -19,7 +19,8 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from imu_allan.core.noise.model import base_name, GM_PEAK_TAU, TERMS
+from imu_allan.core.noise.shapes import GM_PEAK_TAU
+from imu_allan.core.noise.terms import base_name, TERMS
 from imu_allan.core.plan.precision import _avar, _log_params, Component
 
 #: Non-centrality at which a 5 % test on one degree of freedom has 90 % power.

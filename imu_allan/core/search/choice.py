@@ -27,9 +27,10 @@ import math
 
 import numpy as np
 
-from imu_allan.core.fit.api import fit_fixed_weights, Fix, n_params, profile_threshold
+from imu_allan.core.fit.axis import n_params, profile_threshold
 from imu_allan.core.fit.result import AxisFit, Param
-from imu_allan.core.noise.model import GM_PEAK_TAU
+from imu_allan.core.fit.solver import fit_fixed_weights, Fix
+from imu_allan.core.noise.shapes import GM_PEAK_TAU
 from imu_allan.core.rules import GRID_POINTS, PIN_MARGIN, RIVAL_DELTA
 from imu_allan.core.search.rivals import _neg2_loglik
 from imu_allan.core.search.rules import _label_for, FinalModel, GridPoint, Rival
@@ -115,11 +116,11 @@ def rival_models(fitter, slots, sol, dof: int, i: int) -> list:
 
     Parameters
     ----------
-    fitter : imu_allan.core.fit.solver._Fitter
+    fitter : imu_allan.core.fit.solver.Fitter
         The search's fitter at the final model's weights.
-    slots : list of _Slot
+    slots : list of Slot
         The final model's slots.
-    sol : _Solution
+    sol : Solution
         Its solution.
     dof : int
         Its degrees of freedom.
@@ -290,7 +291,7 @@ def random_walk_or_slow_process(fit: AxisFit, model: FinalModel) -> AxisFit:
     white + Gauss-Markov + random-walk record).  A time at an end of its range is no
     rival either (the fit's own rule: not identified, the curve reshaped).  When its
     chi-square is within the profile threshold of the final model's minimum
-    (:func:`imu_allan.core.fit.api.profile_threshold`, the same rise that bounds every
+    (:func:`imu_allan.core.fit.axis.profile_threshold`, the same rise that bounds every
     95 % interval), K = 0 is in the confidence set of that wider family: K is
     reported as an upper bound at its interval's upper end, and the
     alternative model goes to the rivals (the ADIS16405 gyros: K from 6e-6 to 2.2e-5

@@ -19,8 +19,7 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import minimize_scalar
 
-from imu_allan.core.allan.raw import raw_evidence, RawKeeper  # noqa: F401 (re-exported)
-from imu_allan.core.noise.model import TERMS
+from imu_allan.core.noise.terms import TERMS
 from imu_allan.core.rules import LINE_FALSE_ALARM, RAMP_BLOCKS, RAMP_LR_MIN
 
 

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from imu_allan.core.fit.api import n_params
+from imu_allan.core.fit.axis import n_params
 from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.judge import shows_quantization
 from imu_allan.core.rules import DELTA_MIN, N_RIVALS

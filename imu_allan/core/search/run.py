@@ -12,14 +12,14 @@ from typing import Any
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_sf
-from imu_allan.core.fit import fit_axis
-from imu_allan.core.fit.api import (check_curve, filter_identified, filtered_start,
-                                    fit_fixed_weights, Fitter, n_params, term_slot, thin)
+from imu_allan.core.fit.axis import (check_curve, filter_identified, filtered_start, fit_axis,
+                                     n_params, term_slot, thin)
 from imu_allan.core.fit.criterion import claim_penalty
 from imu_allan.core.fit.judge import shows_quantization
 from imu_allan.core.fit.result import AxisFit
+from imu_allan.core.fit.solver import fit_fixed_weights, Fitter
 from imu_allan.core.fit.trust import judge_fit
-from imu_allan.core.noise.model import base_name, TERMS
+from imu_allan.core.noise.terms import base_name, TERMS
 from imu_allan.core.rules import (CANNOT_TELL_LR, DELTA_MIN, KEEP_PENALTY, MAX_STEPS,
                                   P_CONSISTENT, PIN_MARGIN, RAMP_LR_MIN)
 from imu_allan.core.search.choice import ambiguous_bias
@@ -47,6 +47,7 @@ def _noise_terms(slots, coef, phi, scale: float) -> list:
     return [(s.term.name, float(c) * scale, tuple(p)) for s, c, p in zip(slots, coef, phi)]
 
 
+# Long because it is the search's state plus its phases, one short method each.
 class _Run:
     """
     One search: the curve, its fitter and the model as it grows, phase by phase.
@@ -138,7 +139,7 @@ class _Run:
         it buys its margin on the whole curve, its time constant is identifiable
         (:func:`filter_identified`) and no other time of the model is pinned at an end
         of its range by it; otherwise the leading taus it bends are left out
-        (:func:`imu_allan.core.fit.api.filtered_start`) and white noise is fitted to
+        (:func:`imu_allan.core.fit.axis.filtered_start`) and white noise is fitted to
         the rest, as :func:`fit_axis` does.
         """
         self.irls(list(base_labels))

@@ -10,14 +10,15 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from imu_allan.io.imu_cdr import (_join, decode_imu_payloads, orientation_unknown,
+from imu_allan.io.imu_cdr import (decode_imu_payloads, join_payloads, orientation_unknown,
                                   payload_frames)
 
 #: Messages per ImuBlock unless asked otherwise.
 DEFAULT_BLOCK_SIZE = 65536
 
 _FETCH_ROWS = 32768
-_MCAP_MAGIC = b'\x89MCAP0\r\n'
+#: The first bytes of an MCAP file (its magic).
+MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 PathLike = str | os.PathLike
 
@@ -51,7 +52,7 @@ class ImuBlock(NamedTuple):
     samples: np.ndarray
 
 
-class _Topic(NamedTuple):
+class Topic(NamedTuple):
     """Internal topic record; encoding is 'cdr', 'ros1' or what the bag names."""
 
     name: str
@@ -60,7 +61,7 @@ class _Topic(NamedTuple):
     encoding: str
 
 
-class _Piece(NamedTuple):
+class Piece(NamedTuple):
     """
     Decoded messages of one fetch or chunk, plus how many were dropped.
 
@@ -87,24 +88,24 @@ class _Piece(NamedTuple):
 
 #: Header of an MCAP Message record: opcode, record length, channel id, log_time.
 def _make_piece(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray, recv_ns: np.ndarray,
-                encoding: str, decompress: Callable[[bytes], bytes] | None) -> _Piece:
-    """Decode payloads into a _Piece, dropping undecodable ones."""
+                encoding: str, decompress: Callable[[bytes], bytes] | None) -> Piece:
+    """Decode payloads into a Piece, dropping undecodable ones."""
     if decompress is not None:
         # rosbag2 'message' compression: every payload is its own zstd frame.
         # A frame that does not decompress becomes an empty, undecodable payload.
         payloads = [_safely(decompress, u8[s:s + n].tobytes())
                     for s, n in zip(starts.tolist(), lengths.tolist())]
-        u8, starts, lengths = _join(payloads)
+        u8, starts, lengths = join_payloads(payloads)
     stamp_ns, samples, ok = decode_imu_payloads(u8, starts, lengths, encoding)
     n_bad = int(ok.size - np.count_nonzero(ok))
     unoriented = orientation_unknown(u8, starts, lengths, encoding)
     if n_bad:
         good = np.flatnonzero(ok)
         names, frame = payload_frames(u8, starts[good], lengths[good], encoding)
-        return _Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, tuple(names), frame,
-                      unoriented[ok])
+        return Piece(recv_ns[ok], stamp_ns[ok], samples[ok], n_bad, tuple(names), frame,
+                     unoriented[ok])
     names, frame = payload_frames(u8, starts, lengths, encoding)
-    return _Piece(recv_ns, stamp_ns, samples, 0, tuple(names), frame, unoriented)
+    return Piece(recv_ns, stamp_ns, samples, 0, tuple(names), frame, unoriented)
 
 
 def _safely(decompress: Callable[[bytes], bytes], data: bytes) -> bytes:
@@ -114,7 +115,7 @@ def _safely(decompress: Callable[[bytes], bytes], data: bytes) -> bytes:
         return b''
 
 
-class _Backend:
+class Backend:
     """Common interface of the storage readers."""
 
     storage = ''
@@ -125,15 +126,15 @@ class _Backend:
         self.warnings = warnings
         self.decompress = decompress  # per-message decompression of rosbag2, or None
 
-    def topics(self) -> list[_Topic]:
+    def topics(self) -> list[Topic]:
         """Return every topic with its type, count (or None) and encoding."""
         raise NotImplementedError
 
-    def count(self, topic: _Topic) -> int | None:
+    def count(self, topic: Topic) -> int | None:
         """Return the number of messages of a topic (may read the bag; None: unknown)."""
         return topic.n_messages
 
-    def pieces(self, topic: _Topic) -> Iterator[_Piece]:
+    def pieces(self, topic: Topic) -> Iterator[Piece]:
         """Yield decoded Imu messages of a topic in the bag's order."""
         raise NotImplementedError
 

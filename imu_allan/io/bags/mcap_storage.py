@@ -22,11 +22,11 @@ import numpy as np
 import zstandard
 
 from imu_allan.errors import InputError
-from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _MCAP_MAGIC, _Piece, _Topic
+from imu_allan.io.bags.base import _FETCH_ROWS, _make_piece, Backend, MCAP_MAGIC, Piece, Topic
 from imu_allan.io.bags.mcap_records import (_MCAP_MESSAGE, _OP_CHANNEL, _OP_CHUNK,
                                             _OP_DATA_END, _OP_FOOTER, _OP_HEADER, _OP_MESSAGE,
                                             _OP_MESSAGE_INDEX, _OP_SCHEMA, walk)
-from imu_allan.io.imu_cdr import _records
+from imu_allan.io.imu_cdr import read_records
 
 #: Bytes read at a time while walking small records.
 _WINDOW = 1 << 16
@@ -52,7 +52,7 @@ class _Loose(NamedTuple):
 
 # Long by design: one reader of one MCAP file; its state (open file, summary, chunk
 # list, channel table) is shared by the reading steps, each a short method.
-class _McapBackend(_Backend):
+class _McapBackend(Backend):
     """MCAP storage (ros2 or ros1 profile), chunked or not, with or without a summary."""
 
     storage = 'mcap'
@@ -100,11 +100,11 @@ class _McapBackend(_Backend):
     # -- opening --------------------------------------------------------------------
     def _open(self) -> None:
         head = self._read(0, 17)
-        if head[:8] != _MCAP_MAGIC or len(head) < 17 or head[8] != _OP_HEADER:
+        if head[:8] != MCAP_MAGIC or len(head) < 17 or head[8] != _OP_HEADER:
             raise InputError(f'{self.path}: not an MCAP file (bad magic or header)')
         self.data_start = 17 + struct.unpack_from('<Q', head, 9)[0]
         tail = self._read(self.size - 37, 37) if self.size >= self.data_start + 37 else b''
-        self.complete = tail[-8:] == _MCAP_MAGIC and tail[:1] == bytes([_OP_FOOTER])
+        self.complete = tail[-8:] == MCAP_MAGIC and tail[:1] == bytes([_OP_FOOTER])
         self.data_end = self.size
         if self.complete:
             summary_start = struct.unpack_from('<Q', tail, 9)[0]
@@ -345,11 +345,12 @@ class _McapBackend(_Backend):
                     continue
                 u8 = np.frombuffer(raw, np.uint8)
                 offsets = walk(raw, self._add_record)
-                ids = _records(u8, offsets[offsets + 31 <= u8.size], _MCAP_MESSAGE)['channel']
+                ids = read_records(u8, offsets[offsets + 31 <= u8.size], _MCAP_MESSAGE)['channel']
             else:
                 data = np.frombuffer(self._read(item.start, item.end - item.start), np.uint8)
                 offsets = item.offsets - item.start
-                ids = _records(data, offsets[offsets + 31 <= data.size], _MCAP_MESSAGE)['channel']
+                ids = read_records(data, offsets[offsets + 31 <= data.size],
+                                   _MCAP_MESSAGE)['channel']
             for channel_id, k in zip(*np.unique(ids, return_counts=True)):
                 counts[int(channel_id)] = counts.get(int(channel_id), 0) + int(k)
         self.counts = counts
@@ -404,9 +405,9 @@ class _McapBackend(_Backend):
         return not want or crc == want
 
     # -- reading --------------------------------------------------------------------
-    def topics(self) -> list[_Topic]:
+    def topics(self) -> list[Topic]:
         """Return one entry per topic and type (channels of both are merged)."""
-        found: dict[tuple[str, str], _Topic] = {}
+        found: dict[tuple[str, str], Topic] = {}
         for channel_id, (name, schema_id, encoding) in sorted(self.channels.items()):
             count = None if self.counts is None else self.counts.get(channel_id, 0)
             msgtype = self.schemas.get(schema_id, '')
@@ -415,10 +416,10 @@ class _McapBackend(_Backend):
                 both = None if count is None or old.n_messages is None else old.n_messages + count
                 found[name, msgtype] = old._replace(n_messages=both)
             else:
-                found[name, msgtype] = _Topic(name, msgtype, count, encoding)
+                found[name, msgtype] = Topic(name, msgtype, count, encoding)
         return list(found.values())
 
-    def count(self, topic: _Topic) -> int | None:
+    def count(self, topic: Topic) -> int | None:
         """
         Return the topic's count as the file states it, or None when it cannot be known.
 
@@ -437,12 +438,12 @@ class _McapBackend(_Backend):
         return (min(starts) if starts else None), None, None
 
     def _message_piece(self, buf: np.ndarray, offsets: np.ndarray, wanted: set,
-                       encoding: str) -> _Piece | None:
+                       encoding: str) -> Piece | None:
         """Decode the Message records at (k,) offsets of buf that belong to wanted."""
         offsets = offsets[offsets + 31 <= buf.size]
         if offsets.size == 0:
             return None
-        heads = _records(buf, offsets, _MCAP_MESSAGE)
+        heads = read_records(buf, offsets, _MCAP_MESSAGE)
         channels = heads['channel']
         if len(wanted) == 1:
             mine = channels == next(iter(wanted))
@@ -457,7 +458,7 @@ class _McapBackend(_Backend):
         return _make_piece(buf, offsets + 31, lengths, heads['log_time'].astype(np.int64),
                            encoding, self.decompress)
 
-    def pieces(self, topic: _Topic) -> Iterator[_Piece]:
+    def pieces(self, topic: Topic) -> Iterator[Piece]:
         """Yield the topic's messages chunk by chunk; damage is skipped with a warning."""
         # By name and type: another message type on the same topic is not this topic.
         wanted = {cid for cid, (name, schema_id, _) in self.channels.items()

@@ -13,11 +13,11 @@ from typing import Iterator
 import numpy as np
 
 from imu_allan.errors import InputError
-from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _Piece, _Topic
-from imu_allan.io.imu_cdr import _join
+from imu_allan.io.bags.base import _FETCH_ROWS, _make_piece, Backend, Piece, Topic
+from imu_allan.io.imu_cdr import join_payloads
 
 
-class _Ros1Backend(_Backend):
+class _Ros1Backend(Backend):
     """ROS 1 bag (format 2.0) through rosbags' reader; payloads decoded in batches."""
 
     storage = 'ros1'
@@ -34,9 +34,9 @@ class _Ros1Backend(_Backend):
             raise InputError(f'{path}: unreadable ROS 1 bag ({text}); a bag cut short needs '
                              '`rosbag reindex`') from None
 
-    def topics(self) -> list[_Topic]:
+    def topics(self) -> list[Topic]:
         """Return one entry per topic and type, with ROS 1 type names (sensor_msgs/Imu)."""
-        found: dict[tuple[str, str], _Topic] = {}
+        found: dict[tuple[str, str], Topic] = {}
         for conn in self.reader.connections:
             msgtype = conn.msgtype.replace('/msg/', '/')
             old = found.get((conn.topic, msgtype))
@@ -44,10 +44,10 @@ class _Ros1Backend(_Backend):
                 found[conn.topic, msgtype] = old._replace(
                     n_messages=(old.n_messages or 0) + conn.msgcount)
             else:
-                found[conn.topic, msgtype] = _Topic(conn.topic, msgtype, conn.msgcount, 'ros1')
+                found[conn.topic, msgtype] = Topic(conn.topic, msgtype, conn.msgcount, 'ros1')
         return list(found.values())
 
-    def pieces(self, topic: _Topic) -> Iterator[_Piece]:
+    def pieces(self, topic: Topic) -> Iterator[Piece]:
         """
         Yield the topic's messages in time order, decoded in batches.
 
@@ -99,10 +99,10 @@ class _Ros1Backend(_Backend):
                 continue
             recv.append(entry.time)
             if len(payloads) >= _FETCH_ROWS:
-                yield _make_piece(*_join(payloads), np.array(recv, np.int64), 'ros1', None)
+                yield _make_piece(*join_payloads(payloads), np.array(recv, np.int64), 'ros1', None)
                 recv, payloads = [], []
         if payloads:
-            yield _make_piece(*_join(payloads), np.array(recv, np.int64), 'ros1', None)
+            yield _make_piece(*join_payloads(payloads), np.array(recv, np.int64), 'ros1', None)
         if damaged:
             self.warnings.append(
                 f'{self.path}: {len(damaged)} damaged chunk(s) in the ROS 1 bag skipped '

@@ -13,7 +13,7 @@ import yaml
 import zstandard
 
 from imu_allan.errors import InputError
-from imu_allan.io.bags.base import _Backend, _MCAP_MAGIC, _Piece, _Topic, PathLike
+from imu_allan.io.bags.base import Backend, MCAP_MAGIC, PathLike, Piece, Topic
 from imu_allan.io.bags.mcap_storage import _McapBackend
 from imu_allan.io.bags.ros1 import _Ros1Backend
 from imu_allan.io.bags.rosbag2_sqlite import _SqliteBackend
@@ -37,12 +37,12 @@ def _sniff(path: Path) -> bytes:
 
 
 def _open_file(path: Path, warnings: list[str],
-               decompress: Callable[[bytes], bytes] | None = None) -> _Backend:
+               decompress: Callable[[bytes], bytes] | None = None) -> Backend:
     """Open one storage file, recognised by its signature rather than its suffix."""
     head = _sniff(path)
     if not head:
         raise InputError(f'{path}: empty file (0 bytes)')
-    if head.startswith(_MCAP_MAGIC):
+    if head.startswith(MCAP_MAGIC):
         return _McapBackend(path, warnings, decompress)
     if head.startswith(_SQLITE_MAGIC):
         return _SqliteBackend(path, warnings, decompress)
@@ -61,13 +61,15 @@ def _natural_key(path: Path) -> list:
     return [int(t) if t.isdigit() else t for t in re.split(r'(\d+)', path.name)]
 
 
-class _Rosbag2DirBackend(_Backend):
+# Long because a split bag is one storage to its reader: the files' order by their
+# contents, repeated and missing files, and the merged topics live together.
+class _Rosbag2DirBackend(Backend):
     """A rosbag2 directory: metadata.yaml (any version) plus storage files."""
 
     def __init__(self, path: Path, warnings: list[str]) -> None:
         super().__init__(path, warnings)
         self.tmp: tempfile.TemporaryDirectory | None = None
-        self.parts: list[_Backend] = []
+        self.parts: list[Backend] = []
         info = self._metadata()
         files, decompress = self._files(info)
         try:
@@ -81,7 +83,7 @@ class _Rosbag2DirBackend(_Backend):
         self.storage = self.parts[0].storage
         self._topics = self._merge_topics(info)
 
-    def _in_time_order(self, parts: list[_Backend]) -> list[_Backend]:
+    def _in_time_order(self, parts: list[Backend]) -> list[Backend]:
         """
         Order split files by their first receive time; read a repeated file once.
 
@@ -93,8 +95,8 @@ class _Rosbag2DirBackend(_Backend):
         extents = [part.extent() for part in parts]
         order = sorted(range(len(parts)), key=lambda k: (
             extents[k][0] is None, extents[k][0] or 0, k))
-        kept: list[_Backend] = []
-        seen: dict[tuple, _Backend] = {}
+        kept: list[Backend] = []
+        seen: dict[tuple, Backend] = {}
         for k in order:
             part, extent = parts[k], extents[k]
             first = seen.get(extent) if None not in extent else None
@@ -175,8 +177,8 @@ class _Rosbag2DirBackend(_Backend):
             raise InputError(f'{packed}: cannot decompress ({err})') from None
         return target
 
-    def _merge_topics(self, info: dict | None) -> dict[tuple[str, str], _Topic]:
-        merged: dict[tuple[str, str], _Topic] = {}
+    def _merge_topics(self, info: dict | None) -> dict[tuple[str, str], Topic]:
+        merged: dict[tuple[str, str], Topic] = {}
         for part in self.parts:
             for topic in part.topics():
                 key = (topic.name, topic.msgtype)
@@ -199,17 +201,17 @@ class _Rosbag2DirBackend(_Backend):
                 merged[key] = merged[key]._replace(n_messages=count)
         return merged
 
-    def topics(self) -> list[_Topic]:
+    def topics(self) -> list[Topic]:
         """Return the topics of all storage files."""
         return list(self._topics.values())
 
     @staticmethod
-    def _own(part: _Backend, topic: _Topic) -> _Topic | None:
+    def _own(part: Backend, topic: Topic) -> Topic | None:
         """Return the entry of a topic (name and type) in one storage file, or None."""
         return next((t for t in part.topics()
                      if (t.name, t.msgtype) == (topic.name, topic.msgtype)), None)
 
-    def count(self, topic: _Topic) -> int | None:
+    def count(self, topic: Topic) -> int | None:
         """Count a topic's messages over all files (metadata.yaml's count if they cannot)."""
         total = 0
         for part in self.parts:
@@ -220,7 +222,7 @@ class _Rosbag2DirBackend(_Backend):
             total += count
         return total
 
-    def pieces(self, topic: _Topic) -> Iterator[_Piece]:
+    def pieces(self, topic: Topic) -> Iterator[Piece]:
         """Yield the topic's messages file after file (split bags)."""
         for part in self.parts:
             own = self._own(part, topic)
@@ -235,7 +237,8 @@ class _Rosbag2DirBackend(_Backend):
             self.tmp.cleanup()
 
 
-def _open_backend(path: PathLike, warnings: list[str]) -> _Backend:
+def open_backend(path: PathLike, warnings: list[str]) -> Backend:
+    """Open a bag file or directory with the reader of its storage (InputError when none)."""
     path = Path(path)
     if not path.exists():
         raise InputError(f'{path}: no such file or directory')

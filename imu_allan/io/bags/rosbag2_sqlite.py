@@ -17,8 +17,8 @@ import numpy as np
 import yaml
 
 from imu_allan.errors import InputError
-from imu_allan.io.bags.base import _Backend, _FETCH_ROWS, _make_piece, _Piece, _Topic
-from imu_allan.io.imu_cdr import _gather, _join
+from imu_allan.io.bags.base import _FETCH_ROWS, _make_piece, Backend, Piece, Topic
+from imu_allan.io.imu_cdr import gather_bytes, join_payloads
 
 
 _Opened = tuple[sqlite3.Connection, Path, tempfile.TemporaryDirectory | None]
@@ -73,7 +73,9 @@ def _line(err: BaseException) -> str:
     return text.splitlines()[0] if text else type(err).__name__
 
 
-class _SqliteBackend(_Backend):
+# Long because rosbag2's sqlite3 schema changed between releases and a damaged file
+# is read up to its damage: one short method per case.
+class _SqliteBackend(Backend):
     """rosbag2 sqlite3 storage (every schema version since Foxy)."""
 
     storage = 'sqlite3'
@@ -101,11 +103,11 @@ class _SqliteBackend(_Backend):
             raise InputError(f'{path}: damaged or not a sqlite3 database ({_line(err)})') from None
         # Keyed by name and type: another message type on the same topic is another topic.
         self.ids: dict[tuple[str, str], list[int]] = {}
-        self._topics: dict[tuple[str, str], _Topic] = {}
+        self._topics: dict[tuple[str, str], Topic] = {}
         for topic_id, name, msgtype, fmt in rows:
             self.ids.setdefault((name, msgtype), []).append(topic_id)
             count = total if total is not None else metadata_counts.get((name, msgtype))
-            self._topics.setdefault((name, msgtype), _Topic(name, msgtype, count, fmt))
+            self._topics.setdefault((name, msgtype), Topic(name, msgtype, count, fmt))
 
     def _total(self) -> int | None:
         """All rows of the messages table (None when a damaged page hides the count)."""
@@ -130,7 +132,7 @@ class _SqliteBackend(_Backend):
                 ValueError):
             return {}
 
-    def topics(self) -> list[_Topic]:
+    def topics(self) -> list[Topic]:
         """Return every topic of the database."""
         return list(self._topics.values())
 
@@ -143,7 +145,7 @@ class _SqliteBackend(_Backend):
             return None, None, None
         return first, last, count
 
-    def count(self, topic: _Topic) -> int | None:
+    def count(self, topic: Topic) -> int | None:
         """Count a topic's messages by SQL (the stored hint where a damaged page hides it)."""
         if len(self.ids) == 1:
             total = self._total()
@@ -156,7 +158,7 @@ class _SqliteBackend(_Backend):
         except sqlite3.DatabaseError:
             return topic.n_messages
 
-    def pieces(self, topic: _Topic) -> Iterator[_Piece]:
+    def pieces(self, topic: Topic) -> Iterator[Piece]:
         """
         Yield the topic's messages in rowid (recording) order.
 
@@ -178,7 +180,7 @@ class _SqliteBackend(_Backend):
                 pass
         yield from self._sql_pieces(topic, after)
 
-    def _sql_pieces(self, topic: _Topic, start: int) -> Iterator[_Piece]:
+    def _sql_pieces(self, topic: Topic, start: int) -> Iterator[Piece]:
         """
         Yield the topic's messages with rowid > after, one SQL fetch at a time.
 
@@ -240,9 +242,9 @@ class _SqliteBackend(_Backend):
                 rows.append((row[0], row[2], row[3]))
         return rows
 
-    def _piece(self, rows: list, topic: _Topic) -> _Piece:
+    def _piece(self, rows: list, topic: Topic) -> Piece:
         _, recv, payloads = zip(*rows)
-        return _make_piece(*_join(payloads), np.array(recv, np.int64), topic.encoding,
+        return _make_piece(*join_payloads(payloads), np.array(recv, np.int64), topic.encoding,
                            self.decompress)
 
     def _past_damage(self, after: int) -> int | None:
@@ -316,7 +318,7 @@ def _serial_int(u8: np.ndarray, pos: np.ndarray, serial: np.ndarray) -> np.ndarr
     if size.size and size[0] in (1, 2, 4, 8) and (serial == serial[0]).all():
         # One integer width throughout (the usual case): a big-endian view.
         k = int(size[0])
-        return _gather(u8, pos, k).view(f'>i{k}').reshape(-1).astype(np.int64)
+        return gather_bytes(u8, pos, k).view(f'>i{k}').reshape(-1).astype(np.int64)
     value = np.zeros(pos.size, np.int64)
     for i in range(8):
         has = size > i
@@ -369,7 +371,7 @@ class _SqlitePages:
             raise _NotPlain('not the rosbag2 messages layout')
         self.root = int(row[0])
 
-    def pieces(self, topic_ids: list[int], encoding: str) -> Iterator[tuple[_Piece, int]]:
+    def pieces(self, topic_ids: list[int], encoding: str) -> Iterator[tuple[Piece, int]]:
         """Yield (decoded piece, its last rowid) per batch of leaf pages, in rowid order."""
         with open(self.path, 'rb') as f:
             self.fd = f.fileno()
