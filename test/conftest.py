@@ -5,10 +5,15 @@ Test files import the plain ones (``from conftest import REPO, still_imu, T0_NS`
 """
 
 import importlib.util
+import os
 from pathlib import Path
 
-import numpy as np
-import pytest
+# As the CLI and the node do before numpy loads (imu_allan.pipeline.workers.one_blas_thread):
+# the tests that compare an in-process analysis with a CLI run compare the same sums.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / 'shared'
