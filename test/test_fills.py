@@ -131,7 +131,7 @@ def _fit(session: Session):
 def test_dropped_messages_keep_the_clean_records_intervals(simulated, share, burst):
     # The case: messages lost at random (or in bursts of up to 8) and one 30 s
     # hiccup.  The record stays two segments, the warning says how much was missing,
-    # and N, B and K stay estimates whose intervals overlap the clean record's.
+    # and N, B and K keep the clean record's verdicts, their intervals overlapping.
     t, y, clean = simulated
     keep = _lose(t.size, share, burst, seed=5)
     s = _feed(Session(), t[keep], y[keep], block=100_000)
@@ -143,6 +143,10 @@ def test_dropped_messages_keep_the_clean_records_intervals(simulated, share, bur
     fit = _fit(s)
     for name in ('N', 'B', 'K'):
         p, q = fit.optimised[name], clean.optimised[name]
-        assert p.kind == q.kind == 'estimate', (name, p, q)
+        # The same verdict as the clean record: an estimate (K's interval may reach 0
+        # after an hour: then both are 95 % bounds, and of about the same height).
+        assert p.kind == q.kind and p.kind in ('estimate', 'upper_bound'), (name, p, q)
         assert p.ci95[0] <= q.ci95[1] and q.ci95[0] <= p.ci95[1], (name, p, q)
+        if p.kind == 'upper_bound':
+            assert p.value == pytest.approx(q.value, rel=0.5), (name, p, q)
     assert fit.optimised['N'].value == pytest.approx(clean.optimised['N'].value, rel=0.01)

@@ -311,9 +311,11 @@ def test_an_estimate_reaching_zero_is_a_bound_and_bounds_stay_under_the_curve():
     notes: list = []
     out = bound_by_curve(opt, tau, avar, edf, notes)
     assert out['N'] == opt['N']
-    assert out['B'] == Param(b_cap / 1.5, (0.0, b_cap / 1.5), 'upper_bound', 'u')
+    assert out['B'][:4] == (b_cap / 1.5, (0.0, b_cap / 1.5), 'upper_bound', 'u')
+    assert out['B'].reason == 'its 95 % interval reaches 0: upper bound'
     assert out['T_B'].kind == 'not_identified'
-    assert out['K'] == Param(k_cap, (0.0, k_cap), 'upper_bound', 'u')
+    assert out['K'][:4] == (k_cap, (0.0, k_cap), 'upper_bound', 'u')
+    assert out['K'].source == 'curve' and 'capped' in out['K'].reason
     assert len(notes) == 2
 
 

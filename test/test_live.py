@@ -104,7 +104,12 @@ def test_the_node_path_gives_analyzes_parameters_on_a_full_adis_run(shared_dir, 
             p, q = got.params[sym], ref.params[sym]
             assert p.kind == q.kind, (axis, sym, p, q)
             if np.isfinite(q.value):
-                np.testing.assert_allclose(p.value, q.value, rtol=1e-6, err_msg=f'{axis} {sym}')
+                # The node judges spikes and held values per timer batch, analyze per
+                # chunk of 2048 (docs/limits.md): a few verdicts on run 1's outliers
+                # differ, far inside every interval.
+                np.testing.assert_allclose(p.value, q.value, rtol=1e-3, err_msg=f'{axis} {sym}')
+                if q.kind == 'estimate':
+                    assert q.ci95[0] <= p.value <= q.ci95[1], (axis, sym, p, q)
 
 
 def test_the_node_keeps_the_raw_copy_analyze_keeps():

@@ -77,7 +77,10 @@ def _refused(tmp_path, path: Path, capsys, *extra) -> str:
                  '--format', 'json', *extra])
     captured = capsys.readouterr()
     err = captured.err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and captured.out == '', captured
+    assert code == 2 and len(err) == 1, captured
+    # --format json: stdout holds the one error object, the same line as stderr's.
+    doc = json.loads(captured.out)
+    assert doc['exit_code'] == 2 and err[0] == f'imu-allan: error: {doc["error"]}', captured
     assert err[0].startswith(f'imu-allan: error: {path}: unit mistake: '), err
     assert not out.exists()
     return err[0]

@@ -301,7 +301,7 @@ class ImuAllanNode(Node):
         if self._frame_bytes[0] != frame:
             name = frame.encode() + b'\0'
             self._frame_bytes = (frame, len(name).to_bytes(4, 'little') + name)
-        # The little-endian CDR length and name, one slice (0.2 us); anything else decoded.
+        # The little-endian CDR length and name, one slice; anything else decoded.
         key = self._frame_bytes[1]
         return raw[12:12 + len(key)] == key or imu_frame_id(raw) in (frame, None)
 
