@@ -11,7 +11,8 @@ import sys
 
 from conftest import REPO
 
-SCRIPT = r"""
+#: The start of every script here: the import machinery refuses rclpy and ROS messages.
+NO_ROS = r"""
 import logging, sys, tempfile
 from pathlib import Path
 
@@ -23,6 +24,9 @@ class Refuse:
         return None
 
 sys.meta_path.insert(0, Refuse())
+"""
+
+SCRIPT = NO_ROS + r"""
 import numpy as np
 from imu_allan.io.bag_writer import serialize_imu
 from imu_allan.ros.live import LiveInput
@@ -122,18 +126,7 @@ def test_the_node_keeps_the_raw_copy_analyze_keeps():
     assert node_rows == RAW_ROWS == RawKeeper(None).max_samples
 
 
-TWO_IMUS = r"""
-import logging, sys, tempfile
-from pathlib import Path
-
-class Refuse:
-    def find_spec(self, name, path=None, target=None):
-        if name.split('.')[0] in ('rclpy', 'sensor_msgs', 'std_msgs', 'std_srvs',
-                                  'diagnostic_msgs', 'rcl_interfaces'):
-            raise ImportError('refused ' + name)
-        return None
-
-sys.meta_path.insert(0, Refuse())
+TWO_IMUS = NO_ROS + r"""
 import numpy as np
 from imu_allan.io.bag_writer import serialize_imu
 from imu_allan.ros.live import LiveInput
