@@ -1,28 +1,37 @@
-# Set-up and entry points. `make demo` and `make test` work on a fresh machine:
-# they create or refresh .venv (Python 3.12, everything from PyPI) first.
+# Set-up and entry points. `make demo` and `make test` work on a fresh machine: they
+# create or refresh .venv (Python 3.12, everything from PyPI) first. `make demo` installs
+# the runtime set (requirements.txt: what the node and `analyze` need); `make test` adds
+# the test, lint and benchmark stack (requirements-dev.txt) on top of it.
 SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
+RUNTIME := $(VENV)/.runtime
 STAMP := $(VENV)/.installed
+PIP := $(PY) -m pip install -q --disable-pip-version-check
 
-.PHONY: venv demo test lint bench clean
+.PHONY: venv runtime demo test lint bench clean
 
+runtime: $(RUNTIME)
 venv: $(STAMP)
 
-$(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg
+$(RUNTIME): requirements.txt setup.py setup.cfg
 	@py="$${PYTHON:-$$(tools/find_python312.sh)}" || exit 1; \
 	if [ ! -x $(PY) ] || ! $(PY) -c 'import sys; assert sys.version_info[:2] == (3, 12)' 2>/dev/null; then \
 		rm -rf $(VENV); echo "creating $(VENV) with $$py"; "$$py" -m venv $(VENV) || exit 1; \
 	fi
-	$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
-	$(PY) -m pip install -q --disable-pip-version-check -r requirements-dev.txt
-	$(PY) -m pip install -q --disable-pip-version-check --no-deps -e .
+	$(PIP) --upgrade pip
+	$(PIP) -r requirements.txt
+	$(PIP) --no-deps -e .
 	@# Byte-compiled as an installed package is (no .pyc is written where
 	@# PYTHONDONTWRITEBYTECODE is set, and every start would compile each module).
 	$(PY) -m compileall -q imu_allan >/dev/null
+	@touch $(RUNTIME)
+
+$(STAMP): $(RUNTIME) requirements-dev.txt
+	$(PIP) -r requirements-dev.txt
 	@touch $(STAMP)
 
-demo: venv
+demo: runtime
 	$(PY) -m imu_allan demo
 
 test: venv

@@ -18,7 +18,7 @@ from imu_allan import __version__
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import one_blas_thread
 
-SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'fleet', 'demo', 'plan')
+SUBCOMMANDS = ('adev', 'analyze', 'simulate', 'diagnose', 'fleet', 'demo', 'plan', 'node')
 #: Every command: (module in SUBCOMMANDS, one-line help).  Only the module of the command
 #: that runs is imported, so ``imu-allan --help`` loads neither numpy nor scipy.
 COMMANDS = {
@@ -30,6 +30,7 @@ COMMANDS = {
     'fleet': ('fleet', 'characterise many IMUs on Dask; flag changes and outliers'),
     'demo': ('demo', 'run the node on a simulated IMU (make demo)'),
     'plan': ('plan', 'how long to record: expected interval widths and time to targets'),
+    'node': ('node', 'watch and command a running node (status, watch, result, save ...)'),
 }
 
 

@@ -89,10 +89,70 @@ def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
         The files written.
 
     """
-    curve = result.curve
+    title = (f'Allan deviation: {result.source or "input"}  ({result.n_samples} samples, '
+             f'{result.duration_s / 3600:.2f} h at {result.rate_hz:.1f} Hz; dotted: terms, '
+             'dashed: beyond the fitted taus)')
+    fig = adev_figure(result.curve, result.fits, title, figsize=(13, 5.2))
+    return save_figure(fig, Path(base), tight=False, formats=formats)
+
+
+def adev_rgb(curve, fits: dict, title: str, width_px: int = 1040,
+             height_px: int = 416):
+    """
+    Render the ADEV figure as pixels (the node's ``~/adev_image``).
+
+    Parameters
+    ----------
+    curve : imu_allan.core.allan.curve.AllanCurve
+        The measured curve, with its confidence bounds.
+    fits : dict
+        Axis name -> AxisFit or None (empty before the first fit).
+    title : str
+        The figure's title.
+    width_px, height_px : int
+        The image size [pixel].
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (height_px, width_px, 3), uint8 RGB.
+
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    dpi = 80.0
+    fig = adev_figure(curve, fits, title, figsize=(width_px / dpi, height_px / dpi))
+    _plain_log_labels(fig)
+    canvas = FigureCanvasAgg(fig)
+    fig.set_dpi(dpi)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
+
+
+def adev_figure(curve, fits: dict, title: str, figsize: tuple) -> Figure:
+    """
+    Build the ADEV figure: measured curves with bands, models and their terms.
+
+    Parameters
+    ----------
+    curve : imu_allan.core.allan.curve.AllanCurve
+        The measured curve, with its confidence bounds.
+    fits : dict
+        Axis name -> AxisFit or None; an axis without a fit shows its curve only.
+    title : str
+        The figure's title.
+    figsize : tuple of float
+        (width, height) [inch].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure, not yet saved.
+
+    """
     tau = curve.tau_s
     tau_fine = np.geomspace(tau[0], tau[-1], 200)
-    fig, panels = subplots(1, 2, figsize=(13, 5.2))
+    fig, panels = subplots(1, 2, figsize=figsize)
     for ax, (axes, ylabel) in zip(panels, _PANELS):
         cols = [AXES.index(a) for a in axes]
         lo_hi = curve.adev_lo[:, cols], curve.adev_hi[:, cols]
@@ -108,7 +168,7 @@ def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
                             color=colour, alpha=0.18, lw=0)
             ax.loglog(tau[ok], curve.adev[ok, j], 'o', ms=3, color=colour,
                       label=f'{axis} measured (95 % band)')
-            fit = result.fits.get(axis)
+            fit = fits.get(axis)
             if fit is None:
                 continue
             # The model where it was fitted, dashed where it extrapolates.
@@ -138,13 +198,10 @@ def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
             # The measured curves set the range; a term far below them is cut off.
             ax.set_ylim(shown[0] / 30.0, shown[1] * 3.0)
         ax.legend(fontsize=6, loc='lower left')
-    fig.suptitle(f'Allan deviation: {result.source or "input"}  ({result.n_samples} samples, '
-                 f'{result.duration_s / 3600:.2f} h at {result.rate_hz:.1f} Hz; dotted: terms, '
-                 'dashed: beyond the fitted taus)',
-                 fontsize=10)
+    fig.suptitle(title, fontsize=10)
     # A fixed layout: every analysis draws this figure, and cropping costs a draw.
     fig.subplots_adjust(left=0.06, right=0.985, bottom=0.1, top=0.9, wspace=0.2)
-    return save_figure(fig, Path(base), tight=False, formats=formats)
+    return fig
 
 
 def plot_comparison(results: list, labels: list, base) -> list:

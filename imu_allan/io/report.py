@@ -64,6 +64,11 @@ def _atomic_write(path: Path, text: str) -> Path:
     return write_atomic(path, lambda f: f.write(text), mode='w')
 
 
+def result_json(result: AnalysisResult) -> str:
+    """Return result.json's text (also the node's ``~/result`` topic)."""
+    return json.dumps(result.to_json(), indent=1) + '\n'
+
+
 def summary_text(result: AnalysisResult) -> str:
     """Return the human summary: one line per axis plus the input warnings."""
     lines = [f'imu_allan result for {result.source or "input"}: {result.n_samples} samples, '
@@ -143,7 +148,7 @@ def write_outputs(result: AnalysisResult, out_dir, plot: bool = True,
         figures = [pool.submit(_draw, result, out / 'adev', ext) for ext in FIGURE_FORMATS]
     spec = NoiseSpec(name=f'fitted from {result.source or "input"}', axes=result.models())
     written = [
-        _atomic_write(out / FILES['json'], json.dumps(result.to_json(), indent=1) + '\n'),
+        _atomic_write(out / FILES['json'], result_json(result)),
         _atomic_write(out / FILES['kalibr'], result.kalibr_yaml()),
         _atomic_write(out / FILES['kalman'], kalman_yaml(result)),
         _atomic_write(out / FILES['robot_localization'], covariance_yaml(result)),

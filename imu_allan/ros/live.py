@@ -333,6 +333,11 @@ class LiveInput:
             self.frame_id = self.values['frame_id']     # '' locks on again
 
     # ------------------------------------------------- snapshots, checkpoints
+    def view(self) -> SessionView:
+        """Return a session view without the kept samples (for a picture of the curve)."""
+        with self.lock:
+            return SessionView(self.session)
+
     def snapshot(self) -> tuple:
         """Return (session view, copy of its kept samples or None), taken together."""
         with self.lock:

@@ -35,7 +35,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
@@ -43,11 +43,12 @@ from imu_allan.core.allan.raw import RawKeeper
 from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.io.imu_cdr import imu_frame_id
-from imu_allan.io.report import write_outputs
+from imu_allan.io.report import result_json, write_outputs
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.live import LiveInput, SessionView
 from imu_allan.ros.params import as_declared_type, BY_NAME, default_output_dir, PARAMS, RENAMED
+from imu_allan.ros.pictures import CurvePictures
 from imu_allan.ros.plan_report import targets_met
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 from imu_allan.ros.reports import matrix_msg, NodeReports
@@ -178,6 +179,9 @@ class ImuAllanNode(Node):
                                            _result_qos())
         self.pub_kalibr = self.create_publisher(String, '~/kalibr_imu_yaml', _result_qos())
         self.pub_diagnosis = self.create_publisher(String, '~/diagnosis', _result_qos())
+        self.pub_result = self.create_publisher(String, '~/result', _result_qos())
+        self.pictures = CurvePictures(
+            self.create_publisher(Image, '~/adev_image', _result_qos()), self.get_logger())
         self.pub_imu = None
         if self.values['publish_imu_with_covariance']:
             self.pub_imu = self.create_publisher(Imu, '~/imu_with_covariance', qos)
@@ -204,6 +208,7 @@ class ImuAllanNode(Node):
             for key, callback in (('process', self._on_process_timer),
                                   ('publish', self._publish),
                                   ('progress', self._on_progress_timer),
+                                  ('adev_image', self._on_image_timer),
                                   ('checkpoint', self._checkpoint))}
         for key in self._period_timers:
             self._set_period(key, self.values[f'{key}_period_s'])
@@ -275,6 +280,11 @@ class ImuAllanNode(Node):
         if statuses:
             self.get_logger().info(statuses[0].message)
             self.pub_params.publish(self._stamped(statuses))
+
+    def _on_image_timer(self) -> None:
+        if self.pictures.wanted():
+            self.pictures.draw(self.live.view(), self._last_result,
+                               self.subscription.topic_name, self.get_clock().now().to_msg())
 
     # ----------------------------------------------------------- callbacks
     def _on_imu(self, raw: bytes) -> None:
@@ -360,6 +370,7 @@ class ImuAllanNode(Node):
         self.pub_q.publish(matrix_msg(*result.process_noise()))
         self.pub_r.publish(matrix_msg(*result.measurement_noise()))
         self.pub_kalibr.publish(String(data=result.kalibr_yaml()))
+        self.pub_result.publish(String(data=result_json(result)))
         self.get_logger().info('published: ' + '; '.join(result.summary_lines()))
         return result
 
@@ -458,6 +469,8 @@ def main(args=None) -> int:
         pass
     finally:
         if node is not None:
+            print('imu_allan_node: saving the results (after the fit that runs, if one'
+                  ' does)...', file=sys.stderr, flush=True)
             try:
                 paths = node.save()
                 print('imu_allan_node: wrote ' + ', '.join(str(p) for p in paths),

@@ -93,6 +93,9 @@ PARAMS: tuple[NodeParam, ...] = (
               'Period of the timer that moves buffered messages into the pipeline'),
     NodeParam('progress_period_s', float, 10.0, 's', (0.1, 3600.0),
               'Period of progress reports before min_duration_s'),
+    NodeParam('adev_image_period_s', float, 60.0, 's', (0.0, 86400.0),
+              'Period of the curve picture on ~/adev_image, drawn only while someone'
+              ' subscribes (matplotlib); 0 never draws'),
     NodeParam('qos_depth', int, 10000, 'messages', (1, 1000000),
               'Depth of the Imu subscription queue: 10 s at 1 kHz while ~/save runs'),
     NodeParam('qos_reliability', str, 'best_effort', '', ('best_effort', 'reliable'),
