@@ -150,7 +150,7 @@ class NodeClient:
         return got[-1]
 
     def statuses(self) -> list[Status]:
-        """Return the node's latest ``~/noise_parameters`` statuses (progress or results)."""
+        """Return the latest ``~/noise_parameters`` of the node: progress or results."""
         return as_statuses(self.latest('noise_parameters', DiagnosticArray))
 
     def result_json(self) -> str:
