@@ -27,6 +27,7 @@ STILL_SIGMA = (1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1e-2)
 #: the extras they are not collected, and the pytest header names them.
 EXTRAS = {'test_bag_reader.py': ('rosbags', 'mcap'), 'test_bag_writer.py': ('rosbags', 'mcap'),
           'test_cli_analyze.py': ('rosbags', 'mcap'), 'test_cli_simulate.py': ('rosbags',),
+          'test_imu_patch.py': ('rosbags',),
           'test_fleet.py': ('dask', 'pyarrow')}
 MISSING = {f: [m for m in mods if importlib.util.find_spec(m) is None]
            for f, mods in EXTRAS.items()}

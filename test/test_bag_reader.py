@@ -27,8 +27,7 @@ from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
 from imu_allan.io.bags.base import ImuBlock
-from imu_allan.io.imu_cdr import (CovariancePatch, decode_imu_cdr, decode_imu_payloads,
-                                  imu_frame_id, payload_frames, set_imu_covariances_cdr)
+from imu_allan.io.imu_cdr import decode_imu_cdr, decode_imu_payloads, payload_frames
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
@@ -308,35 +307,6 @@ def test_payload_frames_match_rosbags_in_both_byte_orders(ros1):
             assert got == [m.header.frame_id for m in msgs], (frames, big)
             assert names == list(dict.fromkeys(frames))   # in order of first appearance
             assert (index is None) == (len(set(frames)) == 1)
-
-
-def test_covariances_are_written_into_the_cdr_bytes():
-    _, _, msgs, payloads = _mixed_cdr(seed=8)
-    gyro, accel = np.arange(9) * 1e-6, np.arange(9, 18) * 1e-3
-    patched = set_imu_covariances_cdr(payloads, gyro, accel)
-    assert patched[-1] is None and set_imu_covariances_cdr([], gyro, accel) == []
-    for raw, msg in zip(patched[:-1], msgs):
-        got = ROS2.deserialize_cdr(raw, IMU)
-        assert_array_equal(got.angular_velocity_covariance, gyro)
-        assert_array_equal(got.linear_acceleration_covariance, accel)
-        # Everything else is the original message, byte for byte.
-        got.angular_velocity_covariance = msg.angular_velocity_covariance
-        got.linear_acceleration_covariance = msg.linear_acceleration_covariance
-        assert bytes(ROS2.serialize_cdr(got, IMU, little_endian=raw[1] == 1)) == \
-            bytes(ROS2.serialize_cdr(msg, IMU, little_endian=raw[1] == 1))
-
-
-def test_single_message_patch_and_frame_id_match_the_batch_path():
-    # The node's relay patches one message at a time: same bytes as the batch path, in
-    # both byte orders and for every frame_id length (padding), None where it cannot.
-    _, _, msgs, payloads = _mixed_cdr(seed=9)
-    gyro, accel = np.arange(9) * 1e-6, np.arange(9, 18) * 1e-3
-    patch = CovariancePatch(gyro, accel)
-    for raw, batch in zip(payloads, set_imu_covariances_cdr(payloads, gyro, accel)):
-        assert patch(raw) == batch
-    for raw, msg in zip(payloads[:-1], msgs):
-        assert imu_frame_id(raw) == msg.header.frame_id
-    assert imu_frame_id(b'\x00\x01') is None and patch(b'') is None
 
 
 # -- bad inputs ---------------------------------------------------------------------
