@@ -33,8 +33,9 @@ from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_axis
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.plan import noise_components, planning_model
-from imu_allan.core.plan.planner import _crossing, plan_fits
+from imu_allan.core.plan.planner import plan_fits
 from imu_allan.core.plan.precision import CurveModel, relative_width
+from imu_allan.core.plan.reading import crossing
 from imu_allan.core.search import search_axis
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
@@ -159,11 +160,11 @@ def run_model(name: str, noise: AxisNoise, rate_hz: float, unit: str, seeds: int
     for p in PARAMS:
         med = np.median(actual[p], axis=0)
         for target in TARGETS:
-            t_act = _crossing(lengths_s, med, target)
+            t_act = crossing(lengths_s, med, target)
             # Only targets reached inside the simulated lengths (not at the first one).
             if not (lengths_s[0] < t_act < lengths_s[-1]):
                 continue
-            t_true = _crossing(lengths_s, true_cols[p], target)
+            t_true = crossing(lengths_s, true_cols[p], target)
             rows.append((name, p, target, t_true, early_summary(early, p, target, t_act),
                          t_act))
     return rows

@@ -27,6 +27,7 @@ STILL_SIGMA = (1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1e-2)
 #: the extras they are not collected, and the pytest header names them.
 EXTRAS = {'test_bag_reader.py': ('rosbags', 'mcap'), 'test_bag_writer.py': ('rosbags', 'mcap'),
           'test_cli_analyze.py': ('rosbags', 'mcap'), 'test_cli_simulate.py': ('rosbags',),
+          'test_imu_patch.py': ('rosbags',),
           'test_fleet.py': ('dask', 'pyarrow')}
 MISSING = {f: [m for m in mods if importlib.util.find_spec(m) is None]
            for f, mods in EXTRAS.items()}
@@ -72,3 +73,12 @@ def still_imu(n: int, seed: int = 0, rate_hz: float = 100.0) -> tuple:
     samples = rng.normal(0.0, STILL_SIGMA, (n, 6))
     samples[:, 5] += 9.80665
     return T0_NS + np.round(np.arange(n) * 1e9 / rate_hz).astype(np.int64), samples
+
+
+def white_rw_offset(n: int, n_axes: int, seed: int) -> np.ndarray:
+    """White + random-walk rate noise on top of per-axis offsets, shape (n, n_axes)."""
+    rng = np.random.default_rng(seed)
+    offsets = np.array([9.81, -0.3, 0.02, 1e3, 0.0, -9.81])[:n_axes]
+    white = rng.standard_normal((n, n_axes)) * 1e-3
+    walk = np.cumsum(rng.standard_normal((n, n_axes)), axis=0) * 1e-6
+    return offsets + white + walk

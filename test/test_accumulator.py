@@ -7,18 +7,10 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
+from conftest import white_rw_offset
 from imu_allan.core.allan import overlapping_avar, tau_grid
 from imu_allan.core.allan.accumulator import AllanAccumulator
 from imu_allan.errors import InputError
-
-
-def _white_rw_offset(n: int, n_axes: int, seed: int) -> np.ndarray:
-    """White + random-walk rate noise on top of per-axis offsets, shape (n, n_axes)."""
-    rng = np.random.default_rng(seed)
-    offsets = np.array([9.81, -0.3, 0.02, 1e3, 0.0, -9.81])[:n_axes]
-    white = rng.standard_normal((n, n_axes)) * 1e-3
-    walk = np.cumsum(rng.standard_normal((n, n_axes)), axis=0) * 1e-6
-    return offsets + white + walk
 
 
 def _strided_sums(y: np.ndarray, m: int, stride: int) -> tuple[np.ndarray, int]:
@@ -41,7 +33,7 @@ def _feed_random_blocks(acc: AllanAccumulator, y: np.ndarray, rng, max_block: in
 @pytest.fixture(scope='module')
 def record():
     """One 6-axis record fed once: (samples, accumulator)."""
-    y = _white_rw_offset(100_000, 6, seed=1)
+    y = white_rw_offset(100_000, 6, seed=1)
     acc = AllanAccumulator(6, 200.0, exact_max_m=256)
     acc.add(y)
     return y, acc
@@ -102,7 +94,7 @@ def test_curve_fields(record):
 
 
 def test_block_size_invariance():
-    y = _white_rw_offset(120_000, 6, seed=2)
+    y = white_rw_offset(120_000, 6, seed=2)
     one = AllanAccumulator(6, 100.0, exact_max_m=128)
     one.add(y)
     many = AllanAccumulator(6, 100.0, exact_max_m=128)
@@ -120,7 +112,7 @@ def test_block_size_invariance():
 
 
 def test_save_restore_midstream(tmp_path):
-    y = _white_rw_offset(90_000, 6, seed=4)
+    y = white_rw_offset(90_000, 6, seed=4)
     rng = np.random.default_rng(5)
     ref = AllanAccumulator(6, 100.0, exact_max_m=64)
     ref.add(y[:30_000])
@@ -151,7 +143,7 @@ def test_save_restore_midstream(tmp_path):
 
 def _saved_arrays(tmp_path) -> dict:
     acc = AllanAccumulator(2, 50.0, exact_max_m=64)
-    acc.add(_white_rw_offset(3000, 2, seed=6))
+    acc.add(white_rw_offset(3000, 2, seed=6))
     acc.save(tmp_path / 'good.npz')
     with np.load(tmp_path / 'good.npz', allow_pickle=False) as z:
         return {k: z[k] for k in z.files}
@@ -194,7 +186,7 @@ def test_corrupt_state_raises_input_error(tmp_path, damage):
 
 def test_break_segment_pools_per_segment_batch_sums():
     lengths = [5000, 37, 20_000, 1, 0, 12_000, 3]
-    y = _white_rw_offset(sum(lengths), 3, seed=7)
+    y = white_rw_offset(sum(lengths), 3, seed=7)
     acc = AllanAccumulator(3, 100.0, exact_max_m=64)
     rng = np.random.default_rng(8)
     segments, start = [], 0
@@ -222,7 +214,7 @@ def test_decimated_taus_agree_with_batch_within_confidence():
     # Long record (white + random walk), taus far beyond exact_max_m: the decimated
     # estimate differs from the full-overlap batch value by a small fraction of its
     # own confidence interval (the two share most of their terms).
-    y = _white_rw_offset(2 ** 17, 2, seed=9)
+    y = white_rw_offset(2 ** 17, 2, seed=9)
     acc = AllanAccumulator(2, 100.0, exact_max_m=64)
     acc.add(y)
     c = acc.curve()
@@ -340,81 +332,3 @@ def test_bad_input():
                    {'n_axes': 6, 'rate_hz': 1.0, 'per_decade': 0}):
         with pytest.raises(InputError):
             AllanAccumulator(**kwargs)
-
-
-def _skip_avar(y: np.ndarray, miss: np.ndarray, m: int) -> tuple[np.ndarray, int]:
-    """Batch overlapping AVAR over the terms whose 2m samples hold no missing one."""
-    x = np.zeros((y.shape[0] + 1, y.shape[1]))
-    np.cumsum(y - y.mean(axis=0), axis=0, out=x[1:])
-    c = np.concatenate(([0], np.cumsum(miss)))
-    i = np.arange(y.shape[0] + 1 - 2 * m)
-    i = i[c[i + 2 * m] == c[i]]
-    d = x[i + 2 * m] - 2.0 * x[i + m] + x[i]
-    return (d * d).sum(axis=0) / (2.0 * m * m * i.size), i.size
-
-
-def test_missing_samples_leave_their_terms_out_at_short_taus(tmp_path):
-    # 2 % of the samples lost at random and filled: where at least half of a tau's
-    # terms are free of them, the curve is the batch estimator over those terms alone;
-    # beyond, every term counts, by the share of real samples.
-    y = _white_rw_offset(150_000, 6, seed=21)
-    rng = np.random.default_rng(22)
-    miss = rng.random(y.shape[0]) < 0.02
-    miss[[0, -1]] = False
-    i = np.arange(y.shape[0])
-    for a in range(6):                              # filled by linear interpolation
-        y[miss, a] = np.interp(i[miss], i[~miss], y[~miss, a])
-    whole = AllanAccumulator(6, 100.0, exact_max_m=512)
-    whole.add(y, missing=miss)
-    c = whole.curve()
-    assert whole.n_missing == miss.sum()
-    short = c.m[c.m <= 16]
-    for k, m in enumerate(short.tolist()):
-        ref, n = _skip_avar(y, miss, m)
-        assert c.n_terms[k] == n and n >= 0.5 * (y.shape[0] + 1 - 2 * m)
-        assert_allclose(c.avar[k], ref, rtol=1e-9)
-    real = 1.0 - miss.mean()
-    far = (c.m > 64) & (c.m <= 512)
-    assert_allclose(c.n_terms[far], np.round((y.shape[0] + 1 - 2 * c.m[far]) * real),
-                    atol=1)
-    # Any blocks, and a save and load midstream, give the same sums.
-    many = AllanAccumulator(6, 100.0, exact_max_m=512)
-    start = 0
-    while start < 70_000:
-        k = int(rng.integers(1, 3000))
-        many.add(y[start:start + k], missing=miss[start:start + k])
-        start += k
-    many.save(tmp_path / 'acc.npz')
-    back = AllanAccumulator.load(tmp_path / 'acc.npz')
-    back.add(y[start:], missing=miss[start:])
-    b = back.curve()
-    assert back.n_missing == whole.n_missing
-    assert_array_equal(b.n_terms, c.n_terms)
-    assert_allclose(b.avar, c.avar, rtol=1e-12)
-
-
-@pytest.mark.parametrize('share,burst', [(0.10, 1), (0.05, 8)])
-def test_filled_taus_take_off_the_fills_white_noise_excess(share, burst):
-    # Interpolated fills read white noise about share * (1 + g / 2) high where the
-    # filled terms are used; the excess is taken off, so the curve stays the clean
-    # record's (the same samples with nothing lost) to 1.5 %, averaged over six axes.
-    rng = np.random.default_rng(31)
-    n = 300_000
-    y = rng.normal(0.0, 1.0, (n, 6)) + np.cumsum(rng.normal(0.0, 2e-3, (n, 6)), axis=0)
-    miss = np.zeros(n, bool)
-    starts = np.flatnonzero(rng.random(n) < share / burst)
-    for k in range(burst):
-        miss[np.minimum(starts + k, n - 1)] = True
-    miss[[0, -1]] = False
-    filled = y.copy()
-    i = np.arange(n)
-    for a in range(6):
-        filled[miss, a] = np.interp(i[miss], i[~miss], y[~miss, a])
-    clean, lossy = (AllanAccumulator(6, 100.0, exact_max_m=1024) for _ in range(2))
-    clean.add(y)
-    lossy.add(filled, missing=miss)
-    a, b = clean.curve(), lossy.curve()
-    assert_array_equal(a.m, b.m)
-    ratio = (b.avar / a.avar).mean(axis=1)
-    mid = (a.m >= 3) & (a.m <= 256)
-    assert_allclose(ratio[mid], 1.0, atol=0.015)

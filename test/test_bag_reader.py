@@ -27,8 +27,8 @@ from imu_allan.errors import InputError
 from imu_allan.io.bag_reader import list_imu_topics, list_topics, open_imu
 from imu_allan.io.bag_writer import DEFAULT_LATENCY_NS, serialize_imu, write_imu_bag
 from imu_allan.io.bags.base import ImuBlock
-from imu_allan.io.imu_cdr import (CovariancePatch, decode_imu_cdr, decode_imu_payloads,
-                                  imu_frame_id, payload_frames, set_imu_covariances_cdr)
+from imu_allan.io.bags.sqlite_pages import NotPlain, SqlitePages
+from imu_allan.io.imu_cdr import decode_imu_cdr, decode_imu_payloads, payload_frames
 
 IMU = 'sensor_msgs/msg/Imu'
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
@@ -310,35 +310,6 @@ def test_payload_frames_match_rosbags_in_both_byte_orders(ros1):
             assert (index is None) == (len(set(frames)) == 1)
 
 
-def test_covariances_are_written_into_the_cdr_bytes():
-    _, _, msgs, payloads = _mixed_cdr(seed=8)
-    gyro, accel = np.arange(9) * 1e-6, np.arange(9, 18) * 1e-3
-    patched = set_imu_covariances_cdr(payloads, gyro, accel)
-    assert patched[-1] is None and set_imu_covariances_cdr([], gyro, accel) == []
-    for raw, msg in zip(patched[:-1], msgs):
-        got = ROS2.deserialize_cdr(raw, IMU)
-        assert_array_equal(got.angular_velocity_covariance, gyro)
-        assert_array_equal(got.linear_acceleration_covariance, accel)
-        # Everything else is the original message, byte for byte.
-        got.angular_velocity_covariance = msg.angular_velocity_covariance
-        got.linear_acceleration_covariance = msg.linear_acceleration_covariance
-        assert bytes(ROS2.serialize_cdr(got, IMU, little_endian=raw[1] == 1)) == \
-            bytes(ROS2.serialize_cdr(msg, IMU, little_endian=raw[1] == 1))
-
-
-def test_single_message_patch_and_frame_id_match_the_batch_path():
-    # The node's relay patches one message at a time: same bytes as the batch path, in
-    # both byte orders and for every frame_id length (padding), None where it cannot.
-    _, _, msgs, payloads = _mixed_cdr(seed=9)
-    gyro, accel = np.arange(9) * 1e-6, np.arange(9, 18) * 1e-3
-    patch = CovariancePatch(gyro, accel)
-    for raw, batch in zip(payloads, set_imu_covariances_cdr(payloads, gyro, accel)):
-        assert patch(raw) == batch
-    for raw, msg in zip(payloads[:-1], msgs):
-        assert imu_frame_id(raw) == msg.header.frame_id
-    assert imu_frame_id(b'\x00\x01') is None and patch(b'') is None
-
-
 # -- bad inputs ---------------------------------------------------------------------
 
 def test_bad_paths_and_files(tmp_path):
@@ -530,12 +501,10 @@ def test_single_db3_file_is_read_directly(shared_dir):
 
 def _sqlite_both_ways(db3: Path, topic: str):
     """Read a topic with the page reader (asserting it was used) and with SQL."""
-    from imu_allan.io.bags import rosbag2_sqlite
-
     with open_imu(db3, topic) as source:
         backend = source._backend
         own = next(t for t in backend.topics() if t.name == source.topic)
-        pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
+        pages = SqlitePages(db3, backend.conn)
         got = list(pages.pieces(backend.ids[own.name, own.msgtype], own.encoding))
         assert sum(p.recv_ns.size for p, _ in got) == backend.count(own)
         fast = source.read_all()
@@ -589,16 +558,14 @@ def test_sqlite_page_reader_matches_sql(tmp_path, page_size):
 def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
     import sqlite3
 
-    from imu_allan.io.bags import rosbag2_sqlite
-
     stamps, samples = _recording(500, seed=15)
     # Messages larger than a page: the topic itself spills to overflow pages.
     db3 = tmp_path / 'big.db3'
     write_imu_bag(db3, stamps, samples, frame_id='f' * 5000)
     with open_imu(db3) as source:
         backend = source._backend
-        pages = rosbag2_sqlite._SqlitePages(db3, backend.conn)
-        with pytest.raises(rosbag2_sqlite._NotPlain, match='overflow'):
+        pages = SqlitePages(db3, backend.conn)
+        with pytest.raises(NotPlain, match='overflow'):
             list(pages.pieces(list(backend.ids['/imu/data', IMU]), 'cdr'))
         _assert_topic(source.read_all(), stamps, stamps + DEFAULT_LATENCY_NS, samples)
     # A write-ahead log next to the file: SQL reads it (committed rows live in the log).
@@ -610,8 +577,8 @@ def test_sqlite_page_reader_refuses_what_it_cannot_vouch_for(tmp_path):
     conn.execute('DELETE FROM messages WHERE id > 400')
     conn.commit()
     try:
-        with pytest.raises(rosbag2_sqlite._NotPlain, match='wal'):
-            rosbag2_sqlite._SqlitePages(db3, conn)
+        with pytest.raises(NotPlain, match='wal'):
+            SqlitePages(db3, conn)
         with open_imu(db3) as source:
             assert source.read_all().stamp_ns.size == 400
     finally:

@@ -27,9 +27,8 @@ from imu_allan.core.noise.simulate import simulate_axis, simulate_imu
 from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid
 from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
                                  planning_model)
-from imu_allan.core.plan.planner import as_read, inflated, inflation, ORDERING
 from imu_allan.core.plan.precision import _avar, CurveModel, relative_width
-from imu_allan.core.plan.separation import LAMBDA_SEPARATED, rivals, SLOW_PROCESS
+from imu_allan.core.plan.separation import LAMBDA_SEPARATED, ORDERING, rivals, SLOW_PROCESS
 from imu_allan.core.search import search_axis
 from imu_allan.errors import InputError
 from imu_allan.io.report import summary_text
@@ -206,29 +205,6 @@ def test_a_time_does_not_depend_on_where_the_length_grid_stops():
         assert usual.param(name).time_s == pytest.approx(full.param(name).time_s, rel=1e-9)
         # Widths ~ L^-1/2 once resolved: z 1.7x wider needs about 1.7^2 the record.
         assert 2.0 < usual.param(name).time_s / plain.param(name).time_s < 4.0
-
-
-def test_the_plan_is_inflated_by_the_fits_dispersion_only():
-    # A fit as dispersed as its model allows keeps the expected widths; one with
-    # J / dof = 3 widens z by about sqrt(3) (the fit's profile threshold grows so).
-    assert inflation(40.0, 50) == 1.0
-    assert inflation(math.nan, 50) == inflation(10.0, 0) == 1.0
-    assert_allclose(inflation(150.0, 50), math.sqrt(3.0), rtol=0.06)   # F vs chi2 quantile
-    assert_allclose(inflated(np.array([0.1, 0.5]), 1.0), [0.1, 0.5], rtol=1e-12)
-
-
-def test_the_plan_starts_at_the_present_width_and_joins_the_expected_ones():
-    lengths = np.array([1.0, 4.0, 100.0, 1e4]) * 3600.0
-    expected = 0.2 * np.sqrt(lengths[0] / lengths)      # resolved: L^-1/2
-    for now in (0.35, 0.12):                            # wider, or luckily narrower
-        read = as_read(expected, lengths, 1.0, lengths[0], now)
-        assert read[0] == pytest.approx(now, rel=1e-12)
-        # The excess on the log scale shrinks as sd: (1 h / L)^(1/2).
-        excess = np.arcsinh(read) / np.arcsinh(expected) - 1.0
-        assert_allclose(excess, excess[0] * np.sqrt(lengths[0] / lengths), rtol=1e-9)
-    # No present width (a datasheet): the expected widths, inflated.
-    assert_allclose(as_read(expected, lengths, 1.5, 0.0, math.nan),
-                    inflated(expected, 1.5), rtol=1e-12)
 
 
 def test_the_plan_of_a_1_h_fit_agrees_with_the_plan_of_the_true_model():

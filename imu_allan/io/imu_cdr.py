@@ -1,5 +1,5 @@
 """
-The sensor_msgs/Imu wire layout, once: numpy-only decoding and covariance patching.
+The sensor_msgs/Imu wire layout, once: numpy-only decoding.
 
 ROS 2 messages are CDR (4 encapsulation bytes, then ``header.stamp`` sec int32 and
 nanosec uint32, ``frame_id`` as uint32 length and bytes, padding to 8, then 37
@@ -8,7 +8,8 @@ doubles: orientation (4), its covariance (9), angular_velocity (3), its covarian
 ``secs``, ``nsecs`` uint32, ``frame_id`` (uint32 length, bytes), then the doubles.
 Used by the node (which needs nothing of the bag libraries), the bag readers and the
 tests.  Only payloads that fit neither layout go through rosbags' own deserialiser,
-imported on demand.
+imported on demand.  The node's relay writes covariances into these bytes with
+:mod:`imu_allan.io.imu_patch`.
 """
 
 import functools
@@ -317,50 +318,6 @@ def decode_imu_cdr(payloads) -> tuple[np.ndarray, np.ndarray]:
     return stamp_ns, samples
 
 
-def set_imu_covariances_cdr(payloads, angular_velocity_covariance,
-                            linear_acceleration_covariance) -> list[bytes | None]:
-    """
-    Copy serialised ROS 2 sensor_msgs/msg/Imu messages (CDR) with new covariances.
-
-    The two 3x3 covariances are written straight into the bytes, so republishing
-    costs no Python message per sample.
-
-    Parameters
-    ----------
-    payloads : sequence of bytes
-        n serialised messages, e.g. from an rclpy raw subscription.
-    angular_velocity_covariance : array_like
-        (9,) row-major 3x3 covariance [(rad/s)^2].
-    linear_acceleration_covariance : array_like
-        (9,) row-major 3x3 covariance [(m/s^2)^2].
-
-    Returns
-    -------
-    list
-        n patched payloads (bytes); None where the payload is not in the plain CDR
-        layout (the caller deserialises those).
-
-    """
-    if not len(payloads):
-        return []
-    u8, starts, lengths = join_payloads(payloads)
-    u8 = u8.copy()  # writable
-    offset, big, fits = _imu_layout(u8, starts, lengths, False)
-    # The covariances follow orientation (4 doubles), its covariance (9) and
-    # angular_velocity (3), then linear_acceleration (3): byte 128 and 224 of the doubles.
-    for field_at, cov in ((128, angular_velocity_covariance),
-                          (224, linear_acceleration_covariance)):
-        for is_big in (False, True):
-            sel = np.flatnonzero(fits & (big == is_big))
-            if sel.size:
-                data = np.frombuffer(np.asarray(cov, '>f8' if is_big else '<f8').tobytes(),
-                                     np.uint8)
-                u8[(starts[sel] + offset[sel] + field_at)[:, None] + np.arange(72)] = data
-    joined = u8.tobytes()
-    return [joined[a:a + n] if ok else None
-            for a, n, ok in zip(starts.tolist(), lengths.tolist(), fits.tolist())]
-
-
 def _cdr_doubles_offset(raw: bytes) -> tuple[int, bool] | None:
     """(offset of orientation.x, big-endian) of one plain ROS 2 CDR Imu payload, or None."""
     if len(raw) < 16 or raw[0] != 0 or raw[1] > 1:
@@ -491,38 +448,6 @@ def payload_frames_slow(u8: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     ranked[order] = np.arange(order.size)
     by_code = list(names)
     return [by_code[k] for k in order.tolist()], ranked[index]
-
-
-class CovariancePatch:
-    """
-    Write two fixed covariances into single serialised Imu messages (ROS 2 CDR).
-
-    The per-message path of the node's relay: the byte strings of both fields are
-    prepared once per covariance update, so a message costs a few slices (about a
-    microsecond), with the same result as :func:`set_imu_covariances_cdr`.
-
-    Parameters
-    ----------
-    angular_velocity_covariance, linear_acceleration_covariance : array_like
-        (9,) row-major 3x3 covariances [(rad/s)^2], [(m/s^2)^2].
-
-    """
-
-    def __init__(self, angular_velocity_covariance, linear_acceleration_covariance):
-        fields = [np.asarray(c, np.float64).reshape(9) for c in
-                  (angular_velocity_covariance, linear_acceleration_covariance)]
-        self._bytes = {big: [f.astype('>f8' if big else '<f8').tobytes() for f in fields]
-                       for big in (False, True)}
-
-    def __call__(self, raw: bytes) -> bytes | None:
-        """Return the patched copy of ``raw``, or None for an unusual layout."""
-        layout = _cdr_doubles_offset(raw)
-        if layout is None:
-            return None
-        at, big = layout
-        gyro, accel = self._bytes[big]
-        return b''.join((raw[:at + 128], gyro, raw[at + 200:at + 224], accel,
-                         raw[at + 296:]))
 
 
 def join_payloads(payloads) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

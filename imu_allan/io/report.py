@@ -6,7 +6,10 @@ ekf.yaml fragments (IMUs with and without orientation), driver parameters, the V
 the OpenVINS kalibr_imu_chain.yaml, the fitted model as a params YAML, a human summary
 and the ADEV plot (docs/outputs.md).
 
-Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.
+Used by the node (``~/save`` and shutdown) and by ``imu-allan analyze`` alike.  The
+text of each consumer file is made in :mod:`imu_allan.core.outputs` (imu.yaml:
+:func:`imu_allan.core.outputs.exports.kalibr_yaml`, given the result's covering pairs
+by :meth:`imu_allan.pipeline.analysis.AnalysisResult.kalibr_yaml`).
 """
 
 from concurrent.futures import Executor

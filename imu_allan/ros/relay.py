@@ -18,7 +18,7 @@ import yaml
 
 from imu_allan.core.outputs.kalman import UNKNOWN_VARIANCE
 from imu_allan.errors import InputError
-from imu_allan.io.imu_cdr import CovariancePatch
+from imu_allan.io.imu_patch import CovariancePatch
 
 _FIELDS = ('angular_velocity_covariance', 'linear_acceleration_covariance')
 

@@ -43,30 +43,16 @@ applied to each segment and pooled).  The EDF of a pooled estimate is approximat
 that of one segment with the same number of terms (N_eff = n_terms + 2 m' - 1).
 
 Missing samples (:meth:`AllanAccumulator.add` with ``missing``): a short gap filled by
-the caller keeps the segment whole.  At exact taus the accumulator also sums the terms
-whose 2m samples hold a filled one, and :meth:`~AllanAccumulator.curve` leaves them out
-while that keeps at least half of the terms (:data:`SKIP_SHARE`): the overlapping
-estimator over the available terms, the gap estimator of Sesia and Tavella (Metrologia
-45, 2008, S134), unbiased whatever the noise.  Beyond (at 2 % of samples missing at
-random, from m = 17 on) nearly every term holds a filled sample and the filled terms
-are used, with their count scaled by the share of real samples, so the EDF and
-the curve's covariance count only real data.  A fill reads white noise high: a gap
-of g samples filled by linear interpolation gives its two neighbours the weight
-1 + g / 2 in a cluster, so the sum over all terms of a cluster size m exceeds the
-real samples' by sigma^2 (g + g^2 / 2) (2 m - 4) (summed over the term positions,
-the gap's neighbours straddling a cluster edge included; sigma^2 the variance of
-white samples).  With K the sum of g + g^2 / 2 over the gaps and N the samples,
-the filled taus subtract sigma^2 K (m - 2) / (N m^2) from the AVAR, sigma^2 read
-off the first tau over real samples alone.  Unrepaired, 2 % of the samples lost at
-random read white noise 3 % high there (15 % at 10 %); repaired, within 0.5 %
-(1.5 % at 10 %, m >= 4) on simulated white and random-walk noise
-(test/test_accumulator.py).
+the caller keeps the segment whole; at exact taus the terms over filled samples are
+left out, beyond they are used less the fills' white-noise excess
+(:mod:`imu_allan.core.allan.fill_terms`).
 
 Precision: the running sum is rebuilt for every chunk from zero, after subtracting a
 per-axis reference (the mean of the first chunk) and then the chunk window's own
-mean.  A constant subtracted from all samples of a window cancels exactly in every
-second difference, so |X| is bounded by the window length times the *local*
-variation of the signal, never by the record length or by the 9.81 m/s^2 offset.
+mean (:mod:`imu_allan.core.allan.window_sums`).  A constant subtracted from all
+samples of a window cancels exactly in every second difference, so |X| is bounded by
+the window length times the *local* variation of the signal, never by the record
+length or by the 9.81 m/s^2 offset.
 """
 
 import numpy as np
@@ -74,8 +60,10 @@ import numpy as np
 from imu_allan.core.allan.accumulator_state import _Persistence
 from imu_allan.core.allan.curve import AllanCurve
 from imu_allan.core.allan.edf import confidence_bounds, edf_overlapping
+from imu_allan.core.allan.fill_terms import gap_excess, used_terms
 from imu_allan.core.allan.noise_id import alpha_from_slope
 from imu_allan.core.allan.taus import dense_m_grid
+from imu_allan.core.allan.window_sums import accumulate, dirty_terms, phase, TILE_COLS
 from imu_allan.errors import InputError
 
 #: Decimated levels serve m = m' D_L with _M_LO < m' <= 2 * _M_LO.
@@ -85,13 +73,6 @@ _M_LO = 64
 _MAX_M = 2 ** 40
 #: Largest exact_max_m: keeps the state under 1 MB per axis (0.58 MB at this value).
 _MAX_EXACT_M = 2 ** 14
-#: A tau keeps only the terms free of missing samples while they are at least this share
-#: of all its terms; below, the terms over filled samples are kept too (module docstring).
-SKIP_SHARE = 0.5
-#: End points per tile of the exact passes: 6 axes x 16384 doubles (768 KiB) stay in
-#: L2; wider tiles cost more, narrower ones hand the GIL over more often (offline, the
-#: accumulator runs on a thread beside the checks and the reader).
-_TILE_COLS = 16384
 
 
 class _Level:
@@ -270,8 +251,9 @@ class AllanAccumulator(_Persistence):
         missing : np.ndarray, optional
             Shape (n,), bool: rows that stand in for lost samples (a short gap the
             caller filled, e.g. by linear interpolation).  Exact taus leave the terms
-            over them out while that keeps at least :data:`SKIP_SHARE` of the terms;
-            those sums are differences, so fills should be of the samples' own size.
+            over them out while that keeps at least
+            :data:`~imu_allan.core.allan.fill_terms.SKIP_SHARE` of the terms; those
+            sums are differences, so fills should be of the samples' own size.
 
         """
         block = np.asarray(samples)
@@ -287,7 +269,8 @@ class AllanAccumulator(_Persistence):
                 raise InputError(f'missing must have one flag per row ({n}), '
                                  f'not {missing.size}')
             self._n_missing += int(missing.sum())
-            self._note_runs(missing)
+            excess, self._miss_run = gap_excess(missing, self._miss_run)
+            self._fill_excess += excess
         if not np.issubdtype(block.dtype, np.number) or np.iscomplexobj(block):
             raise InputError(f'samples must be real numbers, not {block.dtype}')
         for s in range(0, n, self._chunk):   # checked by chunks: bounded temporaries
@@ -306,17 +289,6 @@ class AllanAccumulator(_Persistence):
             start += take
             if self._pending == self._chunk:
                 self._flush()
-
-    def _note_runs(self, missing: np.ndarray) -> None:
-        """Add each missing sample's share 1.5 + r of its gap's g + g^2 / 2 (r: its place)."""
-        if not missing.any():
-            self._miss_run = 0
-            return
-        idx = np.arange(missing.size)
-        last_real = np.maximum.accumulate(np.where(missing, -1, idx))
-        place = idx - last_real - 1 + np.where(last_real < 0, self._miss_run, 0)
-        self._fill_excess += float(np.sum(1.5 + place[missing]))
-        self._miss_run = int(place[-1]) + 1 if missing[-1] else 0
 
     def break_segment(self) -> None:
         """
@@ -340,7 +312,7 @@ class AllanAccumulator(_Persistence):
         if self._work is None:
             a, w = self.n_axes, self._buf.shape[1]
             self._work = (np.empty((a, w + 1)), np.empty((a, w + 1)),
-                          np.empty((a, _TILE_COLS)))
+                          np.empty((a, TILE_COLS)))
         return self._work
 
     def _flush(self) -> None:
@@ -354,17 +326,17 @@ class AllanAccumulator(_Persistence):
         buf[:, h:w] -= self._ref[:, None]
         x_all, x2_all, tile = self._work_arrays()
         x = x_all[:, :w + 1]
-        r = _phase(buf[:, :w], x)
+        r = phase(buf[:, :w], x)
         if self._miss[h:w].any():
             sums = np.zeros((self._m0.size, self.n_axes))
             counts = np.zeros(self._m0.size, dtype=np.int64)
-            _accumulate(x, h + 1, w, self._m0, sums, counts, 0, x2_all, tile)
+            accumulate(x, h + 1, w, self._m0, sums, counts, 0, x2_all, tile)
             self._sums[:self._m0.size] += sums
             self._counts[:self._m0.size] += counts
-            _dirty_terms(x, self._miss[:w], h + 1, self._m0, sums, self._dirty_sums,
-                         self._dirty_counts)
+            dirty_terms(x, self._miss[:w], h + 1, self._m0, sums, self._dirty_sums,
+                        self._dirty_counts)
         else:
-            _accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, x2_all, tile)
+            accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, x2_all, tile)
         # Cluster sums for level 1 end at segment indices that are multiples of D_1.
         base = self._seg_n - h
         if self._levels:
@@ -387,9 +359,9 @@ class AllanAccumulator(_Persistence):
             h, c = level.h, values.shape[1]
             win = np.concatenate((level.hist[:, level.capacity - h:], values), axis=1)
             x = np.empty((self.n_axes, h + c + 1))
-            r = _phase(win, x)
-            _accumulate(x, h + 1, h + c, level.m_prime, self._sums, self._counts,
-                        level.index[0] if level.index.size else 0)
+            r = phase(win, x)
+            accumulate(x, h + 1, h + c, level.m_prime, self._sums, self._counts,
+                       level.index[0] if level.index.size else 0)
             # Pairs of this level's values form the next level's cluster sums.
             first = (level.n // 2 + 1) * 2
             ends = np.arange(first, level.n + c + 1, 2) - (level.n - h)
@@ -410,42 +382,6 @@ class AllanAccumulator(_Persistence):
         clone = self._copy()
         clone._flush()
         return clone._sums, clone._counts, clone._dirty_sums, clone._dirty_counts
-
-    def _used_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """
-        Return the sums (K, n_axes), term counts (K,) and effective counts (K,) per tau.
-
-        With missing samples, an exact tau keeps the terms free of them while they are
-        at least :data:`SKIP_SHARE` of its terms (then every term counts in full);
-        otherwise all terms are kept, less the fills' white-noise excess (module
-        docstring), and count by the share of real samples.
-        """
-        sums, counts, dirty_sums, dirty_counts = self._sums_now()
-        if not self._n_missing:
-            return sums, counts, counts
-        k0 = self._m0.size
-        clean = counts[:k0] - dirty_counts
-        skip = (dirty_counts > 0) & (clean >= SKIP_SHARE * counts[:k0])
-        sums, counts = sums.copy(), counts.copy()
-        # The clean sums are the larger part here: the difference keeps their digits.
-        sums[:k0][skip] = np.maximum(sums[:k0][skip] - dirty_sums[skip], 0.0)
-        counts[:k0][skip] = clean[skip]
-        real = 1.0 - self._n_missing / max(self._n_samples, 1)
-        eff = np.maximum(np.round(counts * real).astype(np.int64), np.minimum(counts, 1))
-        kept = np.zeros(counts.size, bool)
-        kept[:k0] = skip | (dirty_counts == 0)
-        eff[kept] = counts[kept]
-        if counts[0] and self._m[0] == 1:
-            # sigma^2 from the first tau over real samples alone; the excess per term.
-            sigma2 = sums[0] / (2.0 * counts[0])
-            mf = self._m.astype(float)
-            excess = (sigma2[None, :] * (self._fill_excess / max(self._n_samples, 1))
-                      * np.maximum(2.0 * mf - 4.0, 0.0)[:, None])
-            fix = ~kept & (counts > 0)
-            # Never more than half the sum: a guard for noise far from white at tau0.
-            sums[fix] = np.maximum(sums[fix] - excess[fix] * counts[fix, None],
-                                   0.5 * sums[fix])
-        return sums, counts, eff
 
     def curve(self, confidence: float = 0.683, alpha=None, min_terms: int = 1,
               bounds: bool = True) -> AllanCurve:
@@ -480,7 +416,8 @@ class AllanAccumulator(_Persistence):
         """
         if not 0.0 < confidence < 1.0:
             raise InputError(f'confidence must lie strictly between 0 and 1, not {confidence}')
-        sums, counts, eff = self._used_terms()
+        sums, counts, eff = used_terms(self._m, *self._sums_now(), self._n_missing,
+                                       self._n_samples, self._fill_excess)
         sel = counts >= max(int(min_terms), 1)
         m = self._m[sel]
         tau_s = m / self.rate_hz
@@ -512,117 +449,3 @@ class AllanAccumulator(_Persistence):
         return AllanCurve(tau_s, m, avar, n_terms, edf, alpha_arr, np.asarray(adev_lo),
                           np.asarray(adev_hi), float(confidence), 'overlapping',
                           self.rate_hz)
-
-
-def _phase(win: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """
-    Compute the running sum of a window, from zero, after removing the window's mean.
-
-    Parameters
-    ----------
-    win : np.ndarray
-        Shape (n_axes, w), samples [unit].
-    x : np.ndarray
-        Shape (n_axes, w + 1), output: x[:, 0] = 0, x[:, j] = sum of the first j
-        centred samples [unit * samples].
-
-    Returns
-    -------
-    np.ndarray
-        Shape (n_axes,), the mean that was removed [unit].
-
-    """
-    r = win.mean(axis=1)
-    x[:, 0] = 0.0
-    np.subtract(win, r[:, None], out=x[:, 1:])
-    np.cumsum(x[:, 1:], axis=1, out=x[:, 1:])
-    return r
-
-
-def _accumulate(x: np.ndarray, j_first: int, j_last: int, ms: np.ndarray, sums: np.ndarray,
-                counts: np.ndarray, row0: int, x2_buf: np.ndarray | None = None,
-                tile: np.ndarray | None = None) -> None:
-    """
-    Add the squared second differences that end at x[:, j_first:j_last + 1].
-
-    Parameters
-    ----------
-    x : np.ndarray
-        Shape (n_axes, w + 1), running sum; index 0 is the oldest point held.
-    j_first, j_last : int
-        First and last new end points (local indices into x).
-    ms : np.ndarray
-        Shape (k,), cluster sizes in units of x's samples.
-    sums, counts : np.ndarray
-        Shapes (K, n_axes) and (K,), updated in place at rows row0 .. row0 + k - 1.
-    row0 : int
-        Row of ms[0] in sums and counts.
-    x2_buf, tile : np.ndarray, optional
-        Scratch arrays of the numpy path, shapes (n_axes, >= w + 1) and (n_axes, c)
-        with c >= 1 (the end points are taken c at a time).
-
-    """
-    j0 = np.maximum(j_first, 2 * ms)
-    live = j0 <= j_last
-    counts[row0:row0 + ms.size] += np.where(live, j_last - j0 + 1, 0)
-    w = x.shape[1]
-    x2 = np.multiply(x, 2.0, out=None if x2_buf is None else x2_buf[:, :w])
-    if tile is None:
-        tile = np.empty((x.shape[0], min(_TILE_COLS, max(j_last - j_first + 1, 1))))
-    width = tile.shape[1]
-    for k in np.flatnonzero(live).tolist():
-        m, start = int(ms[k]), int(j0[k])
-        total = np.zeros(x.shape[0])
-        # d_j = X[j] + X[j - 2m] - 2 X[j - m], a tile of end points at a time: the
-        # temporary stays in the core's cache.
-        for s in range(start, j_last + 1, width):
-            e = min(s + width, j_last + 1)
-            d = np.add(x[:, s:e], x[:, s - 2 * m:e - 2 * m], out=tile[:, :e - s])
-            np.subtract(d, x2[:, s - m:e - m], out=d)
-            # einsum, not np.dot/vecdot: OpenBLAS threads its ddot, which stalls badly on
-            # a busy machine; numpy's own loop is as fast single-threaded.
-            total += np.einsum('ij,ij->i', d, d)
-        sums[row0 + k] += total
-
-
-def _dirty_terms(x: np.ndarray, miss: np.ndarray, j_first: int, ms: np.ndarray,
-                 totals: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> None:
-    """
-    Add the squared second differences that hold a missing sample, per cluster size.
-
-    The term ending at x[:, j] spans samples j - 2m .. j - 1 of the window; it is
-    dirty when one of them is missing.  Whichever of the dirty and the clean terms
-    are fewer is summed (the other part is the window's total less it), so the work
-    stays below half a pass per tau.
-
-    Parameters
-    ----------
-    x : np.ndarray
-        Shape (n_axes, w + 1), running sum of the window's samples.
-    miss : np.ndarray
-        Shape (w,), bool, the window's missing samples.
-    j_first : int
-        First new end point (local index into x); the last is w.
-    ms : np.ndarray
-        Shape (k,), cluster sizes [samples].
-    totals : np.ndarray
-        Shape (k, n_axes), the window's sums over all its new terms per size.
-    sums, counts : np.ndarray
-        Shapes (k, n_axes) and (k,), updated in place with the dirty terms.
-
-    """
-    w = miss.size
-    n_miss = np.concatenate(([0], np.cumsum(miss)))
-    for k, m in enumerate(ms.tolist()):
-        j = np.arange(max(j_first, 2 * m), w + 1)
-        if not j.size:
-            continue
-        dirty = n_miss[j] > n_miss[j - 2 * m]
-        n_dirty = int(dirty.sum())
-        if not n_dirty:
-            continue
-        pick = j[dirty] if 2 * n_dirty <= j.size else j[~dirty]
-        d = x[:, pick] + x[:, pick - 2 * m] - 2.0 * x[:, pick - m]
-        part = np.einsum('ij,ij->i', d, d)
-        sums[k] += part if 2 * n_dirty <= j.size else np.maximum(totals[k] - part, 0.0)
-        counts[k] += n_dirty

@@ -177,6 +177,8 @@ def diagnose_axis(tau_s, avar, edf, rate_hz: float, n_samples: int, *,
     avar_all = np.asarray(avar, dtype=np.float64)
     edf_all = np.asarray(edf, dtype=np.float64)
     # The same search as every analysis (one model); here each step is also simulated.
+    # Effects are added in core/search/run.py, _Run.forward (screen, then choose: a
+    # sinusoid must also pass the periodogram check, core/search/rules.py).
     search = search_axis(tau_all, avar_all, edf_all, rate_hz, n_samples, raw=raw,
                          raw_rate_hz=raw_rate_hz, unit=unit, base_labels=base_labels,
                          effects=tuple(e for e in (_default_effects(base_labels) if effects

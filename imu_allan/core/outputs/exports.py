@@ -133,7 +133,10 @@ def kalibr_yaml(sources, rate_hz: float, reduce: str = 'max', rostopic: str = '/
     calibration over-confident on it, over-stating only down-weights it); ``'mean'``
     gives the typical axis.  The reported and covering values per axis are comments.
     A key no axis can give is left out with a comment (Kalibr stops on it; 0 it would
-    take).
+    take).  The values come from :func:`report_axes` (the fit's reported N and K,
+    :mod:`imu_allan.core.outputs.reported`) and :func:`cover_axes`; the text is written
+    as imu.yaml by :func:`imu_allan.io.report.write_outputs` (``analyze``, the node's
+    ``~/save``).
 
     Parameters
     ----------

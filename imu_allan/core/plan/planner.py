@@ -7,10 +7,10 @@ expected relative 95 % half-width of every parameter is computed there
 (:class:`imu_allan.core.plan.precision.CurveModel`) and the length at which it falls
 to its target is interpolated in log-log (the widths fall about as L^-1/2 once a term
 is resolved).  The widths are read against the fit: inflated by its dispersion, from
-its present interval on (:func:`as_read`).  A parameter the fit reports as an upper
-bound is planned at its bound: a smaller true value takes longer, so the time is "at
-least".  The grid is shared by the six axes, whose curves share their taus and so the
-quadrature of Sigma.
+its present interval on (:mod:`imu_allan.core.plan.reading`).  A parameter the fit
+reports as an upper bound is planned at its bound: a smaller true value takes longer,
+so the time is "at least".  The grid is shared by the six axes, whose curves share
+their taus and so the quadrature of Sigma.
 """
 
 import math
@@ -18,15 +18,15 @@ from typing import Collection, Mapping, Sequence
 
 import numpy as np
 
-from imu_allan.core.fit.axis import profile_threshold
 from imu_allan.core.fit.covariance import CurveCovariance
 from imu_allan.core.noise.terms import TERMS
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.plan.precision import (_avar, _jacobian, Component, CurveModel,
-                                           expected_widths, fit_taus, interval_threshold,
-                                           relative_width, Z95)
+                                           expected_widths, fit_taus)
+from imu_allan.core.plan.reading import as_read, crossing, inflation, present_width
 from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
-from imu_allan.core.plan.separation import LAMBDA_SEPARATED, mismatch, rivals, scaled, SLOW_PROCESS
+from imu_allan.core.plan.separation import (LAMBDA_SEPARATED, mismatch, ORDERING, ordering,
+                                            rivals, scaled, SLOW_PROCESS)
 from imu_allan.core.search.choice import SLOWER_PROCESS_RIVAL
 
 #: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise).
@@ -112,21 +112,6 @@ def length_grid(duration_s: float) -> np.ndarray:
     return np.array(first + later)
 
 
-def _crossing(lengths: np.ndarray, widths: np.ndarray, target: float) -> float:
-    """First length where the width falls to ``target`` (log-log interpolation)."""
-    ok = widths <= target
-    if not ok.any():
-        return math.inf
-    j = int(np.argmax(ok))
-    if j == 0:
-        return float(lengths[0])
-    w0, w1 = widths[j - 1], widths[j]
-    if not math.isfinite(w0):
-        return float(lengths[j])
-    f = math.log(w0 / target) / math.log(w0 / w1)
-    return float(math.exp(math.log(lengths[j - 1]) + f * math.log(lengths[j] / lengths[j - 1])))
-
-
 def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
               targets: Mapping[str, float] | None = None,
               present: Mapping[str, Mapping] | None = None,
@@ -157,7 +142,7 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
         plans say how long until a record tells the two apart.
     inflations : mapping of str to float, optional
         Per axis, the factor on the expected widths' z for the fit's dispersion
-        (:func:`inflation`; 1 when absent).
+        (:func:`~imu_allan.core.plan.reading.inflation`; 1 when absent).
 
     Returns
     -------
@@ -227,96 +212,14 @@ def plan_axes(models: Mapping[str, tuple], rate_hz: float, duration_s: float,
     return out
 
 
-def inflation(chi2: float, dof: int) -> float:
-    """
-    Factor on the expected intervals' z for a fit whose curve is more dispersed than its model.
-
-    The fit widens its profile intervals where its model explains the curve worse than
-    Sigma allows (J / dof > 1: a real sensor's curve, an effect the model lacks):
-    :func:`imu_allan.core.fit.axis.profile_threshold`.  The expected widths assume the
-    dispersion a correct model shows on average (:func:`interval_threshold`); a longer
-    record of the same sensor keeps the excess, so its widths are sinh(f z sd),
-    f = sqrt(threshold of the fit / threshold expected), at least 1.
-
-    Parameters
-    ----------
-    chi2 : float
-        The fit's GLS chi-square J_min [-].
-    dof : int
-        Its degrees of freedom.
-
-    Returns
-    -------
-    float
-        f >= 1 [-]; 1 without degrees of freedom or a finite chi-square.
-
-    """
-    if dof <= 0 or not math.isfinite(chi2):
-        return 1.0
-    return math.sqrt(max(1.0, profile_threshold(chi2, dof) / interval_threshold(dof)))
-
-
-def inflated(widths: np.ndarray, factor: float) -> np.ndarray:
-    """Multiply the log-scale z of expected relative half-widths by ``factor``."""
-    return np.sinh(factor * np.arcsinh(widths))
-
-
-def as_read(widths: np.ndarray, lengths_s: np.ndarray, factor: float, duration_s: float,
-            now: float) -> np.ndarray:
-    """
-    Read expected widths as the plan does: the fit's dispersion, the present excess.
-
-    The widths are inflated by the fit's dispersion (:func:`inflated`), which a longer
-    record keeps.  The present interval differs from that expected width by the
-    profile's departure from its quadratic approximation and by the scatter of one
-    record's fit; both are of the order of the standard deviation relative to one, so
-    the excess on the log scale, asinh(now) / asinh(expected now) - 1, is carried
-    forward shrinking as sd, (duration / L)^(1/2).  The plan then starts at the
-    present width and joins the expected widths as the record grows.  (Carrying the
-    whole present ratio forward, as the plan once did, put 70 rather than 79 of 82
-    simulated plans within 1.5x of the record length needed: docs/planning.md.)
-
-    Parameters
-    ----------
-    widths : np.ndarray
-        Shape (n,), expected relative half-widths at ``lengths_s`` [-].
-    lengths_s : np.ndarray
-        Shape (n,), record lengths [s], the first the present one.
-    factor : float
-        :func:`inflation` of the fit [-].
-    duration_s : float
-        Length of the present record [s] (0 or less: no record, no present width).
-    now : float
-        The present relative half-width [-] (not finite: no excess carried).
-
-    Returns
-    -------
-    np.ndarray
-        Shape (n,), the widths as read [-].
-
-    """
-    out = inflated(np.asarray(widths, float), factor)
-    if not (duration_s > 0 and out.size and math.isfinite(now) and now > 0
-            and math.isfinite(out[0]) and out[0] > 0):
-        return out
-    excess = math.asinh(now) / math.asinh(float(out[0])) - 1.0
-    return np.sinh(np.arcsinh(out) * (1.0 + excess * np.sqrt(duration_s / lengths_s)))
-
-
-def _present_width(p) -> float:
-    """Relative half-width of a reported parameter: inf unless an estimate, NaN if absent."""
-    if p is None:
-        return math.nan
-    return relative_width(p.value, p.ci95) if p.kind == 'estimate' else math.inf
-
-
 def _all_met(widths: dict, lams: list, targets, lengths_s: np.ndarray, factor: float,
              duration_s: float, present: Mapping) -> bool:
     """
     Whether at the last length evaluated every target is met, every rival rejected.
 
     ``widths`` maps each variant ('' the point model) to its rows at ``lengths_s``; the
-    point model's widths are read as the plan reads them (:func:`as_read`).
+    point model's widths are read as the plan reads them
+    (:func:`~imu_allan.core.plan.reading.as_read`).
     """
     for key, rows in widths.items():
         if not rows:
@@ -325,7 +228,7 @@ def _all_met(widths: dict, lams: list, targets, lengths_s: np.ndarray, factor: f
             col = np.array([row[name] for row in rows])
             if key == '':
                 col = as_read(col, lengths_s, factor, duration_s,
-                              _present_width(present.get(name)))
+                              present_width(present.get(name)))
             if col[-1] > target_of(name, targets):
                 return False
     return all(v >= LAMBDA_SEPARATED for v in (lams[-1].values() if lams else ()))
@@ -334,13 +237,13 @@ def _all_met(widths: dict, lams: list, targets, lengths_s: np.ndarray, factor: f
 def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams: list,
                duration_s: float, targets, present, factor: float) -> AxisPlan:
     """One axis' plan from the expected widths of its parameters on the length grid."""
-    order_lam = _ordering(columns, values, present)
+    order_lam = ordering(columns, values, present)
     if order_lam is not None:
         lams = [{**row, ORDERING: lam} for row, lam in zip(lams, order_lam)]
     seps = []
     for q in sorted({q for row in lams for q in row}):
         lam = np.array([row.get(q, 0.0) for row in lams])
-        when = _crossing(grid, 1.0 / np.maximum(lam, 1e-300), 1.0 / LAMBDA_SEPARATED)
+        when = crossing(grid, 1.0 / np.maximum(lam, 1e-300), 1.0 / LAMBDA_SEPARATED)
         lam_now = (float(np.interp(math.log(duration_s), np.log(grid), lam))
                    if duration_s > 0 else math.nan)
         # The fit has the last word on the present record: it found the levels tied.
@@ -354,7 +257,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
     for name, col in columns.items():
         target = target_of(name, targets)
         p = (present or {}).get(name)
-        now = _present_width(p) if duration_s > 0 else math.nan
+        now = present_width(p) if duration_s > 0 else math.nan
         if name not in bounded:
             col = as_read(col, grid, factor, duration_s, now)
         if duration_s > 0 and p is None:
@@ -367,7 +270,7 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
             kind = 'met'
         else:
             kind = 'predicted'
-        when = _crossing(grid, col, target)
+        when = crossing(grid, col, target)
         if kind == 'met':
             when = duration_s
         elif kind == 'at_least' and duration_s > 0 and when <= duration_s:
@@ -388,37 +291,8 @@ def _axis_plan(columns: dict, values: dict, bounded: set, grid: np.ndarray, lams
     return AxisPlan(float(duration_s), tuple(params), tuple(seps))
 
 
-#: Question of which Gauss-Markov process is the bias instability (:func:`_ordering`).
-ORDERING = 'which process is the bias instability'
 #: Parameters the fit leaves unidentified (or bounded) until a question is answered.
 _WAITS = {'T_B': (ORDERING, SLOW_PROCESS), 'K': (SLOW_PROCESS,)}
-
-
-def _ordering(columns: dict, values: dict, present) -> np.ndarray | None:
-    """
-    Non-centrality per length of the test that orders B against a tied process's B.
-
-    Where the fit reports T_B as not identified because another Gauss-Markov process's
-    B interval reaches B's (:func:`imu_allan.core.search.choice.ambiguous_bias`), T_B is
-    known once the two levels are ordered.  Their 95 % intervals are ln B +- asinh(w)
-    (w the relative half-width); they part when |ln(B / B_other)| exceeds the sum of
-    the two, the test at correlation -1 the fit uses.  As a non-centrality on the scale
-    of the other questions, lambda = (Z95 ln(B / B_other) / (asinh(w) + asinh(w_other)))^2
-    (3.84 where the intervals touch); the least over the tied processes.  None when
-    no process is tied.
-    """
-    b, t_b = (present or {}).get('B'), (present or {}).get('T_B')
-    if b is None or t_b is None or t_b.kind != 'not_identified' or 'B' not in columns:
-        return None
-    lams = []
-    for name, col in columns.items():
-        other = present.get(name)
-        if (not name.endswith('.B') or other is None or other.kind != 'estimate'
-                or other.ci95[1] < b.ci95[0]):
-            continue
-        gap = Z95 * abs(math.log(values['B'] / values[name]))
-        lams.append((gap / (np.arcsinh(columns['B']) + np.arcsinh(col))) ** 2)
-    return np.min(lams, axis=0) if lams else None
 
 
 def noise_components(noise: AxisNoise) -> list:

@@ -4,7 +4,9 @@ How long a record must be to tell two explanations of the long-tau curve apart.
 The rivals are a rate ramp against a random walk (both raise the curve at long tau),
 one Gauss-Markov process against two, and, where the fit could not tell them apart
 (:func:`imu_allan.core.search.choice.random_walk_or_slow_process`), a random walk
-against a slower Gauss-Markov process that turns over inside the record.  For a record
+against a slower Gauss-Markov process that turns over inside the record; and where the
+fit could not tell which of two tied Gauss-Markov processes is the bias instability,
+how long until their levels are ordered (:func:`ordering`).  For a record
 of a given length the curve the fitted model predicts is compared with the best rival
 curve (the rival model fitted to it by GLS at the model's own Sigma); the mismatch
 delta^T Sigma^-1 delta is the non-centrality lambda of the likelihood-ratio statistic
@@ -21,7 +23,7 @@ from scipy.optimize import least_squares
 
 from imu_allan.core.noise.shapes import GM_PEAK_TAU
 from imu_allan.core.noise.terms import base_name, TERMS
-from imu_allan.core.plan.precision import _avar, _log_params, Component
+from imu_allan.core.plan.precision import _avar, _log_params, Component, Z95
 
 #: Non-centrality at which a 5 % test on one degree of freedom has 90 % power.
 LAMBDA_SEPARATED = 10.5
@@ -29,6 +31,8 @@ LAMBDA_SEPARATED = 10.5
 
 #: Question of the random walk against a slower process (see :func:`rivals`).
 SLOW_PROCESS = 'random walk or slower process'
+#: Question of which Gauss-Markov process is the bias instability (:func:`ordering`).
+ORDERING = 'which process is the bias instability'
 
 
 def rivals(comps: Sequence[Component], tau_max_s: float,
@@ -126,4 +130,32 @@ def scaled(comps: Sequence[Component], scale: float) -> list:
     return [Component(c.label, c.coef / scale, c.phi) for c in comps]
 
 
-__all__ = ['LAMBDA_SEPARATED', 'mismatch', 'rivals', 'scaled', 'SLOW_PROCESS', 'TERMS']
+def ordering(columns: dict, values: dict, present) -> np.ndarray | None:
+    """
+    Return the non-centrality per length of the test that orders B against a tied B.
+
+    Where the fit reports T_B as not identified because another Gauss-Markov process's
+    B interval reaches B's (:func:`imu_allan.core.search.choice.ambiguous_bias`), T_B is
+    known once the two levels are ordered.  Their 95 % intervals are ln B +- asinh(w)
+    (w the relative half-width); they part when |ln(B / B_other)| exceeds the sum of
+    the two, the test at correlation -1 the fit uses.  As a non-centrality on the scale
+    of the other questions, lambda = (Z95 ln(B / B_other) / (asinh(w) + asinh(w_other)))^2
+    (3.84 where the intervals touch); the least over the tied processes.  None when
+    no process is tied.
+    """
+    b, t_b = (present or {}).get('B'), (present or {}).get('T_B')
+    if b is None or t_b is None or t_b.kind != 'not_identified' or 'B' not in columns:
+        return None
+    lams = []
+    for name, col in columns.items():
+        other = present.get(name)
+        if (not name.endswith('.B') or other is None or other.kind != 'estimate'
+                or other.ci95[1] < b.ci95[0]):
+            continue
+        gap = Z95 * abs(math.log(values['B'] / values[name]))
+        lams.append((gap / (np.arcsinh(columns['B']) + np.arcsinh(col))) ** 2)
+    return np.min(lams, axis=0) if lams else None
+
+
+__all__ = ['LAMBDA_SEPARATED', 'mismatch', 'ordering', 'ORDERING', 'rivals', 'scaled',
+           'SLOW_PROCESS', 'TERMS']
