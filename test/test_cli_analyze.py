@@ -29,12 +29,12 @@ from imu_allan import AXES
 from imu_allan.cli import main
 from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_imu
+from imu_allan.core.outputs.short_record import SHORT_RECORD
 from imu_allan.io import inputs
 from imu_allan.io.bag_writer import serialize_imu, write_imu_bag
 from imu_allan.io.csv_io import write_csv
 from imu_allan.io.inputs import open_input, stream_input
 from imu_allan.io.progress import Progress
-from imu_allan.pipeline.analysis import SHORT_RECORD
 from imu_allan.pipeline.hygiene import SessionConfig
 
 REPO = Path(__file__).resolve().parents[1]

@@ -21,10 +21,10 @@ from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.noise.unit_check import (G0_M_S2, GYRO_BIAS_MAX, GYRO_WHITE_MAX,
                                              parse_units, unit_warnings)
+from imu_allan.core.outputs.short_record import SHORT_RECORD
 from imu_allan.errors import InputError
 from imu_allan.io.bag_writer import write_imu_bag
 from imu_allan.io.csv_io import write_csv
-from imu_allan.pipeline.analysis import SHORT_RECORD
 
 REPO = Path(__file__).resolve().parents[1]
 RATE_HZ = 100.0

@@ -27,6 +27,7 @@ from imu_allan.core.outputs.covering import cover_axes, default_horizon, DEFAULT
 from imu_allan.core.outputs.exports import driver_yaml, kalibr_yaml, robot_localization_yaml
 from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
 from imu_allan.core.outputs.reported import report_axes
+from imu_allan.core.outputs.short_record import SHORT_RECORD, short_record_warnings
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import worker_pool
@@ -439,75 +440,6 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     # and so is a consumer value the record cannot determine.
     return replace(result, warnings=result.warnings + tuple(result.trust_warnings())
                    + tuple(short_record_warnings(fits, plans, float(session.duration_s))))
-
-
-#: What consumers call N, K and B of a sensor (Kalibr keys; B is the Kalman b_gm state).
-CONSUMER_NAMES = {('gyro', 'N'): 'gyroscope_noise_density (N)',
-                  ('gyro', 'K'): 'gyroscope_random_walk (K)',
-                  ('gyro', 'B'): 'the gyroscope bias instability B (kalman_qr.yaml b_gm)',
-                  ('accel', 'N'): 'accelerometer_noise_density (N)',
-                  ('accel', 'K'): 'accelerometer_random_walk (K)',
-                  ('accel', 'B'): 'the accelerometer bias instability B (kalman_qr.yaml b_gm)'}
-#: The start of each warning of :func:`short_record_warnings` (consumer files carry them).
-SHORT_RECORD = 'record too short'
-
-
-def short_record_warnings(fits: dict, plans: dict, duration_s: float) -> list:
-    """
-    Name each consumer value the record cannot determine, and the length that would.
-
-    A value is undetermined on an axis whose parameter is not an estimate (an upper
-    bound, or not identified): the consumer files then carry a bound.  The length is
-    the plan's record length to the parameter's target (an upper bound's plan is a
-    lower limit).
-
-    Parameters
-    ----------
-    fits : dict of str to AxisFit or None
-        The fits by axis.
-    plans : dict of str to imu_allan.core.plan.AxisPlan
-        The plans by axis (empty when not planned).
-    duration_s : float
-        Length of the record [s].
-
-    Returns
-    -------
-    list of str
-        One line per sensor and parameter (N, K, B) with an undetermined axis.
-
-    """
-    from imu_allan.core.plan.result import hours
-    out = []
-    for (sensor, sym), name in CONSUMER_NAMES.items():
-        axes = [a for a in AXES if a.startswith(sensor) and fits.get(a) is not None]
-        params = {a: fits[a].optimised.get(sym) for a in axes}
-        open_axes = [a for a, p in params.items() if p is None or p.kind != 'estimate']
-        if not open_axes:
-            continue
-        bounds = [p.value for a, p in params.items() if a in open_axes and p is not None
-                  and p.kind == 'upper_bound' and math.isfinite(p.value)]
-        what = (f'only a 95 % upper bound (up to {max(bounds):.3g} {params[open_axes[0]].unit}'
-                ', what the files carry)' if bounds else 'not identified')
-        estimated = [a for a in axes if a not in open_axes]
-        line = (f'{SHORT_RECORD} ({hours(duration_s)}) to determine {name}: '
-                f'{what} on {", ".join(open_axes)}'
-                + (f' ({", ".join(estimated)} estimated)' if estimated else ''))
-        planned = [plans[a].param(sym) for a in open_axes if a in plans]
-        planned = [q for q in planned if q is not None]
-        if planned and len(planned) == len(open_axes):
-            worst = max(planned, key=lambda q: q.time_s if not math.isnan(q.time_s)
-                        else math.inf)
-            at_least = any(q.kind in ('at_least', 'open') for q in planned)
-            if worst.kind == 'open' or math.isnan(worst.time_s):
-                line += '; a longer record (this one cannot say how long) would'
-            else:
-                line += (f'; {"at least " if at_least else ""}{hours(worst.time_s)} '
-                         f'would (the time the plan gives to +-{100 * worst.target:.0f} %)')
-        else:
-            line += ('; a longer record would (plan it: imu-allan plan, or analyze without '
-                     '--no-plan)')
-        out.append(line)
-    return out
 
 
 def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:
