@@ -21,7 +21,7 @@ from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.outputs.covering import N_MARGIN
 from imu_allan.core.outputs.reported import report_axes, report_axis
-from imu_allan.io.report import kalman_yaml, summary_text
+from imu_allan.io.report import distinct_notes, kalman_yaml, summary_text
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.hygiene import SessionConfig
 from imu_allan.pipeline.session import Session
@@ -139,3 +139,35 @@ def test_the_summary_marks_bounds_both_ways(result):
         fit, optimised=dict(fit.optimised, T_B=t_b, K=k))))
     line = changed.summary_line('gyro_x')
     assert 'T_B > ' in line and 'K < ' in line
+
+
+def test_the_summary_gives_each_estimate_its_interval_and_a_floor_only_where_measured(result):
+    for axis in AXES:
+        report = result.reports[axis]
+        parts = dict(part.split(' ', 1) for part in
+                     result.summary_line(axis).split(': ', 1)[1].split('; '))
+        for sym in ('N', 'B', 'K', 'T_B'):
+            p = report.params[sym]
+            text = parts[sym]
+            if p.kind == 'estimate':
+                lo, hi = (float(v) for v in text.split('[')[1].split(']')[0].split(', '))
+                assert lo <= float(text.split()[0]) <= hi, (axis, sym, text)
+            else:
+                assert text[0] == {'upper_bound': '<', 'lower_bound': '>',
+                                   'not_identified': 'n'}[p.kind], (axis, sym, text)
+        # The gyro N also in a datasheet's unit (deg/s/sqrt(Hz)).
+        if axis in GYRO_AXES:
+            assert f'({math.degrees(report.params["N"].value):.3g} deg/s/sqrt(Hz))' in parts['N']
+        floor = report.floor
+        assert ('floor' in parts.get('ADEV', '')) == (floor is not None)
+        if floor is not None:
+            assert floor.ci95[1] / floor.ci95[0] <= 2.0 and floor.tau_s < result.curve.tau_s[-1]
+    text = summary_text(result)
+    assert "'<' an upper bound" in text and text.rstrip().splitlines()[-1].startswith('B conv')
+
+
+def test_notes_are_told_once_whatever_their_figures():
+    notes = ['sinusoid at 10.1 Hz (A 0.0076) fits the curve; not added',
+             'sinusoid at 10.1 Hz (A 0.0079) fits the curve; not added',
+             'K: its 95 % interval reaches 0']
+    assert distinct_notes(notes) == [notes[0], notes[2]]

@@ -62,3 +62,11 @@ RAMP_BLOCKS = 256
 #: Likelihood-ratio statistic a ramp must exceed: chi2(1) at about 1e-5, since the
 #: search asks this of every axis (few false ramps over a fleet of axes).
 RAMP_LR_MIN = 19.5
+
+# ------------------------------------------------------------------ what is reported
+
+#: The lowest ADEV (a datasheet's in-run bias stability) is reported only where the
+#: curve measures it: an interior minimum (the curve rises after it) whose 95 % interval
+#: spans at most this factor (hi / lo; about 17 equivalent degrees of freedom).  Read
+#: at the last taus, where a 3 h record's floor interval spans 70x, it told nothing.
+FLOOR_SPREAD_MAX = 2.0

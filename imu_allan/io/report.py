@@ -15,6 +15,7 @@ by :meth:`imu_allan.pipeline.analysis.AnalysisResult.kalibr_yaml`).
 from concurrent.futures import Executor
 import json
 from pathlib import Path
+import re
 
 import yaml
 
@@ -75,12 +76,15 @@ def result_json(result: AnalysisResult) -> str:
 def summary_text(result: AnalysisResult) -> str:
     """Return the human summary: one line per axis plus the input warnings."""
     lines = [f'imu_allan result for {result.source or "input"}: {result.n_samples} samples, '
-             f'{result.duration_s / 3600:.3f} h at {result.rate_hz:.3f} Hz',
-             f'B convention: {B_CONVENTION}', '']
+             f'{result.duration_s / 3600:.3f} h at {result.rate_hz:.3f} Hz', '']
     lines += result.summary_lines()
-    for axis, fit in result.fits.items():
-        if fit is not None and fit.notes:
-            lines += [f'  {axis} note: {n}' for n in fit.notes]
+    lines += ['', "[lo, hi]: the 95 % interval; '<' an upper bound (95 %), '>' a lower bound; "
+              'n/a: not identified; ADEV floor: the lowest Allan deviation (what a '
+              'datasheet calls in-run bias stability), shown where the curve measures it']
+    notes = [f'  {axis}: {n}' for axis, fit in result.fits.items() if fit is not None
+             for n in distinct_notes(fit.notes)]
+    if notes:
+        lines += ['', 'notes (why a value is a bound, what the model leaves open):'] + notes
     lines += [''] + result.covering_lines()
     if ekf_advice(result):
         lines += ['', ekf_advice(result)]
@@ -91,7 +95,24 @@ def summary_text(result: AnalysisResult) -> str:
             lines += [f'{axis}: {plan.progress_line()}'] + plan.table_lines()
     if result.warnings:
         lines += ['', 'warnings:'] + [f'  - {w}' for w in result.warnings]
+    lines += ['', f'B convention: {B_CONVENTION}']
     return '\n'.join(lines) + '\n'
+
+
+def distinct_notes(notes) -> list:
+    """
+    Return the notes without repeats: one per wording, whatever its numbers.
+
+    The search may note the same finding twice with other figures (a sinusoid near
+    10.1 Hz tried at two amplitudes); the first is kept.
+    """
+    seen, out = set(), []
+    for note in notes:
+        key = re.sub(r'[-+]?\d[\d.e+-]*', '#', note)
+        if key not in seen:
+            seen.add(key)
+            out.append(note)
+    return out
 
 
 def kalman_yaml(result: AnalysisResult) -> str:

@@ -39,6 +39,7 @@ from imu_allan.core.allan.edf import curve_k_bound
 from imu_allan.core.noise.model import avar_model
 from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise
+from imu_allan.core.rules import FLOOR_SPREAD_MAX
 from imu_allan.errors import InputError
 
 #: The parameters every axis reports, in the order people quote them.
@@ -68,6 +69,29 @@ class ConsumerValue(NamedTuple):
     value: float
     kind: str
     reason: str = ''
+
+
+class Floor(NamedTuple):
+    """
+    The lowest point of the measured ADEV: a datasheet's in-run bias stability.
+
+    Attributes
+    ----------
+    adev : float
+        ADEV at the minimum [unit].
+    ci95 : tuple of float
+        Its 95 % interval (NIST SP 1065 sec. 5.3) [unit].
+    tau_s : float
+        Where it lies [s].
+    b_floor : float
+        The IEEE Std 952 read-off of B, adev / 0.664 [unit].
+
+    """
+
+    adev: float
+    ci95: tuple
+    tau_s: float
+    b_floor: float
 
 
 class GaussMarkovState(NamedTuple):
@@ -117,6 +141,9 @@ class AxisReport:
     trust : tuple of str
         Why the fitted numbers were replaced by conservative ones read off the curve
         (empty when they are used as fitted).
+    floor : Floor or None
+        The lowest ADEV where the curve measures it (:data:`FLOOR_SPREAD_MAX`), else
+        None: the summary then shows no floor at all.
     source : object
         The AxisFit or AxisNoise this report was decided from (the covering pair reads
         the whole model's Allan variance from it).
@@ -130,6 +157,7 @@ class AxisReport:
     gauss_markov: GaussMarkovState | None
     left_out: tuple = ()
     trust: tuple = ()
+    floor: Floor | None = None
     source: object = field(default=None, repr=False, compare=False)
 
     @property
@@ -307,6 +335,20 @@ def _params_of_noise(noise: AxisNoise) -> dict:
     return out
 
 
+def _floor(fit) -> Floor | None:
+    """The lowest ADEV of a fit's curve where it is measured (:data:`FLOOR_SPREAD_MAX`)."""
+    b = getattr(fit, 'b_floor', None)
+    if b is None or not b.ci95[0] > 0 or b.ci95[1] / b.ci95[0] > FLOOR_SPREAD_MAX:
+        return None
+    # b_floor is ADEV_min / 0.664 over the taus past the sensor's filter (fit.trust).
+    adev = np.sqrt(np.maximum(np.asarray(fit.avar_meas, float), 0.0))
+    j = int(np.argmin(np.abs(adev / 0.664 - b.value)))
+    if j >= adev.size - 1:          # still falling at the last tau: no floor measured
+        return None
+    return Floor(float(adev[j]), (0.664 * b.ci95[0], 0.664 * b.ci95[1]),
+                 float(fit.tau_s[j]), float(b.value))
+
+
 def report_axis(source, axis: str = '') -> AxisReport:
     """
     Decide what every output reports for one axis (the rules of the module docstring).
@@ -346,7 +388,8 @@ def report_axis(source, axis: str = '') -> AxisReport:
                               'estimate')
     return AxisReport(axis=axis, params=params, white=_white(params, model, source),
                       random_walk=_random_walk(params, model, source), gauss_markov=gm,
-                      left_out=_left_out(model, params, gm), trust=trust, source=source)
+                      left_out=_left_out(model, params, gm), trust=trust,
+                      floor=_floor(source), source=source)
 
 
 def report_axes(sources) -> dict:
