@@ -90,8 +90,8 @@ def plot_result(result, base, formats: tuple = FIGURE_FORMATS) -> list:
 
     """
     title = (f'Allan deviation: {result.source or "input"}  ({result.n_samples} samples, '
-             f'{result.duration_s / 3600:.2f} h at {result.rate_hz:.1f} Hz; dotted: terms, '
-             'dashed: beyond the fitted taus)')
+             f'{result.duration_s / 3600:.2f} h at {result.rate_hz:.1f} Hz; dotted: white, '
+             'bias, drift and periodic terms; dashed: beyond the fitted taus)')
     fig = adev_figure(result.curve, result.fits, title, figsize=(13, 5.2))
     return save_figure(fig, Path(base), tight=False, formats=formats)
 
@@ -127,6 +127,51 @@ def adev_rgb(curve, fits: dict, title: str, width_px: int = 1040,
     fig.set_dpi(dpi)
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
+
+
+#: The dotted lines of the figure: each term's group (the rest are "bias").
+_GROUPS = {'white': 'white', 'filtered_white': 'white', 'quantization': 'white',
+           'random_walk': 'drift', 'rate_ramp': 'drift', 'sinusoid': 'periodic'}
+#: Where N, B and K are read on an ADEV curve (IEEE Std 952 C.1): the white line at
+#: tau = 1 s, 0.664 B at the floor, the random-walk line at tau = 3 s.
+_MARKS = {'N': '^', 'B': 's', 'K': 'v'}
+
+
+def effect_group(term: str) -> str:
+    """Return the group a term is drawn in: white, bias, drift or periodic."""
+    return _GROUPS.get(term, 'bias')
+
+
+def _envelope(avar: np.ndarray, width: int = 15) -> np.ndarray:
+    """Upper envelope of a sinusoid's comb of nulls: the largest value in a moving window."""
+    if avar.size < width:
+        return avar
+    padded = np.pad(avar, width // 2, mode='edge')
+    return np.lib.stride_tricks.sliding_window_view(padded, width).max(axis=1)
+
+
+def _mark_nbk(ax, fit, colour: str) -> None:
+    """Mark where N, B and K are read, for the estimates (hollow: a bound)."""
+    tau_lo, tau_hi = float(fit.tau_s.min()), float(fit.tau_s.max())
+    for sym, marker in _MARKS.items():
+        p = fit.optimised.get(sym)
+        if p is None or not np.isfinite(p.value) or p.kind == 'not_identified':
+            continue
+        if sym == 'N':
+            at = (1.0, p.value)
+        elif sym == 'K':
+            at = (3.0, p.value)
+        else:
+            t_b = fit.optimised.get('T_B')
+            tau = 1.89 * t_b.value if t_b is not None and np.isfinite(t_b.value) else None
+            if tau is None:
+                i = int(np.argmin(fit.avar_meas))
+                tau = float(fit.tau_s[i])
+            at = (tau, 0.664 * p.value)
+        if not tau_lo / 10 <= at[0] <= tau_hi * 10:
+            continue
+        ax.loglog(*at, marker, ms=7, color=colour, mec='black', mew=0.6,
+                  mfc=colour if p.kind == 'estimate' else 'none')
 
 
 def adev_figure(curve, fits: dict, title: str, figsize: tuple) -> Figure:
@@ -176,21 +221,24 @@ def adev_figure(curve, fits: dict, title: str, figsize: tuple) -> Figure:
             inside = (tau_fine >= lo * 0.999) & (tau_fine <= hi * 1.001)
             model = np.sqrt(fit.avar_at(tau_fine))
             ax.loglog(tau_fine[inside], model[inside], '-', color=colour, lw=1.4,
-                      label=f'{axis} model ({", ".join(fit.terms)})')
+                      label=f'{axis} model')
             for part in (tau_fine < lo, tau_fine > hi):
                 if part.any():
                     ax.loglog(tau_fine[part], model[part], '--', color=colour, lw=1.0,
                               alpha=0.7)
+            # One dotted line per group of terms, not one per term: a comb of sinusoid
+            # curves and a label per term hid the curve.
+            groups: dict = {}
             for label, c_si, phi in fit.components:
+                group = effect_group(base_name(label))
                 avar = c_si * TERMS[base_name(label)].shape(tau_fine[inside], *phi)
+                groups[group] = groups.get(group, 0.0) + avar
+            for group, avar in groups.items():
+                if group == 'periodic':
+                    avar = _envelope(avar)
                 ax.loglog(tau_fine[inside], np.sqrt(avar), ':', color=colour, lw=0.9,
-                          alpha=0.8)
-                k = int(np.argmax(avar))
-                # A term that peaks at the right end (random walk) is labelled leftwards,
-                # so that its name stays inside the figure.
-                ax.annotate(label, (tau_fine[inside][k], np.sqrt(avar[k])), fontsize=6,
-                            color=colour, alpha=0.8,
-                            ha='right' if k > 0.8 * (avar.size - 1) else 'left')
+                          alpha=0.7)
+            _mark_nbk(ax, fit, colour)
         ax.set_xlabel('averaging time tau [s]')
         ax.set_ylabel(ylabel)
         ax.grid(True, which='major', alpha=0.3)
@@ -198,6 +246,10 @@ def adev_figure(curve, fits: dict, title: str, figsize: tuple) -> Figure:
             # The measured curves set the range; a term far below them is cut off.
             ax.set_ylim(shown[0] / 30.0, shown[1] * 3.0)
         ax.legend(fontsize=6, loc='lower left')
+    panels[0].plot([], [], 'k^', ms=6, label='N: white line at 1 s')
+    panels[0].plot([], [], 'ks', ms=6, label='B: 0.664 B at the floor')
+    panels[0].plot([], [], 'kv', ms=6, label='K: random-walk line at 3 s (hollow: a bound)')
+    panels[0].legend(fontsize=6, loc='lower left')
     fig.suptitle(title, fontsize=10)
     # A fixed layout: every analysis draws this figure, and cropping costs a draw.
     fig.subplots_adjust(left=0.06, right=0.985, bottom=0.1, top=0.9, wspace=0.2)

@@ -21,11 +21,12 @@ from imu_allan.core.allan.hold import held_fit_curve
 from imu_allan.core.allan.raw import raw_evidence
 from imu_allan.core.fit.result import AxisFit, json_floats
 from imu_allan.core.noise.unit_check import unit_warnings
-from imu_allan.core.noise.units import format_quoted, quoted, sensor_of
+from imu_allan.core.noise.units import format_quoted, sensor_of
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.outputs.covering import cover_axes, default_horizon, DEFAULT_HORIZON_S
 from imu_allan.core.outputs.exports import driver_yaml, kalibr_yaml, robot_localization_yaml
 from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
+from imu_allan.core.outputs.lines import axis_line
 from imu_allan.core.outputs.reported import report_axes
 from imu_allan.core.outputs.short_record import SHORT_RECORD, short_record_warnings
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
@@ -234,40 +235,8 @@ class AnalysisResult:
         return level, message, values + base
 
     def summary_line(self, axis: str) -> str:
-        """
-        One human line: N, B, K, T_B with their 95 % intervals in the units people quote.
-
-        An estimate reads ``value unit [lo, hi]``, an upper bound ``< bound``, a lower
-        bound ``> bound``; gyro N also in a datasheet's deg/s/sqrt(Hz); the lowest ADEV
-        (a datasheet's in-run bias stability) only where the curve measures it
-        (:class:`imu_allan.core.outputs.reported.Floor`).
-        """
-        fit = self.fits.get(axis)
-        if fit is None:
-            return f'{axis}: no usable noise (frozen or constant axis)'
-        sensor = sensor_of(axis)
-        report = self.reports[axis]
-        parts = []
-        for sym in _CORE:
-            p = report.params.get(sym)
-            if p is None or p.kind == 'not_identified' or not math.isfinite(p.value):
-                parts.append(f'{sym} n/a')
-                continue
-            text = _quoted(sym, sensor, p.value)
-            if p.kind == 'estimate':
-                lo, hi = (quoted(sym, sensor, v)[0] for v in p.ci95)
-                text += f' [{lo:.3g}, {hi:.3g}]'
-            mark = {'upper_bound': '< ', 'lower_bound': '> '}.get(p.kind, '')
-            if sym == 'N' and sensor == 'gyro':
-                text += f' ({math.degrees(p.value):.3g} deg/s/sqrt(Hz))'
-            parts.append(f'{sym} {mark}{text}')
-        floor = report.floor
-        if floor is not None:
-            lo, hi = (quoted('B', sensor, v)[0] for v in floor.ci95)
-            parts.append(f'ADEV floor {_quoted("B", sensor, floor.adev)} [{lo:.3g}, {hi:.3g}] '
-                         f'at {floor.tau_s:.3g} s')
-        line = f'{axis}: ' + '; '.join(parts)
-        return line + (' (NOT TRUSTED: conservative values)' if fit.trust else '')
+        """One human line of an axis (:func:`imu_allan.core.outputs.lines.axis_line`)."""
+        return axis_line(axis, self.fits.get(axis), self.reports[axis])
 
     def trust_warnings(self) -> list:
         """One top-level warning per axis whose fit is not trusted (conservative values)."""
@@ -502,11 +471,6 @@ def _trust_problems(fit: AxisFit) -> list:
         elif not (p.ci95[0] > 0 and p.ci95[1] / p.ci95[0] <= max_ratio):
             problems.append(f'{sym} interval still wide')
     return problems
-
-
-def _quoted(sym: str, sensor: str, value_si: float) -> str:
-    """A value in the unit people quote, 3 significant digits: '2.44 deg/sqrt(h)'."""
-    return format_quoted(sym, sensor, value_si, digits=3)
 
 
 def _g(x: float) -> str:

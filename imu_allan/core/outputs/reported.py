@@ -336,7 +336,7 @@ def _params_of_noise(noise: AxisNoise) -> dict:
 
 
 def _floor(fit) -> Floor | None:
-    """The lowest ADEV of a fit's curve where it is measured (:data:`FLOOR_SPREAD_MAX`)."""
+    """Return the lowest ADEV of a fit where the curve measures it (FLOOR_SPREAD_MAX)."""
     b = getattr(fit, 'b_floor', None)
     if b is None or not b.ci95[0] > 0 or b.ci95[1] / b.ci95[0] > FLOOR_SPREAD_MAX:
         return None
