@@ -48,6 +48,23 @@ def shared_dir() -> Path:
     return SHARED
 
 
+@pytest.fixture(scope='session')
+def adis_run1():
+    """
+    Return ADIS16405 run 1 analysed as ``imu-allan analyze`` does, once per test session.
+
+    The docs' figures (test_docs) and the node's path (test_live) compare with it; skips
+    when ../shared is absent.
+    """
+    path = SHARED / 'realdata' / 'adis16405' / 'adis16405_run1.csv.gz'
+    if not path.is_file():
+        pytest.skip('../shared (real recordings and reference data) is not present')
+    from imu_allan.io.inputs import analyze_input
+    from imu_allan.pipeline.hygiene import SessionConfig
+
+    return analyze_input(path, None, SessionConfig(), quiet=True, progress=False)[0]
+
+
 def still_imu(n: int, seed: int = 0, rate_hz: float = 100.0) -> tuple:
     """
     Return a still IMU: white noise of sd STILL_SIGMA, gravity on accel_z.

@@ -190,3 +190,38 @@ def test_dotted_name_check_can_fail():
                      'imu_allan.AXES'}
     assert not _resolves('imu_allan.pipeline.Session')
     assert _resolves('imu_allan.core.fit.fit_axis') and _resolves('imu_allan.AXES')
+
+
+# ------------------------------------------------- figures the docs quote, re-run
+def _doc(name: str) -> str:
+    return (REPO / 'docs' / name).read_text()
+
+
+def test_the_six_run_table_of_offline_md_holds_todays_run_1(adis_run1):
+    # docs/offline.md quotes comparison.md of `imu-allan analyze run1.csv.gz ... run6`:
+    # its run1 column is re-run here (the other runs are the same code on other data).
+    rows = [[c.strip() for c in line.strip().strip('|').split('|')]
+            for line in _doc('offline.md').splitlines()
+            if re.match(r'\s*\| (gyro|accel)_[xyz] \| ', line)]
+    table = [r for r in rows if len(r) == 12]
+    assert len(table) >= 5
+    for axis, sym, unit, run1, *_ in table:
+        p = adis_run1.fits[axis].optimised[sym]
+        assert p.kind == 'estimate' and p.unit == unit, (axis, sym, p)
+        assert float(run1) == pytest.approx(p.value, rel=1e-3), (axis, sym, run1, p.value)
+
+
+def test_the_vins_values_of_outputs_md_are_todays_run_1(adis_run1):
+    text = ' '.join(_doc('outputs.md').split())
+    written = dict(re.findall(r'^(\w+): ([-+.\de]+)', adis_run1.vins_yaml(), re.M))
+    quoted = dict(re.findall(r'`(\w+)`(?: went)? (?:was|from) [-+.\de]+(?: \(the density\))?'
+                             r' (?:and is now|to) ([-+.\de]+)', text))
+    assert set(quoted) == {'gyr_n', 'gyr_w', 'acc_n', 'acc_w'}, quoted
+    for key, value in quoted.items():
+        assert float(value) == pytest.approx(float(written[key]), rel=1e-3), key
+    factors = re.search(r'covering factors ([\d.]+) \(gyro N\), ([\d.]+) \(gyro K\), '
+                        r'([\d.]+) \(accel N\), ([\d.]+) \(accel K\)', text)
+    got = re.findall(r'factor N ([\d.]+), K ([\d.]+)', adis_run1.vins_yaml())
+    (acc_n, acc_k), (gyr_n, gyr_k) = got
+    assert [float(f) for f in factors.groups()] == pytest.approx(
+        [float(gyr_n), float(gyr_k), float(acc_n), float(acc_k)], rel=0.01)

@@ -69,7 +69,8 @@ def test_the_live_input_runs_on_plain_bytes_without_ros():
     assert out.stdout.strip().endswith('ok')
 
 
-def test_the_node_path_gives_analyzes_parameters_on_a_full_adis_run(shared_dir, tmp_path):
+def test_the_node_path_gives_analyzes_parameters_on_a_full_adis_run(shared_dir, tmp_path,
+                                                                    adis_run1):
     # ADIS16405 run 1 (2.78 h at 100 Hz) through the node's own input side (LiveInput:
     # buffer, decode, session, raw copy, as the node's timer drives it) and analyze()
     # as ImuAllanNode._analyze calls it, against `imu-allan analyze` of the same file.
@@ -81,9 +82,7 @@ def test_the_node_path_gives_analyzes_parameters_on_a_full_adis_run(shared_dir, 
 
     from imu_allan.io.bag_writer import serialize_imu
     from imu_allan.io.csv_io import read_csv
-    from imu_allan.io.inputs import analyze_input
     from imu_allan.pipeline.analysis import analyze
-    from imu_allan.pipeline.hygiene import SessionConfig
     from imu_allan.ros.live import LiveInput
     from imu_allan.ros.params import PARAMS
 
@@ -99,7 +98,7 @@ def test_the_node_path_gives_analyzes_parameters_on_a_full_adis_run(shared_dir, 
     assert live.checkpoint(flush=True)                # the node's final save
     view, raw = live.snapshot()
     node = analyze(view, raw=raw)
-    offline, _ = analyze_input(path, None, SessionConfig(), quiet=True, progress=False)
+    offline = adis_run1
     assert node.n_samples == offline.n_samples == data.samples.shape[0]
     for axis in offline.fits:
         got, ref = node.reports[axis], offline.reports[axis]
