@@ -31,6 +31,8 @@ from imu_allan.pipeline.workers import start_workers
 CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
 #: Samples handed to the Session at a time for CSV input.
 CSV_BLOCK = 65536
+#: The CSV column of the temperature [degC] (docs/offline.md, pipeline/thermal.py).
+TEMPERATURE_COLUMN = 'temperature'
 
 
 # --------------------------------------------------------------------------------------
@@ -172,18 +174,20 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
         from imu_allan.io.csv_io import read_csv
         if path.is_dir():
             raise InputError(f'{path}: is a directory, not a CSV file')
-        data = read_csv(path, columns=list(AXES))
+        data = read_csv(path, columns=list(AXES), optional=[TEMPERATURE_COLUMN])
         if data.t_s is None:
             raise InputError(f'{path}: a t column (seconds) is needed for analyze')
         # The declared time unit applies before nanoseconds (ms since the epoch in ns
         # would overflow int64).
         t_s = data.t_s * units.time_scale(1.0) if units is not None else data.t_s
         stamp_ns = np.round(t_s * 1e9).astype(np.int64)
-        samples = _to_si(data.samples, units)
+        samples = _to_si(data.samples[:, :len(AXES)], units)
+        temp_c = data.samples[:, len(AXES)] if len(data.columns) > len(AXES) else None
 
         def csv_blocks():
             for k in range(0, stamp_ns.size, CSV_BLOCK):
-                yield stamp_ns[k:k + CSV_BLOCK], samples[k:k + CSV_BLOCK]
+                yield stamp_ns[k:k + CSV_BLOCK], samples[k:k + CSV_BLOCK], \
+                    None if temp_c is None else temp_c[k:k + CSV_BLOCK]
         return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
     from imu_allan.io.bag_reader import open_imu
     source = open_imu(path, topic, frame_id)
@@ -194,7 +198,7 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
             stamp_ns = block.stamp_ns
             if time_scale != 1.0:
                 stamp_ns = np.round(stamp_ns * time_scale).astype(np.int64)
-            yield stamp_ns, _to_si(block.samples, units)
+            yield stamp_ns, _to_si(block.samples, units), None
     label = f'{path.name} {source.topic}' + (f' {frame_id}' if frame_id is not None else '')
     return InputSource(path, label, source.storage, source.topic,
                        source.n_messages, bag_blocks, source.warnings, source.close,
@@ -244,8 +248,8 @@ def stream_input(source: InputSource, config: SessionConfig,
     session = Session(config, on_warning=on_warning)
     done = 0
     blocks = _prefetch(source.blocks()) if prefetch else source.blocks()
-    for stamp_ns, samples in blocks:
-        session.add(stamp_ns, samples)
+    for stamp_ns, samples, temp_c in blocks:
+        session.add(stamp_ns, samples, temp_c)
         if tap is not None:
             tap(session, samples)
         done += stamp_ns.size
