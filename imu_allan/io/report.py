@@ -20,6 +20,7 @@ from imu_allan.core.noise.params import dump_params
 from imu_allan.core.noise.values import NoiseSpec
 from imu_allan.io import FIGURE_FORMATS
 from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
+from imu_allan.pipeline.thermal_report import thermal_lines
 
 #: File names inside the output directory (stable: other tools read them).
 FILES = {
@@ -73,6 +74,7 @@ def summary_text(result: AnalysisResult) -> str:
     for axis, fit in result.fits.items():
         if fit is not None and fit.notes:
             lines += [f'  {axis} note: {n}' for n in fit.notes]
+    lines += thermal_lines(result.thermal)
     lines += [''] + result.covering_lines()
     if ekf_advice(result):
         lines += ['', ekf_advice(result)]

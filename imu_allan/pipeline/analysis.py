@@ -29,7 +29,7 @@ from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanMo
 from imu_allan.core.outputs.reported import report_axes
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
-from imu_allan.pipeline.thermal_report import THERMAL_DRIFT, thermal_axes
+from imu_allan.pipeline.thermal_report import thermal_axes, THERMAL_DRIFT
 from imu_allan.pipeline.workers import worker_pool
 
 #: Confidence of the reported Allan bands and parameter intervals.
@@ -81,8 +81,8 @@ class AnalysisResult:
     plans : dict of str to imu_allan.core.plan.AxisPlan
         Per axis, the precision now and the record length to each target (empty
         unless :func:`analyze` was asked to plan).
-    thermal : dict of str to imu_allan.pipeline.thermal_report.AxisThermal
-        Per axis, the thermal coefficient and compensated fit (empty without a temperature).
+    thermal : dict of str to AxisThermal
+        Thermal coefficient and compensated fit per axis (pipeline/thermal_report.py).
 
     """
 
@@ -221,8 +221,7 @@ class AnalysisResult:
                        (f'{sym}_kind', p.kind)]
         problems = _trust_problems(fit)
         if fit.trust:
-            problems.append('fit not trusted, conservative values used: '
-                            + '; '.join(fit.trust))
+            problems.append('fit not trusted, conservative values used: ' + '; '.join(fit.trust))
         elif fit.model_consistent is False:
             problems.append('no listed effect explains the curve (see the notes)')
         if any(k in self.hygiene and self.hygiene[k] for k in ('n_motion_events',)):
@@ -238,9 +237,7 @@ class AnalysisResult:
         fit = self.fits.get(axis)
         if fit is None:
             return f'{axis}: no usable noise (frozen or constant axis)'
-        sensor = sensor_of(axis)
-        parts = []
-        params = self.reports[axis].params
+        sensor, parts, params = sensor_of(axis), [], self.reports[axis].params
         for sym in _CORE:
             p = params.get(sym)
             if p is None or p.kind == 'not_identified':
@@ -250,8 +247,7 @@ class AnalysisResult:
             mark = {'upper_bound': '< ', 'lower_bound': '> '}.get(p.kind, '')
             parts.append(f'{sym} {mark}{text}')
             if sym == 'B' and fit.b_floor is not None:
-                parts.append('B_floor ' + format_quoted('B', sensor, fit.b_floor.value,
-                                                        digits=3))
+                parts.append('B_floor ' + format_quoted('B', sensor, fit.b_floor.value, digits=3))
         line = f'{axis}: ' + ', '.join(parts)
         return line + (' (NOT TRUSTED: conservative values)' if fit.trust else '')
 
@@ -378,8 +374,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
     Fit every axis of a session's current Allan curve, effect search included.
 
     The node, ``imu-allan analyze`` and ``imu-allan diagnose`` all come here (or to
-    :func:`imu_allan.core.search.search_axis` with the same inputs), so they report the
-    same model for the same data.
+    :func:`imu_allan.core.search.search_axis` alike): one model for the same data.
 
     Parameters
     ----------

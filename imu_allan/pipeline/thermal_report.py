@@ -169,16 +169,41 @@ def _moved(plain: AxisFit, comp: AxisFit) -> list:
 
 def _warning(axis: str, entry: AxisThermal, fit: AxisFit, moved: list) -> str:
     c = entry.coefficient
-    sensor = sensor_of(axis)
-    params = report_axis(fit).params
-    values = ', '.join(
-        f'{s} {"< " if params[s].kind == "upper_bound" else ""}'
-        + format_quoted(s, sensor, params[s].value, digits=3)
-        for s in ('N', 'B', 'K') if s in params
-        and params[s].kind in ('estimate', 'upper_bound'))
     return (f'{THERMAL_DRIFT} on {axis}: its bias follows the temperature '
             f'(c = {c.value:.3g} {entry.unit}, 95 % [{c.ci95[0]:.3g}, {c.ci95[1]:.3g}], '
-            f'over {c.span_c:.3g} degC); {", ".join(moved)} above include that drift, as '
+            f'over {c.span_c:.3g} degC); the reported {", ".join(moved)} include that drift, as '
             'a filter without thermal compensation sees it; a filter that subtracts '
-            f'c (T - T0) should use the compensated values: {values} '
+            f'c (T - T0) should use the compensated values: {_values(axis, fit)} '
             f'(result.json axes.{axis}.thermal)')
+
+
+def thermal_lines(thermal: dict) -> list:
+    """Return the summary lines of the thermal part ([] without a temperature)."""
+    if not thermal:
+        return []
+    lines = ['', 'thermal coefficient c of the bias (95 %); the values above are without '
+             'thermal compensation (what a filter without it should use); a filter that '
+             'subtracts c (T - T0) should use the compensated values:']
+    for axis, entry in thermal.items():
+        c = entry.coefficient
+        if not math.isfinite(c.value):
+            lines.append(f'  {axis}: c not determined ({c.reason})')
+            continue
+        line = (f'  {axis}: c {c.value:.3g} {entry.unit} [{c.ci95[0]:.3g}, {c.ci95[1]:.3g}]'
+                f' over {c.span_c:.3g} degC')
+        if entry.fit is None:
+            line += ' (its interval holds 0: nothing to compensate)'
+        else:
+            line += ': compensated ' + _values(axis, entry.fit)
+        lines.append(line)
+    return lines
+
+
+def _values(axis: str, fit: AxisFit) -> str:
+    """N, B, K of a fit as reported, in customary units."""
+    params = report_axis(fit).params
+    return ', '.join(
+        f'{s} {"< " if params[s].kind == "upper_bound" else ""}'
+        + format_quoted(s, sensor_of(axis), params[s].value, digits=3)
+        for s in ('N', 'B', 'K') if s in params
+        and params[s].kind in ('estimate', 'upper_bound'))

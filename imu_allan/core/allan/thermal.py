@@ -28,7 +28,6 @@ import numpy as np
 SCALE = 1.0
 
 
-
 def thermal_columns(samples: np.ndarray, temp_c: np.ndarray) -> np.ndarray:
     """
     Return the columns the thermal accumulator sums: T, then y_i + s T.

@@ -1,0 +1,185 @@
+"""The temperature: its column, the thermal sums, the coefficient and the compensated curve."""
+
+import json
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from conftest import T0_NS
+from imu_allan import AXES
+from imu_allan.core.allan.accumulator import AllanAccumulator
+from imu_allan.core.allan.thermal import allan_covariance, compensated_avar
+from imu_allan.core.search.thermal import thermal_regression
+from imu_allan.io.csv_io import read_csv, write_csv
+from imu_allan.io.inputs import analyze_input
+from imu_allan.io.report import summary_text
+from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.thermal import BLOCK_ROWS, ThermalFeed
+from imu_allan.pipeline.thermal_report import thermal_axes, thermal_lines
+
+RATE_HZ = 10.0
+#: The temperature's cycle [s] (short: the records of these tests are short).
+PERIOD_S = 600.0
+#: Truth of the simulated records: gyro_x and accel_x follow the temperature.
+COEF = np.array([1e-4, 0.0, 0.0, 2e-3, 0.0, 0.0])
+
+
+def record(seed: int, hours: float, rate_hz: float = RATE_HZ) -> tuple:
+    """Return (stamp_ns, samples (n, 6), temp_c): white + random walk, a thermal cycle."""
+    rng = np.random.default_rng(seed)
+    n = int(hours * 3600 * rate_hz)
+    dt = 1.0 / rate_hz
+    t_s = np.arange(n) * dt
+    temp = 25.0 + 5.0 * np.sin(2 * np.pi * t_s / PERIOD_S)
+    white = np.array([1e-3] * 3 + [5e-3] * 3)
+    walk = np.array([1e-6] * 3 + [1e-5] * 3)
+    y = (rng.normal(size=(n, 6)) * white / np.sqrt(dt)
+         + np.cumsum(rng.normal(size=(n, 6)) * walk * np.sqrt(dt), axis=0))
+    y[:, 5] += 9.81
+    y += COEF * (temp - 25.0)[:, None]
+    return T0_NS + np.round(t_s * 1e9).astype(np.int64), y, temp
+
+
+def session_of(stamp_ns, y, temp, block: int = 7919) -> Session:
+    s = Session(SessionConfig())
+    for k in range(0, stamp_ns.size, block):
+        s.add(stamp_ns[k:k + block], y[k:k + block],
+              None if temp is None else temp[k:k + block])
+    s.flush()
+    return s
+
+
+def test_compensated_curve_streams_as_the_batch_curve_of_the_compensated_samples():
+    t, y, temp = record(1, 0.5)
+    s = session_of(t, y, temp)
+    curve = s.curve(bounds=False)
+    tcurve = s.feed.thermal.acc.curve(bounds=False)
+    avar_t, acov = allan_covariance(curve.avar, tcurve.avar)
+    comp = compensated_avar(curve.avar, avar_t, acov, COEF)
+    batch = AllanAccumulator(6, RATE_HZ)
+    batch.add(y - COEF * temp[:, None])
+    # Exact for the estimates (polarisation): equal to rounding.
+    assert_allclose(comp, batch.curve(bounds=False).avar, rtol=1e-7)
+
+
+def test_block_means_are_the_means_of_the_rows_whatever_the_blocks():
+    feed = ThermalFeed(SessionConfig())
+    feed.start(RATE_HZ)
+    track_ns = np.arange(5) * 10**9 * 1000
+    feed.add_temperature(track_ns, np.arange(5.0))
+    rng = np.random.default_rng(2)
+    n = 3 * BLOCK_ROWS + 77
+    rows = rng.normal(size=(n, 6))
+    stamps = np.arange(n, dtype=np.int64) * 10**8
+    at = 0
+    for size in rng.integers(1, 5000, size=200):
+        if at >= n:
+            break
+        feed.add(rows[at:at + size], stamps[at:at + size], None)
+        at += size
+    means, rate = feed.block_means()
+    f = n // means.shape[0]
+    assert f == 4 and rate == RATE_HZ / 4
+    assert_allclose(means[:, :6], rows[:means.shape[0] * f].reshape(-1, f, 6).mean(axis=1),
+                    rtol=1e-12, atol=1e-12)
+    temp = np.interp(stamps[:means.shape[0] * f], track_ns, np.arange(5.0))
+    assert_allclose(means[:, 6], temp.reshape(-1, f).mean(axis=1), rtol=1e-12)
+
+
+def test_regression_recovers_the_coefficient_within_its_interval():
+    t, y, temp = record(3, 0.5)
+    terms = [('white', 1e-6, ()), ('random_walk', 1e-12, ())]
+    found = thermal_regression(y[:, 0], temp, RATE_HZ, terms)
+    assert found.significant and found.ci95[0] <= COEF[0] <= found.ci95[1]
+    assert found.ci95[1] - found.ci95[0] < 0.3 * COEF[0]
+    none = thermal_regression(y[:, 1], temp, RATE_HZ, terms)
+    assert none.ci95[0] <= 0.0 <= none.ci95[1] and not none.significant
+    flat = thermal_regression(y[:, 1], np.full(temp.size, 25.0), RATE_HZ, terms)
+    assert np.isnan(flat.value) and 'did not change' in flat.reason
+
+
+def test_csv_temperature_column_gives_coefficient_compensated_fit_and_warning(tmp_path):
+    t, y, temp = record(4, 0.4)
+    path = tmp_path / 'warm.csv'
+    write_csv(path, (t - T0_NS) * 1e-9, np.column_stack([y, temp]),
+              list(AXES) + ['temperature'])
+    assert read_csv(path, columns=list(AXES), optional=['temperature']).columns[-1] \
+        == 'temperature'
+    result, _ = analyze_input(path, None, SessionConfig(), quiet=True)
+    for j, axis in enumerate(AXES):
+        c = result.thermal[axis].coefficient
+        assert c.ci95[0] <= COEF[j] <= c.ci95[1], axis
+        assert c.significant == (COEF[j] != 0), axis
+    hot = [w for w in result.warnings if w.startswith('thermal drift on')]
+    assert {w.split()[3].rstrip(':') for w in hot} <= {'gyro_x', 'accel_x'}
+    assert 'accel_x' in ' '.join(hot)
+    entry = json.loads(json.dumps(result.to_json()))['axes']['accel_x']['thermal']
+    assert entry['coefficient']['unit'] == 'm/s^2/degC'
+    assert entry['compensated']['params']['N']['kind'] == 'estimate'
+    assert 'thermal coefficient c of the bias' in summary_text(result)
+
+
+def test_without_temperature_nothing_changes():
+    t, y, temp = record(5, 0.15)
+    plain = session_of(t, y, None)
+    warm = session_of(t, y, temp)
+    assert plain.feed.thermal is None and 'thermal__meta' not in plain.feed.state()
+    curve = plain.curve()
+    assert_allclose(warm.curve().avar, curve.avar, rtol=0, atol=0)
+    assert thermal_axes(plain, curve, {}, (None, None), None, 1) == ({}, ())
+    assert thermal_lines({}) == []
+
+
+def test_late_temperature_is_left_out_with_a_warning():
+    t, y, temp = record(6, 0.5)
+    s = Session(SessionConfig())
+    s.add(t[:9000], y[:9000])
+    s.release()
+    assert s.curve() is not None    # rows accumulated: a temperature now comes too late
+    s.add(t[9000:], y[9000:], temp[9000:])
+    s.flush()
+    assert s.feed.thermal is None
+    assert any('temperature came after' in w for w in s.warnings)
+
+
+def test_rows_wait_for_the_first_temperature():
+    t, y, temp = record(7, 0.2)
+    direct = session_of(t, y, temp)
+    s = Session(SessionConfig())
+    assert s.expect_temperature()
+    s.add(t[:5000], y[:5000])
+    s.add_temperature(t[::50], temp[::50])   # a slower topic, arriving later
+    s.add(t[5000:], y[5000:])
+    s.flush()
+    a = direct.feed.thermal.acc.curve(bounds=False).avar
+    b = s.feed.thermal.acc.curve(bounds=False).avar
+    # The temperature read at 0.2 Hz and interpolated: the same curve at long taus.
+    assert_allclose(b[-8:, 0], a[-8:, 0], rtol=1e-3)
+
+
+def test_checkpoint_keeps_the_thermal_sums(tmp_path):
+    t, y, temp = record(8, 0.2)
+    whole = session_of(t, y, temp)
+    half = t.size // 2
+    first = Session(SessionConfig())
+    first.add(t[:half], y[:half], temp[:half])
+    first.save_state(tmp_path / 'state.npz')
+    resumed = Session.load_state(tmp_path / 'state.npz')
+    assert resumed.feed.thermal is not None
+    resumed.add(t[half:], y[half:], temp[half:])
+    resumed.flush()
+    assert_allclose(resumed.feed.thermal.acc.curve(bounds=False).avar,
+                    whole.feed.thermal.acc.curve(bounds=False).avar, rtol=1e-9)
+    assert_allclose(resumed.feed.thermal.block_means()[0], whole.feed.thermal.block_means()[0],
+                    rtol=1e-9)
+
+
+@pytest.mark.parametrize('bad', [{'thermal__sums': np.zeros((BLOCK_ROWS + 1, 7))}])
+def test_damaged_thermal_state_is_one_error(bad, tmp_path):
+    t, y, temp = record(9, 0.05)
+    s = session_of(t, y, temp)
+    arrays = {**s.feed.state(), **bad}
+    from imu_allan.errors import InputError
+    with pytest.raises(InputError):
+        ThermalFeed.restore(SessionConfig(), arrays)
