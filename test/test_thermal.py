@@ -183,3 +183,54 @@ def test_damaged_thermal_state_is_one_error(bad, tmp_path):
     from imu_allan.errors import InputError
     with pytest.raises(InputError):
         ThermalFeed.restore(SessionConfig(), arrays)
+
+
+def write_bag_with_temperature(path, stamp_ns, y, temp, topics=('/imu/temperature',),
+                               every: int = 10) -> None:
+    """Write a rosbag2 (sqlite3) with /imu/data and Temperature topics (every 10th stamp)."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import get_typestore, Stores
+
+    from imu_allan.io.bag_writer import serialize_imu
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    Temperature = store.types['sensor_msgs/msg/Temperature']
+    Header = store.types['std_msgs/msg/Header']
+    Time = store.types['builtin_interfaces/msg/Time']
+    rows = serialize_imu(stamp_ns, y)
+    with Writer(path, version=9) as bag:
+        imu = bag.add_connection('/imu/data', 'sensor_msgs/msg/Imu', typestore=store)
+        temps = [bag.add_connection(t, 'sensor_msgs/msg/Temperature', typestore=store)
+                 for t in topics]
+        for k in range(stamp_ns.size):
+            t = int(stamp_ns[k])
+            bag.write(imu, t, rows[k].tobytes())
+            if k % every == 0:
+                msg = Temperature(Header(Time(t // 10**9, t % 10**9), 'imu_link'),
+                                  float(temp[k]), 0.0)
+                for conn in temps:
+                    bag.write(conn, t, store.serialize_cdr(msg, conn.msgtype))
+
+
+def test_bag_temperature_topic_is_read_and_interpolated(tmp_path):
+    from imu_allan.errors import InputError
+    from imu_allan.io.inputs import open_input, stream_input
+
+    t, y, temp = record(10, 0.1)
+    write_bag_with_temperature(tmp_path / 'bag', t, y, temp)
+    with open_input(tmp_path / 'bag') as source:
+        assert source.label.endswith('(temperature /imu/temperature)')
+        from_bag = stream_input(source, SessionConfig())
+    direct = session_of(t, y, temp)
+    # Read at a tenth of the rate and interpolated: the same thermal curve at long taus.
+    a = direct.feed.thermal.acc.curve(bounds=False).avar
+    b = from_bag.feed.thermal.acc.curve(bounds=False).avar
+    assert_allclose(b[-10:], a[-10:], rtol=1e-3)
+    write_bag_with_temperature(tmp_path / 'two', t[:2000], y[:2000], temp[:2000],
+                               topics=('/a/temperature', '/b/temperature'))
+    with pytest.raises(InputError, match='2 Temperature topics'):
+        open_input(tmp_path / 'two')
+    with open_input(tmp_path / 'two', temperature_topic='/b/temperature') as source:
+        assert source.temperature is not None
+    with pytest.raises(InputError, match='not in the bag'):
+        open_input(tmp_path / 'two', temperature_topic='/c')

@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 def add_input_options(p: argparse.ArgumentParser, frame_id: bool = True) -> None:
     """Add the options of reading an input into a Session (shared with ``diagnose``)."""
     p.add_argument('--topic', help='Imu topic (needed when a bag holds several)')
+    p.add_argument('--temperature-topic', metavar='TOPIC',
+                   help='sensor_msgs/Temperature topic of a bag (default: its only one); '
+                        'a CSV gives a temperature column')
     if frame_id:
         p.add_argument('--frame-id', metavar='NAME',
                        help='the IMU to read when the Imu topic carries several, told apart '
@@ -107,12 +110,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, frame_id, config, out, plot, units, tau_max_s, plan = args
+    path, topic, frame_id, config, out, plot, units, tau_max_s, plan, temp_topic = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True, units=units,
-                                        frame_id=frame_id,
+                                        frame_id=frame_id, temperature_topic=temp_topic,
                                         plan=plan is not None, plan_targets=plan)
         result = replace(result, covering_tau_max_s=tau_max_s)
         with writing(out):
@@ -257,8 +260,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         raise InputError(f'--cover-tau-max must be a positive number of seconds, got '
                          f'{args.cover_tau_max}')
     plan = None if args.no_plan else parse_targets(args.target)
-    jobs = [(p, args.topic, args.frame_id, config, o, plot, units, args.cover_tau_max, plan)
-            for p, o in zip(paths, outs)]
+    jobs = [(p, args.topic, args.frame_id, config, o, plot, units, args.cover_tau_max, plan,
+             args.temperature_topic) for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
@@ -266,8 +269,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         # One input: its six axes are searched on the cores (several inputs: one each).
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
                                         units=units, frame_id=args.frame_id,
-                                        plan=plan is not None,
-                                        plan_targets=plan)
+                                        temperature_topic=args.temperature_topic,
+                                        plan=plan is not None, plan_targets=plan)
         result = replace(result, covering_tau_max_s=args.cover_tau_max)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, writing(outs[0]), \

@@ -28,7 +28,8 @@ import numpy as np
 
 from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise
-from imu_allan.core.rules import THERMAL_BLOCKS, THERMAL_MIN_SPAN_C
+from imu_allan.core.rules import (DRIFT_BASIS, DRIFT_FALSE_ALARM, THERMAL_BLOCKS,
+                                  THERMAL_MIN_SPAN_C)
 from imu_allan.core.search.evidence import _stencil_cov
 
 
@@ -177,3 +178,114 @@ def thermal_regression(y, temp_c, rate_hz: float, terms: list,
     half = 1.959964 * math.sqrt(var)
     lo, hi = c - half, c + half
     return ThermalCoefficient(c, (lo, hi), bool(lo > 0 or hi < 0), span)
+
+
+class DriftCheck(NamedTuple):
+    """
+    Result of :func:`drift_test`.
+
+    Attributes
+    ----------
+    lr : float
+        2 (restricted log-likelihood with the slow drift - without it), each maximised
+        over the random walk's level [-].
+    amplitude : float
+        Range of the fitted slow drift over the record [unit].
+    significant : bool
+        lr beyond the chi-square quantile of :data:`imu_allan.core.rules.DRIFT_FALSE_ALARM`.
+
+    """
+
+    lr: float
+    amplitude: float
+    significant: bool
+
+
+def drift_test(y, rate_hz: float, terms: list, n_blocks: int = THERMAL_BLOCKS,
+               n_basis: int = DRIFT_BASIS) -> DriftCheck | None:
+    """
+    Test a slow deterministic drift against the noise model, in the time domain.
+
+    The ramp test of :mod:`imu_allan.core.search.evidence` for any slow drift (a
+    temperature's): the record's block means carry, under the alternative, a smooth
+    function of time, the first ``n_basis`` cosines of the record (DCT-II, half-cycles
+    1 .. n_basis: a warm-up, a day's cycle, a 40-minute air-conditioning cycle in a
+    3 h record), and the differences of neighbouring block means are Gaussian with the
+    covariance Sigma(K) of the noise model, K^2 free.  Both restricted likelihoods
+    (REML: the drift's own degrees of freedom do not shrink K) are maximised over K;
+    a random walk spreads its power over every frequency, as K fixes it, a drift puts
+    it at the slow ones beyond what K explains.  Twice their difference is compared
+    with the chi-square(n_basis) quantile at :data:`imu_allan.core.rules.DRIFT_FALSE_ALARM`.
+
+    Parameters
+    ----------
+    y : array_like
+        Shape (n,), samples (raw or block-averaged) [unit].
+    rate_hz : float
+        Their rate [Hz].
+    terms : list of (str, float, tuple)
+        The fitted noise terms (:func:`model_terms`).
+    n_blocks : int
+        Blocks the record is cut into.
+    n_basis : int
+        Cosines of the slow drift.
+
+    Returns
+    -------
+    DriftCheck or None
+        None when the record is too short (fewer than 4 blocks per cosine).
+
+    """
+    from scipy.linalg import cho_factor, cho_solve
+    from scipy.optimize import minimize_scalar
+
+    from imu_allan.core.allan.quantiles import chi2_ppf
+
+    y = np.asarray(y, dtype=np.float64)
+    n_blocks = min(int(n_blocks), y.size // 2)
+    if n_blocks < 4 * n_basis:
+        return None
+    per = y.size // n_blocks
+    means = y[:per * n_blocks].reshape(n_blocks, per).mean(axis=1)
+    lag_s = per / float(rate_hz)
+    d = np.diff(means)
+    k = np.arange(1, n_basis + 1)
+    basis = np.cos(np.pi * np.outer(np.arange(n_blocks) + 0.5, k) / n_blocks)
+    x = np.diff(basis, axis=0)
+    fixed = [tm for tm in terms if tm[0] != 'random_walk']
+    c_rw = sum(tm[1] for tm in terms if tm[0] == 'random_walk')
+    base = _stencil_cov(fixed, lag_s, d.size)
+    unit_rw = _stencil_cov([('random_walk', 1.0, ())], lag_s, d.size)
+    scale = max(float(np.mean(d * d)), 1e-300)
+    z = d / math.sqrt(scale)
+    eye = np.eye(d.size)
+
+    def loglik(log_k2: float, drift: bool) -> tuple[float, np.ndarray]:
+        cov = (base + math.exp(log_k2) * unit_rw) / scale
+        try:
+            cf = cho_factor(cov + 1e-12 * eye * np.trace(cov) / d.size)
+        except np.linalg.LinAlgError:
+            return -math.inf, np.zeros(n_basis)
+        logdet = 2.0 * float(np.sum(np.log(np.diag(cf[0]))))
+        beta = np.zeros(n_basis)
+        extra = 0.0
+        if drift:
+            w = cho_solve(cf, x)
+            info = x.T @ w
+            beta = np.linalg.solve(info, w.T @ z)
+            extra = float(np.linalg.slogdet(info)[1])
+        r = z - x @ beta
+        return -0.5 * (float(r @ cho_solve(cf, r)) + logdet + extra), beta
+
+    k0 = c_rw if c_rw > 0 else scale * lag_s
+    best = {}
+    for drift in (False, True):
+        res = minimize_scalar(lambda v: -loglik(v, drift)[0], method='bounded',
+                              bounds=(math.log(k0) - 14.0, math.log(k0) + 14.0),
+                              options={'xatol': 1e-3})
+        best[drift] = (-float(res.fun), float(res.x))
+    lr = 2.0 * (best[True][0] - best[False][0])
+    beta = loglik(best[True][1], True)[1] * math.sqrt(scale)
+    shape = basis @ beta
+    limit = float(chi2_ppf(1.0 - DRIFT_FALSE_ALARM, n_basis))
+    return DriftCheck(float(lr), float(shape.max() - shape.min()), bool(lr >= limit))
