@@ -234,3 +234,43 @@ def test_bag_temperature_topic_is_read_and_interpolated(tmp_path):
         assert source.temperature is not None
     with pytest.raises(InputError, match='not in the bag'):
         open_input(tmp_path / 'two', temperature_topic='/c')
+
+
+def temperature_cdr(stamp_ns: int, temp_c: float, frame_id: str = 'imu_link') -> bytes:
+    """Serialize one sensor_msgs/msg/Temperature (CDR, little-endian) by hand."""
+    import struct
+    name = frame_id.encode() + b'\0'
+    body = struct.pack('<iII', stamp_ns // 10**9, stamp_ns % 10**9, len(name)) + name
+    body += b'\0' * (-len(body) % 8)
+    return b'\0\x01\0\0' + body + struct.pack('<dd', temp_c, 0.0)
+
+
+def test_live_input_reads_the_temperature_topic_as_analyze_reads_the_column(tmp_path):
+    import logging
+
+    from imu_allan.io.bag_writer import serialize_imu
+    from imu_allan.io.temperature_cdr import decode_temperatures
+    from imu_allan.ros.live import LiveInput
+    from imu_allan.ros.params import PARAMS
+
+    t, y, temp = record(11, 0.2)
+    got = decode_temperatures([temperature_cdr(int(t[3]), 21.5), b'\0\x01\0\0junk'])
+    assert got[0].tolist() == [int(t[3])] and got[1].tolist() == [21.5] and got[2] == 1
+    values = dict({p.name: p.default for p in PARAMS}, temperature_topic='/imu/temperature')
+    live = LiveInput(values, tmp_path, logging.getLogger('thermal'))
+    rows = serialize_imu(t, y)
+    for k0 in range(0, t.size, 1000):
+        for k in range(k0, min(k0 + 1000, t.size)):
+            live.append(rows[k].tobytes())
+            if k % 10 == 0:
+                live.append_temperature(temperature_cdr(int(t[k]), float(temp[k])))
+        live.process()
+    live.session.flush()
+    offline = session_of(t[:], y, np.where(np.arange(t.size) % 10 == 0, temp, np.nan))
+    terms = [('white', 1e-6, ()), ('random_walk', 1e-12, ())]
+    found = []
+    for s in (live.session, offline):
+        means, rate = s.feed.thermal.block_means()
+        found.append(thermal_regression(means[:, 0], means[:, -1], rate, terms))
+    assert_allclose(found[0].value, found[1].value, rtol=1e-9)
+    assert_allclose(found[0].ci95, found[1].ci95, rtol=1e-9)

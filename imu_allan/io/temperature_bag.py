@@ -100,7 +100,7 @@ def read_temperature(path, topic: str | None = None) -> BagTemperature | None:
                              '--temperature-topic')
         else:
             name = next(iter(found))
-            note = f'the temperature is read from {name}, the bag\'s only Temperature topic'
+            note = f"the temperature is read from {name}, the bag's only Temperature topic"
         conns = [c for c in reader.connections if c.topic == name
                  and c.msgtype in TEMPERATURE_MSGTYPES]
         stamps, values = [], []

@@ -127,6 +127,8 @@ class AccumulatorFeed:
     def close(self) -> None:
         """End the recording: hand the queued rows on."""
         self.pass_on()
+        if self.thermal is not None:
+            self.thermal.flush()
 
     def state(self) -> dict:
         """Return the accumulator's state as arrays (its own file's keys, prefixed)."""

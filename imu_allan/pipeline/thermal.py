@@ -98,13 +98,28 @@ class ThermalFeed:
         self._track_ns, self._track_c = t, c
         if self._t0 is None:
             self._t0 = int(t[0])
-        if self._wait and self.acc is not None:
-            waiting, self._wait, self._wait_rows = self._wait, [], 0
-            for item in waiting:
-                if item is None:
-                    self.acc.break_segment()
-                else:
-                    self._take(*item)
+        self._release(int(t[-1]))
+
+    def _release(self, until_ns: int | None) -> None:
+        """Take the waiting rows up to ``until_ns`` [ns] (None: all, the last value held)."""
+        if self.acc is None:
+            return
+        while self._wait:
+            item = self._wait[0]
+            if item is None:
+                self._wait.pop(0)
+                self.acc.break_segment()
+                continue
+            rows, stamps, missing = item
+            n = stamps.size if until_ns is None else int(np.searchsorted(stamps, until_ns,
+                                                                          'right'))
+            if n:
+                self._take(rows[:n], stamps[:n], None if missing is None else missing[:n])
+                self._wait_rows -= n
+            if n < stamps.size:
+                self._wait[0] = (rows[n:], stamps[n:], None if missing is None else missing[n:])
+                return
+            self._wait.pop(0)
 
     @property
     def has_temperature(self) -> bool:
@@ -138,16 +153,27 @@ class ThermalFeed:
         """Take the rows (n, 6) the main accumulator took, their stamps and fill marks."""
         if self.acc is None or self.off_reason:
             return
-        if not self.has_temperature:
-            self._wait.append((rows.copy(), stamp_ns.copy(),
-                               None if missing is None else missing.copy()))
-            self._wait_rows += rows.shape[0]
-            if self._wait_rows > WAIT_S * max(self.rate_hz, 1.0):
-                self.off_reason = (f'no temperature came with the first {WAIT_S:g} s of '
-                                   'samples: the thermal analysis is off')
-                self._wait, self._wait_rows = [], 0
+        # Rows after the last reading wait for the next (a topic's reading comes later).
+        if not self._wait and self.has_temperature and stamp_ns[-1] <= self._track_ns[-1]:
+            self._take(rows, stamp_ns, missing)
             return
-        self._take(rows, stamp_ns, missing)
+        self._wait.append((rows.copy(), stamp_ns.copy(),
+                           None if missing is None else missing.copy()))
+        self._wait_rows += rows.shape[0]
+        if self.has_temperature:
+            self._release(int(self._track_ns[-1]))
+        if self._wait_rows > WAIT_S * max(self.rate_hz, 1.0):
+            if self.has_temperature:     # the topic went quiet: its last value is held
+                self._release(None)
+                return
+            self.off_reason = (f'no temperature came with the first {WAIT_S:g} s of '
+                               'samples: the thermal analysis is off')
+            self._wait, self._wait_rows = [], 0
+
+    def flush(self) -> None:
+        """Take the rows still waiting, the last temperature held (the end of the data)."""
+        if self.has_temperature:
+            self._release(None)
 
     def _take(self, rows: np.ndarray, stamp_ns: np.ndarray,
               missing: np.ndarray | None) -> None:
@@ -218,8 +244,9 @@ class ThermalFeed:
 
     # ------------------------------------------------------------- checkpoint
     def state(self) -> dict:
-        """Return the state as arrays, prefixed ``thermal__`` (rows still waiting: lost)."""
+        """Return the state as arrays, prefixed ``thermal__`` (waiting rows taken first)."""
         assert self.acc is not None
+        self.flush()
         acc_meta, acc_arrays = self.acc.to_state()
         meta = {'acc': acc_meta, 'off_reason': self.off_reason, 't0': self._t0,
                 'n_blocks': self._n_blocks, 'part_n': self._part_n,

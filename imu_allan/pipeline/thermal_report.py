@@ -94,8 +94,10 @@ def thermal_axes(session, curve: AllanCurve, fits: dict, raw: tuple,
         return {}, ()
     if thermal.off_reason:
         return {}, (f'{THERMAL_DRIFT}: {thermal.off_reason}',)
+    thermal.flush()     # the rows after the last reading: the last value held
     tcurve = thermal.acc.curve(bounds=False)
-    if not np.array_equal(tcurve.m, curve.m):
+    if (not np.array_equal(tcurve.m, curve.m)
+            or thermal.acc.n_samples != session.feed.acc.n_samples):
         return {}, (f'{THERMAL_DRIFT}: the thermal sums do not match the curve: not used',)
     avar_t, acov = allan_covariance(curve.avar, tcurve.avar)
     means, means_rate = thermal.block_means()
