@@ -152,19 +152,22 @@ def _with_fits(out: dict, axes: list, found: list, comp: np.ndarray, fits: dict)
 
 
 def _moved(plain: AxisFit, comp: AxisFit) -> list:
-    """The symbols of N, B, K whose reported value lies outside the compensated interval."""
+    """
+    The symbols of N, B, K the drift moved: reported outside the compensated interval.
+
+    Also where the compensated value is only an upper bound and the reported one an
+    estimate: the drift made an estimate of what the noise alone cannot determine.
+    """
     out = []
     a, b = report_axis(plain).params, report_axis(comp).params
     for sym in ('N', 'B', 'K'):
         p, q = a.get(sym), b.get(sym)
-        if p is None or q is None or not math.isfinite(p.value):
+        if (p is None or q is None or not math.isfinite(p.value)
+                or q.kind not in ('estimate', 'upper_bound')):
             continue
-        lo, hi = q.ci95
-        if q.kind == 'upper_bound':
-            lo = 0.0
-        if q.kind not in ('estimate', 'upper_bound'):
-            continue
-        if not lo <= p.value <= hi * (1 + 1e-9):
+        lo, hi = (0.0 if q.kind == 'upper_bound' else q.ci95[0]), q.ci95[1]
+        made = q.kind == 'upper_bound' and p.kind == 'estimate'
+        if made or not lo <= p.value <= hi * (1 + 1e-9):
             out.append(sym)
     return out
 
