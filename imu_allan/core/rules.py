@@ -72,9 +72,3 @@ THERMAL_MIN_SPAN_C = 0.01
 #: the temperature's block means must follow its changes (a 40-minute cycle in a
 #: 2.8 h record is 20 blocks per cycle), and the covariance is blocks^2.
 THERMAL_BLOCKS = 512
-#: Cosines (half-cycles over the record) of the slow drift the drift test fits
-#: (core/search/thermal.py): a 40-minute cycle in a 2.8 h record is 8.4 half-cycles.
-DRIFT_BASIS = 12
-#: False-alarm probability of the drift test (chi-square(DRIFT_BASIS) quantile): it is
-#: asked of every axis of every record without a temperature.
-DRIFT_FALSE_ALARM = 1e-5
