@@ -14,7 +14,8 @@ from imu_allan.core.search.thermal import thermal_regression
 from imu_allan.io.csv_io import read_csv, write_csv
 from imu_allan.io.inputs import analyze_input
 from imu_allan.io.report import summary_text
-from imu_allan.pipeline.session import Session, SessionConfig
+from imu_allan.pipeline.hygiene import SessionConfig
+from imu_allan.pipeline.session import Session
 from imu_allan.pipeline.thermal import BLOCK_ROWS, ThermalFeed
 from imu_allan.pipeline.thermal_report import thermal_axes, thermal_lines
 

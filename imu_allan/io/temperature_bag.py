@@ -12,7 +12,7 @@ without a temperature.
 """
 
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -105,7 +105,7 @@ def read_temperature(path, topic: str | None = None) -> BagTemperature | None:
                  and c.msgtype in TEMPERATURE_MSGTYPES]
         stamps, values = [], []
         for conn, _recv_ns, raw in reader.messages(connections=conns):
-            msg = reader.deserialize(raw, conn.msgtype)
+            msg: Any = reader.deserialize(raw, conn.msgtype)
             stamps.append(int(msg.header.stamp.sec) * 1_000_000_000
                           + int(msg.header.stamp.nanosec))
             values.append(float(msg.temperature))

@@ -35,6 +35,8 @@ BLOCK_ROWS = 8192
 WAIT_S = 600.0
 
 
+# Long because it mirrors the accumulator feed step for step (start, rate, rows, breaks,
+# restart, checkpoint) and keeps the rows that wait for a reading; each method is short.
 class ThermalFeed:
     """
     The temperature track and the thermal sums of one session.
@@ -111,8 +113,8 @@ class ThermalFeed:
                 self.acc.break_segment()
                 continue
             rows, stamps, missing = item
-            n = stamps.size if until_ns is None else int(np.searchsorted(stamps, until_ns,
-                                                                          'right'))
+            n = (stamps.size if until_ns is None
+                 else int(np.searchsorted(stamps, until_ns, 'right')))
             if n:
                 self._take(rows[:n], stamps[:n], None if missing is None else missing[:n])
                 self._wait_rows -= n

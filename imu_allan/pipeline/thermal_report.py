@@ -15,7 +15,7 @@ cause and what to do.  Without a temperature nothing here runs.
 
 from dataclasses import dataclass
 import math
-from typing import Callable
+from typing import Callable, TYPE_CHECKING
 
 import numpy as np
 
@@ -26,7 +26,9 @@ from imu_allan.core.allan.thermal import allan_covariance, compensated_avar
 from imu_allan.core.fit.result import AxisFit, json_floats
 from imu_allan.core.noise.units import format_quoted, sensor_of
 from imu_allan.core.outputs.reported import report_axis
-from imu_allan.core.search.thermal import model_terms, thermal_regression, ThermalCoefficient
+
+if TYPE_CHECKING:
+    from imu_allan.core.search.thermal import ThermalCoefficient
 
 #: The start of each warning of this module (consumer files carry them).
 THERMAL_DRIFT = 'thermal drift'
@@ -50,7 +52,7 @@ class AxisThermal:
 
     """
 
-    coefficient: ThermalCoefficient
+    coefficient: 'ThermalCoefficient'
     unit: str
     fit: AxisFit | None = None
     adev: np.ndarray | None = None
@@ -92,6 +94,9 @@ def thermal_axes(session, curve: AllanCurve, fits: dict, raw: tuple,
     thermal = session.feed.thermal
     if thermal is None or thermal.acc is None:
         return {}, ()
+    # scipy (the search package): imported only when a temperature was given.
+    from imu_allan.core.search.thermal import model_terms, thermal_regression
+
     if thermal.off_reason:
         return {}, (f'{THERMAL_DRIFT}: {thermal.off_reason}',)
     thermal.flush()     # the rows after the last reading: the last value held
@@ -153,7 +158,7 @@ def _with_fits(out: dict, axes: list, found: list, comp: np.ndarray, fits: dict)
 
 def _moved(plain: AxisFit, comp: AxisFit) -> list:
     """
-    The symbols of N, B, K the drift moved: reported outside the compensated interval.
+    Return the symbols of N, B, K the drift moved (outside the compensated interval).
 
     Also where the compensated value is only an upper bound and the reported one an
     estimate: the drift made an estimate of what the noise alone cannot determine.
@@ -205,7 +210,7 @@ def thermal_lines(thermal: dict) -> list:
 
 
 def _values(axis: str, fit: AxisFit) -> str:
-    """N, B, K of a fit as reported, in customary units."""
+    """Return N, B, K of a fit as reported, in customary units."""
     params = report_axis(fit).params
     return ', '.join(
         f'{s} {"< " if params[s].kind == "upper_bound" else ""}'
