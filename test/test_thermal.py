@@ -275,3 +275,15 @@ def test_live_input_reads_the_temperature_topic_as_analyze_reads_the_column(tmp_
         found.append(thermal_regression(means[:, 0], means[:, -1], rate, terms))
     assert_allclose(found[0].value, found[1].value, rtol=1e-9)
     assert_allclose(found[0].ci95, found[1].ci95, rtol=1e-9)
+
+
+def test_node_snapshot_carries_the_thermal_sums():
+    from imu_allan.ros.live import SessionView
+
+    t, y, temp = record(12, 0.1)
+    s = session_of(t, y, temp)
+    view = SessionView(s)
+    assert view.feed.thermal is not s.feed.thermal
+    assert_allclose(view.feed.thermal.block_means()[0], s.feed.thermal.block_means()[0])
+    assert view.feed.acc.n_samples == s.feed.acc.n_samples
+    assert SessionView(session_of(t, y, None)).feed.thermal is None

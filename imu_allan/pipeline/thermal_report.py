@@ -91,7 +91,8 @@ def thermal_axes(session, curve: AllanCurve, fits: dict, raw: tuple,
         Processes for them.
 
     """
-    thermal = session.feed.thermal
+    # A session, or a snapshot of one (the node's SessionView) with its copies.
+    thermal = getattr(getattr(session, 'feed', None), 'thermal', None)
     if thermal is None or thermal.acc is None:
         return {}, ()
     # scipy (the search package): imported only when a temperature was given.

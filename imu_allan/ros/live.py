@@ -22,6 +22,7 @@ import os
 from pathlib import Path
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -62,6 +63,12 @@ class SessionView:
         self.warnings = session.warnings
         #: Why the data cannot be analysed yet (too little still data), or None.
         self.still_problem = session.still_problem
+        # With a temperature, copies of both accumulators: the thermal analysis reads
+        # them (pipeline/thermal_report.py) while the input goes on.
+        thermal = session.feed.thermal
+        self.feed = SimpleNamespace(
+            thermal=copy.deepcopy(thermal),
+            acc=None if thermal is None else copy.deepcopy(session.feed.acc))
 
     def curve(self, confidence: float = CONFIDENCE, bounds: bool = True):
         """Return the Allan curve taken with the snapshot (bounds computed on request)."""
