@@ -35,9 +35,6 @@ if TYPE_CHECKING:
 def add_input_options(p: argparse.ArgumentParser, frame_id: bool = True) -> None:
     """Add the options of reading an input into a Session (shared with ``diagnose``)."""
     p.add_argument('--topic', help='Imu topic (needed when a bag holds several)')
-    p.add_argument('--temperature-topic', metavar='TOPIC',
-                   help='sensor_msgs/Temperature topic of a bag (default: its only one); '
-                        'a CSV gives a temperature column')
     if frame_id:
         p.add_argument('--frame-id', metavar='NAME',
                        help='the IMU to read when the Imu topic carries several, told apart '
@@ -88,8 +85,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     'IMU: Allan deviation, fitted N, B, K, T_B with 95 % intervals, '
                     'Kalibr imu.yaml, Kalman Q/R, robot_localization covariances, plots.')
     p.add_argument('inputs', nargs='+', metavar='INPUT', help='bag directory, .mcap, .db3, '
-                   '.bag or .csv[.gz] (t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z)')
+                   '.bag or .csv[.gz] (t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z'
+                   '[,temperature])')
     add_input_options(p)
+    p.add_argument('--temperature-topic', metavar='TOPIC',
+                   help='sensor_msgs/Temperature topic of a bag (default: its only one); '
+                        'a CSV gives a temperature column')
     p.add_argument('--out', type=Path, default=Path('imu_allan_out'),
                    help='output directory (one sub-directory per input when several)')
     p.add_argument('--format', choices=('text', 'json'), default='text')
