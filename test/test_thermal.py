@@ -287,3 +287,17 @@ def test_node_snapshot_carries_the_thermal_sums():
     assert_allclose(view.feed.thermal.block_means()[0], s.feed.thermal.block_means()[0])
     assert view.feed.acc.n_samples == s.feed.acc.n_samples
     assert SessionView(session_of(t, y, None)).feed.thermal is None
+
+
+def test_node_analysis_of_its_snapshot_gives_the_coefficient_analyze_gives():
+    from imu_allan.pipeline.analysis import analyze
+    from imu_allan.ros.live import SessionView
+
+    t, y, temp = record(13, 0.25)
+    s = session_of(t, y, temp)
+    node = analyze(SessionView(s))
+    offline = analyze(s)
+    for axis in ('gyro_x', 'accel_x', 'gyro_y'):
+        a, b = node.thermal[axis].coefficient, offline.thermal[axis].coefficient
+        assert a.significant == b.significant == (axis != 'gyro_y')
+        assert_allclose(a.ci95, b.ci95, rtol=1e-9)
