@@ -85,8 +85,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     'IMU: Allan deviation, fitted N, B, K, T_B with 95 % intervals, '
                     'Kalibr imu.yaml, Kalman Q/R, robot_localization covariances, plots.')
     p.add_argument('inputs', nargs='+', metavar='INPUT', help='bag directory, .mcap, .db3, '
-                   '.bag or .csv[.gz] (t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z)')
+                   '.bag or .csv[.gz] (t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z'
+                   '[,temperature])')
     add_input_options(p)
+    p.add_argument('--temperature-topic', metavar='TOPIC',
+                   help='sensor_msgs/Temperature topic of a bag (default: its only one); '
+                        'a CSV gives a temperature column')
     p.add_argument('--out', type=Path, default=Path('imu_allan_out'),
                    help='output directory (one sub-directory per input when several)')
     p.add_argument('--format', choices=('text', 'json'), default='text')
@@ -107,12 +111,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _job(args):
     """Analyse and report one input in a worker; errors come back as one line."""
-    path, topic, frame_id, config, out, plot, units, tau_max_s, plan = args
+    path, topic, frame_id, config, out, plot, units, tau_max_s, plan, temp_topic = args
     from imu_allan.io.inputs import analyze_input
     from imu_allan.io.report import write_outputs
     try:
         result, seconds = analyze_input(path, topic, config, quiet=True, units=units,
-                                        frame_id=frame_id,
+                                        frame_id=frame_id, temperature_topic=temp_topic,
                                         plan=plan is not None, plan_targets=plan)
         result = replace(result, covering_tau_max_s=tau_max_s)
         with writing(out):
@@ -257,8 +261,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         raise InputError(f'--cover-tau-max must be a positive number of seconds, got '
                          f'{args.cover_tau_max}')
     plan = None if args.no_plan else parse_targets(args.target)
-    jobs = [(p, args.topic, args.frame_id, config, o, plot, units, args.cover_tau_max, plan)
-            for p, o in zip(paths, outs)]
+    jobs = [(p, args.topic, args.frame_id, config, o, plot, units, args.cover_tau_max, plan,
+             args.temperature_topic) for p, o in zip(paths, outs)]
     if several:
         n_workers = max(1, args.jobs or min(len(jobs), os.cpu_count() or 1))
         outcomes = _run_several(jobs, n_workers)
@@ -266,8 +270,8 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
         # One input: its six axes are searched on the cores (several inputs: one each).
         result, seconds = analyze_input(paths[0], args.topic, config, workers=workers,
                                         units=units, frame_id=args.frame_id,
-                                        plan=plan is not None,
-                                        plan_targets=plan)
+                                        temperature_topic=args.temperature_topic,
+                                        plan=plan is not None, plan_targets=plan)
         result = replace(result, covering_tau_max_s=args.cover_tau_max)
         from imu_allan.io.report import write_outputs   # scipy: imported while reading
         with Progress(paths[0].name) as bar, writing(outs[0]), \

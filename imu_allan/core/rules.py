@@ -63,6 +63,16 @@ RAMP_BLOCKS = 256
 #: search asks this of every axis (few false ramps over a fleet of axes).
 RAMP_LR_MIN = 19.5
 
+# ------------------------------------------------------------- the thermal coefficient
+
+#: The temperature changed when its block means span at least this [degC]: below it
+#: (a temperature sensor's quantization step) no thermal coefficient is read.
+THERMAL_MIN_SPAN_C = 0.01
+#: Blocks the record is cut into for the thermal regression (core/search/thermal.py):
+#: the temperature's block means must follow its changes (a 40-minute cycle in a
+#: 2.8 h record is 20 blocks per cycle), and the covariance is blocks^2.
+THERMAL_BLOCKS = 512
+
 # ------------------------------------------------------------------ what is reported
 
 #: The lowest ADEV (a datasheet's in-run bias stability) is reported only where the

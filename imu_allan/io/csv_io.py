@@ -190,7 +190,7 @@ def _line_of_row(data: memoryview, row: int, first_line: int) -> int:
 
 
 def read_csv(path: PathLike, columns: Sequence[str] | None = None,
-             rate_hz: float | None = None) -> CsvData:
+             rate_hz: float | None = None, optional: Sequence[str] = ()) -> CsvData:
     """
     Read an IMU (or any numeric) record from a CSV file, optionally gzip-compressed.
 
@@ -206,6 +206,9 @@ def read_csv(path: PathLike, columns: Sequence[str] | None = None,
     rate_hz : float, optional
         Sample rate [Hz]; overrides the rate derived from the time column, and is
         required when there is no time column.
+    optional : sequence of str
+        Columns returned too (after ``columns``) when the header has them, e.g.
+        ``temperature``; NaN is allowed there (a missing reading).
 
     Returns
     -------
@@ -263,8 +266,9 @@ def read_csv(path: PathLike, columns: Sequence[str] | None = None,
             tail = '' if has_header else ')'
             raise InputError(f'{path}: column(s) {", ".join(missing)} not in the {where} '
                              f'{avail}{tail}')
+    used = [header.index(c) for c in want] + ([time_col] if time_col is not None else [])
+    want += [c for c in optional if c in header and c not in want]
     idx = [header.index(c) for c in want]
-    used = idx + ([time_col] if time_col is not None else [])
     # Column by column: strided views, no copy of the table.
     bad = [int(np.argmin(np.isfinite(table[:, j]))) for j in used
            if not np.isfinite(table[:, j]).all()]

@@ -31,6 +31,8 @@ from imu_allan.pipeline.workers import start_workers
 CSV_SUFFIXES = ('.csv', '.csv.gz', '.txt', '.txt.gz')
 #: Samples handed to the Session at a time for CSV input.
 CSV_BLOCK = 65536
+#: The CSV column of the temperature [degC] (docs/offline.md, pipeline/thermal.py).
+TEMPERATURE_COLUMN = 'temperature'
 
 
 # --------------------------------------------------------------------------------------
@@ -67,6 +69,9 @@ class InputSource:
         self.n_messages, self.warnings = n_messages, warnings
         self._blocks, self._close, self._frame_id = blocks, close, frame_id
         self._counts = counts if counts is not None else lambda: (n_messages, 0)
+        #: (stamp_ns (n,), temp_c (n,)) of a bag's temperature topic, read whole; None
+        #: without one (a CSV's column comes with the blocks).
+        self.temperature: tuple | None = None
 
     @property
     def read_counts(self) -> dict:
@@ -135,7 +140,8 @@ def check_path(path: Path) -> None:
 
 
 def open_input(path, topic: str | None = None, units: DeclaredUnits | None = None,
-               frame_id: str | None = None) -> InputSource:
+               frame_id: str | None = None,
+               temperature_topic: str | None = None) -> InputSource:
     """
     Open any supported input for streaming.
 
@@ -153,6 +159,9 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
     frame_id : str, optional
         The IMU to read when the topic carries several (header.frame_id); ignored for
         CSV.
+    temperature_topic : str, optional
+        The sensor_msgs/Temperature topic of a bag; by default its only one, if any
+        (:mod:`imu_allan.io.temperature_bag`).  A CSV gives a ``temperature`` column.
 
     Returns
     -------
@@ -172,20 +181,24 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
         from imu_allan.io.csv_io import read_csv
         if path.is_dir():
             raise InputError(f'{path}: is a directory, not a CSV file')
-        data = read_csv(path, columns=list(AXES))
+        data = read_csv(path, columns=list(AXES), optional=[TEMPERATURE_COLUMN])
         if data.t_s is None:
             raise InputError(f'{path}: a t column (seconds) is needed for analyze')
         # The declared time unit applies before nanoseconds (ms since the epoch in ns
         # would overflow int64).
         t_s = data.t_s * units.time_scale(1.0) if units is not None else data.t_s
         stamp_ns = np.round(t_s * 1e9).astype(np.int64)
-        samples = _to_si(data.samples, units)
+        samples = _to_si(data.samples[:, :len(AXES)], units)
+        temp_c = data.samples[:, len(AXES)] if len(data.columns) > len(AXES) else None
 
         def csv_blocks():
             for k in range(0, stamp_ns.size, CSV_BLOCK):
-                yield stamp_ns[k:k + CSV_BLOCK], samples[k:k + CSV_BLOCK]
+                yield stamp_ns[k:k + CSV_BLOCK], samples[k:k + CSV_BLOCK], \
+                    None if temp_c is None else temp_c[k:k + CSV_BLOCK]
         return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
     from imu_allan.io.bag_reader import open_imu
+    from imu_allan.io.temperature_bag import read_temperature
+    temperature = read_temperature(path, temperature_topic)
     source = open_imu(path, topic, frame_id)
     time_scale = units.time_scale(1e-9) if units is not None else 1.0
 
@@ -194,12 +207,19 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
             stamp_ns = block.stamp_ns
             if time_scale != 1.0:
                 stamp_ns = np.round(stamp_ns * time_scale).astype(np.int64)
-            yield stamp_ns, _to_si(block.samples, units)
+            yield stamp_ns, _to_si(block.samples, units), None
     label = f'{path.name} {source.topic}' + (f' {frame_id}' if frame_id is not None else '')
-    return InputSource(path, label, source.storage, source.topic,
-                       source.n_messages, bag_blocks, source.warnings, source.close,
-                       lambda: source.frame_id,
-                       lambda: (source.n_read, source.n_lost, source.n_no_orientation))
+    opened = InputSource(path, label, source.storage, source.topic,
+                         source.n_messages, bag_blocks, source.warnings, source.close,
+                         lambda: source.frame_id,
+                         lambda: (source.n_read, source.n_lost, source.n_no_orientation))
+    if temperature is not None:
+        opened.label += f' (temperature {temperature.topic})'
+        stamps = temperature.stamp_ns
+        if time_scale != 1.0:
+            stamps = np.round(stamps * time_scale).astype(np.int64)
+        opened.temperature = (stamps, temperature.temp_c)
+    return opened
 
 
 def _to_si(samples: np.ndarray, units: DeclaredUnits | None) -> np.ndarray:
@@ -242,10 +262,13 @@ def stream_input(source: InputSource, config: SessionConfig,
 
     """
     session = Session(config, on_warning=on_warning)
+    if source.temperature is not None:
+        session.expect_temperature()
+        session.add_temperature(*source.temperature)
     done = 0
     blocks = _prefetch(source.blocks()) if prefetch else source.blocks()
-    for stamp_ns, samples in blocks:
-        session.add(stamp_ns, samples)
+    for stamp_ns, samples, temp_c in blocks:
+        session.add(stamp_ns, samples, temp_c)
         if tap is not None:
             tap(session, samples)
         done += stamp_ns.size
@@ -325,7 +348,7 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
                   quiet: bool = False, progress: bool | None = None, workers: int = 1,
                   prefetch: bool = True, units: DeclaredUnits | None = None,
                   plan: bool = False, plan_targets: dict | None = None,
-                  frame_id: str | None = None):
+                  frame_id: str | None = None, temperature_topic: str | None = None):
     """
     Stream one input through a Session and fit it.
 
@@ -354,6 +377,8 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
         The units of the input (see :func:`open_input`).
     frame_id : str, optional
         The IMU of a topic that carries several (see :func:`open_input`).
+    temperature_topic : str, optional
+        The Temperature topic of a bag (see :func:`open_input`).
 
     Returns
     -------
@@ -374,7 +399,7 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
 
     show = (not quiet) if progress is None else progress
     tap, keeper = raw_tap()
-    with open_input(path, topic, units, frame_id) as source:
+    with open_input(path, topic, units, frame_id, temperature_topic) as source:
         bar = Progress(path.name, source.n_messages) if show else None
         try:
             try:

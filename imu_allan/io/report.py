@@ -24,6 +24,7 @@ from imu_allan.core.noise.params import dump_params
 from imu_allan.core.noise.values import NoiseSpec
 from imu_allan.io import FIGURE_FORMATS
 from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
+from imu_allan.pipeline.thermal_report import thermal_lines
 
 #: File names inside the output directory (stable: other tools read them).
 FILES = {
@@ -85,6 +86,7 @@ def summary_text(result: AnalysisResult) -> str:
              for n in distinct_notes(fit.notes)]
     if notes:
         lines += ['', 'notes (why a value is a bound, what the model leaves open):'] + notes
+    lines += thermal_lines(result.thermal)
     lines += [''] + result.covering_lines()
     if ekf_advice(result):
         lines += ['', ekf_advice(result)]

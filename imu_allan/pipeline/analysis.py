@@ -31,6 +31,7 @@ from imu_allan.core.outputs.reported import report_axes
 from imu_allan.core.outputs.short_record import SHORT_RECORD, short_record_warnings
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
+from imu_allan.pipeline.thermal_report import thermal_axes, THERMAL_DRIFT
 from imu_allan.pipeline.workers import worker_pool
 
 #: Confidence of the reported Allan bands and parameter intervals.
@@ -82,6 +83,8 @@ class AnalysisResult:
     plans : dict of str to imu_allan.core.plan.AxisPlan
         Per axis, the precision now and the record length to each target (empty
         unless :func:`analyze` was asked to plan).
+    thermal : dict of str to AxisThermal
+        Thermal coefficient and compensated fit per axis (pipeline/thermal_report.py).
 
     """
 
@@ -98,6 +101,7 @@ class AnalysisResult:
     frame_id: str = ''
     covering_tau_max_s: float = DEFAULT_HORIZON_S
     plans: dict = field(default_factory=dict)
+    thermal: dict = field(default_factory=dict)
 
     def models(self) -> dict:
         """Fitted AxisNoise per axis (an empty model where the axis has no fit)."""
@@ -222,8 +226,7 @@ class AnalysisResult:
                        (f'{sym}_kind', p.kind)]
         problems = _trust_problems(fit)
         if fit.trust:
-            problems.append('fit not trusted, conservative values used: '
-                            + '; '.join(fit.trust))
+            problems.append('fit not trusted, conservative values used: ' + '; '.join(fit.trust))
         elif fit.model_consistent is False:
             problems.append('no listed effect explains the curve (see the notes)')
         if any(k in self.hygiene and self.hygiene[k] for k in ('n_motion_events',)):
@@ -262,7 +265,8 @@ class AnalysisResult:
         """Consumer-file text with a comment per untrusted axis and undetermined value."""
         lines = [f'# WARNING {c}' for a in AXES
                  for c in [self.fits[a].trust_comment(a) if self.fits.get(a) else ''] if c]
-        lines += [f'# WARNING {w}' for w in self.warnings if w.startswith(SHORT_RECORD)]
+        lines += [f'# WARNING {w}' for w in self.warnings
+                  if w.startswith((SHORT_RECORD, THERMAL_DRIFT))]
         if not lines:
             return text
         head, sep, rest = text.partition('\n')
@@ -305,6 +309,8 @@ class AnalysisResult:
             entry['covering'] = None if cover is None else cover.to_json()
             if axis in self.plans:
                 entry['plan'] = self.plans[axis].to_json()
+            if axis in self.thermal:
+                entry['thermal'] = self.thermal[axis].to_json(axis)
             axes[axis] = entry
         return {
             'source': self.source,
@@ -351,16 +357,14 @@ def _map_axes(jobs: list, workers: int, meanwhile: Callable[[], Any]) -> tuple[l
         return list(fits), done
 
 
-def analyze(session, source: str = '', raw=None, topic: str = '',
-            workers: int = 1,
+def analyze(session, source: str = '', raw=None, topic: str = '', workers: int = 1,
             covering_tau_max_s: float = DEFAULT_HORIZON_S, plan: bool = False,
             plan_targets: dict | None = None) -> AnalysisResult | None:
     """
     Fit every axis of a session's current Allan curve, effect search included.
 
     The node, ``imu-allan analyze`` and ``imu-allan diagnose`` all come here (or to
-    :func:`imu_allan.core.search.search_axis` with the same inputs), so they report the
-    same model for the same data.
+    :func:`imu_allan.core.search.search_axis` alike): one model for the same data.
 
     Parameters
     ----------
@@ -369,14 +373,12 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     source : str
         What was analysed, for the report.
     raw : imu_allan.core.search.evidence.RawKeeper, optional
-        Block-averaged copy of the samples fed to the session: the periodogram and
-        ramp evidence of the effect search.  Without it sinusoids and ramps are named
-        from the Allan curve alone.
+        Block-averaged copy of the samples: the effect search's periodogram and ramp
+        evidence (without it, sinusoids and ramps are named from the curve alone).
     topic : str
         The Imu topic of the samples (Kalibr's ``rostopic``); '' when unknown.
     workers : int
-        Processes that search the axes (1: in this process, as the node does; the
-        results are the same either way).
+        Processes that search the axes (1: in this process, as the node does; same fits).
     covering_tau_max_s : float
         Upper end of the covering pair's horizon [s] (:attr:`AnalysisResult.covers`).
     plan : bool
@@ -409,6 +411,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
     found, (lo, hi) = _map_axes(list(jobs.values()), workers, lambda: confidence_bounds(
         curve.avar, curve.edf, CONFIDENCE))
     fits.update(zip(jobs, found))
+    thermal, hot = thermal_axes(session, curve, fits, (samples, raw_rate), _map_axes, workers)
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
     plans = _plans(fits, float(session.rate_hz), float(session.duration_s), plan_targets,
                    workers) if plan else {}
@@ -421,11 +424,11 @@ def analyze(session, source: str = '', raw=None, topic: str = '',
         hygiene={**asdict(session.stats), 'n_read': int(session.stats.n_received),
                  'n_lost': 0}, curve=curve, fits=fits,
         source=source, topic=topic,
-        covering_tau_max_s=float(covering_tau_max_s), plans=plans)
+        covering_tau_max_s=float(covering_tau_max_s), plans=plans, thermal=thermal)
     # No confident wrong number: an axis whose fit is not trusted is a top-level warning,
     # and so is a consumer value the record cannot determine.
     return replace(result, warnings=result.warnings + tuple(result.trust_warnings())
-                   + tuple(short_record_warnings(fits, plans, float(session.duration_s))))
+                   + tuple(short_record_warnings(fits, plans, float(session.duration_s))) + hot)
 
 
 def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:

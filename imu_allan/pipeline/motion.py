@@ -129,7 +129,7 @@ class MotionGate:
         """Pass the held partial window on as still (end of data or a segment break)."""
         if self._win_y and self._win_y[0].shape[0]:
             if not self.moving:
-                self.feed.queue(np.concatenate(self._win_y))
+                self.feed.queue(np.concatenate(self._win_y), np.concatenate(self._win_t))
         self.feed.pass_on()
         self._win_t, self._win_y = [], []
 
@@ -171,7 +171,7 @@ class MotionGate:
                                               self.ref_mean, self.ref_std)
                 if still:
                     self._in_motion = False
-                    self.feed.queue(y[i * win:(i + still) * win])
+                    self.feed.queue(y[i * win:(i + still) * win], t[i * win:(i + still) * win])
                     k = min(still, _RUN_TAIL + 1)     # the run's last windows
                     tail = y[(i + still - k) * win:(i + still) * win]
                     self._note_still(tail.reshape(k, win, -1).mean(axis=1), k == still)
@@ -197,7 +197,7 @@ class MotionGate:
         if self.ref_mean is None or self.ref_std is None:
             # The first window: a provisional reference, replaced when it was motion.
             self.ref_mean, self.ref_std = np.array(mean, dtype=np.float64), std
-            self.feed.queue(y)
+            self.feed.queue(y, t)
             return
         moved = self._moved(mean, std)
         if moved and not self._in_motion:
@@ -206,13 +206,13 @@ class MotionGate:
         if self.config.on_motion == 'warn':
             if not moved:
                 _follow_drift(self.ref_mean, mean)
-            self.feed.queue(y)
+            self.feed.queue(y, t)
             return
         if not moved and not self.moving:
             _follow_drift(self.ref_mean, mean)
             self._note_still(mean[None])
             self._ref_windows += 1
-            self.feed.queue(y)
+            self.feed.queue(y, t)
             return
         if not self.moving:
             self._close()
@@ -225,7 +225,7 @@ class MotionGate:
                 self._open()
                 self._warn('resume', 'the IMU is still again: accumulation resumed',
                            once=False)
-                self.feed.queue(y)
+                self.feed.queue(y, t)
                 return
         else:
             self._still_since_ns = None
@@ -234,7 +234,7 @@ class MotionGate:
                 and np.median(self._cand_std / self.ref_std) <= NOISIER
                 and self._may_reanchor()):
             self._reanchor()
-            self.feed.queue(y)
+            self.feed.queue(y, t)
             return
         self.stats.n_motion_dropped += t.size
 

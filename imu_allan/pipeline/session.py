@@ -32,6 +32,7 @@ from imu_allan.pipeline.clock import StampClock
 from imu_allan.pipeline.feed import AccumulatorFeed
 from imu_allan.pipeline.hygiene import (HygieneStats, MOTION_POLICIES, N_AXES, SessionConfig,
                                         WarningLog)
+from imu_allan.pipeline.thermal import ThermalFeed
 
 __all__ = ['HygieneStats', 'MOTION_POLICIES', 'Session', 'SessionConfig']
 
@@ -68,7 +69,7 @@ class Session:
             self.feed.start(float(config.rate_hz))
 
     # ------------------------------------------------------------------ input
-    def add(self, stamp_ns, samples) -> None:
+    def add(self, stamp_ns, samples, temp_c=None) -> None:
         """
         Split a block into gap-free runs, keep the still rows, accumulate them.
 
@@ -78,6 +79,8 @@ class Session:
             Shape (n,), header stamps [ns] (int64).
         samples : array_like
             Shape (n, 6), rates [rad/s] and accelerations [m/s^2] in AXES order.
+        temp_c : array_like, optional
+            Shape (n,), the temperature at each row [degC] (:meth:`add_temperature`).
 
         Raises
         ------
@@ -91,9 +94,35 @@ class Session:
         stamp_ns, samples = _as_block(stamp_ns, samples)
         if stamp_ns.size == 0:
             return
+        if temp_c is not None:
+            self.add_temperature(stamp_ns, temp_c)
         self.stats.n_received += stamp_ns.size
         self.clock.split(stamp_ns, samples, self._keep_still)
         self.feed.set_rate(self.clock.rate_hz)
+
+    def add_temperature(self, stamp_ns, temp_c) -> None:
+        """
+        Take temperature readings (n,) [degC] at stamps (n,) [ns] (pipeline/thermal.py).
+
+        The first reading turns the thermal analysis on when no row was accumulated
+        yet (or :meth:`expect_temperature` did); later, it is left out with a warning.
+        """
+        if self.feed.thermal is None and not self.expect_temperature():
+            self.log('thermal-late', 'the temperature came after the first samples were '
+                     'accumulated: not used (give it from the start)')
+            return
+        assert self.feed.thermal is not None
+        self.feed.thermal.add_temperature(stamp_ns, temp_c)
+
+    def expect_temperature(self) -> bool:
+        """Turn the thermal analysis on (rows wait for a temperature); False if too late."""
+        if self.feed.thermal is None:
+            if self.feed.acc is not None and self.feed.acc.n_samples:
+                return False
+            self.feed.thermal = ThermalFeed(self.config)
+            if self.feed.acc is not None:
+                self.feed.thermal.start(self.feed.rate_hz)
+        return True
 
     def _keep_still(self, stamp_ns: np.ndarray, samples: np.ndarray, broken: bool) -> None:
         """Take one gap-free run of the clock: the gate passes its still rows on."""

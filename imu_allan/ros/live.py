@@ -22,6 +22,7 @@ import os
 from pathlib import Path
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from imu_allan.core.allan.edf import confidence_bounds
 from imu_allan.core.allan.raw import RawKeeper
 from imu_allan.errors import InputError, UnitMistake
 from imu_allan.io.imu_cdr import decode_imu_payloads, payload_frames
+from imu_allan.io.temperature_cdr import decode_temperatures
 from imu_allan.pipeline.analysis import CONFIDENCE
 from imu_allan.pipeline.session import Session
 from imu_allan.ros.params import session_config
@@ -61,6 +63,12 @@ class SessionView:
         self.warnings = session.warnings
         #: Why the data cannot be analysed yet (too little still data), or None.
         self.still_problem = session.still_problem
+        # With a temperature, copies of both accumulators: the thermal analysis reads
+        # them (pipeline/thermal_report.py) while the input goes on.
+        thermal = session.feed.thermal
+        self.feed = SimpleNamespace(
+            thermal=copy.deepcopy(thermal),
+            acc=None if thermal is None else copy.deepcopy(session.feed.acc))
 
     def curve(self, confidence: float = CONFIDENCE, bounds: bool = True):
         """Return the Allan curve taken with the snapshot (bounds computed on request)."""
@@ -96,6 +104,9 @@ class LiveInput:
         self.lock = threading.Lock()
         self.process_lock = threading.Lock()
         self.buffer: deque = deque()
+        #: Serialized sensor_msgs/Temperature messages (the temperature_topic parameter).
+        self.temperatures: deque = deque(maxlen=values['max_buffer_messages'])
+        self.n_bad_temperatures = 0
         self.n_received = 0
         self.n_buffer_dropped = 0
         self.n_undecodable = 0
@@ -126,6 +137,10 @@ class LiveInput:
         self.last_rx = time.monotonic()
         self.buffer.append(raw)
 
+    def append_temperature(self, raw: bytes) -> None:
+        """Take one serialized sensor_msgs/Temperature message."""
+        self.temperatures.append(raw)
+
     def due(self) -> bool:
         """Whether the buffer should be handed to the pipeline now."""
         return (len(self.buffer) >= _MIN_BLOCK
@@ -151,6 +166,12 @@ class LiveInput:
 
     def _process_locked(self) -> None:
         raws = self._take_buffer()
+        temps = [self.temperatures.popleft() for _ in range(len(self.temperatures))]
+        if temps:
+            t_ns, temp_c, bad = decode_temperatures(temps)
+            self.n_bad_temperatures += bad
+            with self.lock:
+                self.session.add_temperature(t_ns, temp_c)
         if not raws:
             return
         stamp_ns, samples = self._decode(raws)
@@ -260,10 +281,17 @@ class LiveInput:
                        '; the rate of the incoming data is checked against it'))
                 if config.rate_hz <= 0:
                     self._resume_hold = []
-                return session
+                return self._with_temperature(session)
         elif resume:
             self.log.info(f'resume requested but {path} does not exist: starting fresh')
-        return Session(config, on_warning=self.log.warning)
+        return self._with_temperature(Session(config, on_warning=self.log.warning))
+
+    def _with_temperature(self, session: Session) -> Session:
+        """Have the rows wait for a temperature when the temperature_topic parameter is set."""
+        if self.values['temperature_topic'] and not session.expect_temperature():
+            self.log.warning('the checkpoint holds no temperature: the thermal analysis is '
+                             'off until ~/reset')
+        return session
 
     def _set_aside(self, why: str, tag: str) -> None:
         """Rename the checkpoint to checkpoint.npz.<tag>-<time>[.k]; never overwrite one."""

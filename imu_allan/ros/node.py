@@ -35,7 +35,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import Image, Imu
+from sensor_msgs.msg import Image, Imu, Temperature
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
@@ -58,7 +58,7 @@ from imu_allan.ros.spin import create_executor, spin_until_shutdown
 #: Parameters that shape the session: fixed while it runs (change them and ~/reset).
 _SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messages',
                    'output_dir', 'resume', 'publish_imu_with_covariance',
-                   'initial_covariance_file', 'diagnose_raw_samples'}
+                   'initial_covariance_file', 'diagnose_raw_samples', 'temperature_topic'}
 #: Period of the /diagnostics statuses (the aggregator marks a status stale after 5 s).
 DIAGNOSTICS_PERIOD_S = 1.0
 
@@ -170,6 +170,9 @@ class ImuAllanNode(Node):
         self.subscription = self.create_subscription(
             Imu, 'imu', self._on_imu, qos, raw=True,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        if self.values['temperature_topic']:
+            self.create_subscription(Temperature, self.values['temperature_topic'],
+                                     self.live.append_temperature, qos, raw=True)
         self.pub_params = self.create_publisher(DiagnosticArray, '~/noise_parameters',
                                                 _result_qos())
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)

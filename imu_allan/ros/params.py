@@ -168,6 +168,9 @@ PARAMS: tuple[NodeParam, ...] = (
     NodeParam('frame_id', str, '', '', (),
               'The IMU analysed, by header.frame_id, when the topic carries several (never'
               " merged); '' takes the first seen; the others are counted, named and dropped"),
+    NodeParam('temperature_topic', str, '', '', (),
+              'sensor_msgs/Temperature topic of the IMU: the thermal coefficient of each axis and'
+              " compensated values (docs/thermal.md); '' analyses without a temperature"),
 )
 
 BY_NAME = {p.name: p for p in PARAMS}
