@@ -214,8 +214,9 @@ def test_the_six_run_table_of_offline_md_holds_todays_run_1(adis_run1):
 def test_the_vins_values_of_outputs_md_are_todays_run_1(adis_run1):
     text = ' '.join(_doc('outputs.md').split())
     written = dict(re.findall(r'^(\w+): ([-+.\de]+)', adis_run1.vins_yaml(), re.M))
-    quoted = dict(re.findall(r'`(\w+)`(?: went)? (?:was|from) [-+.\de]+(?: \(the density\))?'
-                             r' (?:and is now|to) ([-+.\de]+)', text))
+    number = r'(\d[\d.e+-]*\d)'         # a figure, not the full stop after it
+    quoted = dict(re.findall(r'`(\w+)`(?: went)? (?:was|from) \d[\d.e+-]*\d(?: \(the '
+                             r'density\))? (?:and is now|to) ' + number, text))
     assert set(quoted) == {'gyr_n', 'gyr_w', 'acc_n', 'acc_w'}, quoted
     for key, value in quoted.items():
         assert float(value) == pytest.approx(float(written[key]), rel=1e-3), key
