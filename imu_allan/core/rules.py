@@ -62,3 +62,20 @@ RAMP_BLOCKS = 256
 #: Likelihood-ratio statistic a ramp must exceed: chi2(1) at about 1e-5, since the
 #: search asks this of every axis (few false ramps over a fleet of axes).
 RAMP_LR_MIN = 19.5
+
+# ------------------------------------------------------------ settling after power-on
+
+#: A transient at the start of a record (:mod:`imu_allan.core.allan.settling`) counts
+#: when its amplitude is this many times the settled part's Allan deviation at its time
+#: constant: far beyond the wander of a settled sensor (to be calibrated).
+SETTLE_SCORE = 20.0
+#: The output has settled where what is left of the transient is this many of those
+#: Allan deviations.
+SETTLE_LEFT = 1.0
+#: A second, slower time constant (at least 3 times the first) sets the cut when its
+#: amplitude is this many of those Allan deviations: noise alone fits a slow part of
+#: about one (a transient of two time constants, or a ramp to a level, has a slower
+#: tail than the one exponential that fits it best).
+SETTLE_TAIL = 5.0
+#: Passes of the settling search: after a cut, what follows is judged again.
+SETTLE_PASSES = 3

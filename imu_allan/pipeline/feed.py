@@ -51,17 +51,19 @@ class AccumulatorFeed:
             self.acc.rate_hz = rate_hz
         self.rate_hz = rate_hz
 
-    def queue(self, samples: np.ndarray) -> None:
+    def queue(self, samples: np.ndarray, counted: bool = False) -> None:
         """
         Take still rows (n, 6); they reach the accumulator at :meth:`pass_on`.
 
         Rows that fill a short gap (:mod:`imu_allan.pipeline.fills`) reach it marked
-        as missing and do not count as used.
+        as missing and do not count as used; ``counted``: the rows already count as
+        used (held for the settling judgement).
         """
         fill = filled(samples)
         self._queued.append(samples)
         self._filled.append(fill)
-        self.stats.n_used += samples.shape[0] - (0 if fill is None else int(fill.sum()))
+        if not counted:
+            self.stats.n_used += samples.shape[0] - (0 if fill is None else int(fill.sum()))
 
     def pass_on(self) -> None:
         """Hand the queued rows to the accumulator, in order."""
