@@ -41,16 +41,16 @@ def test_a_clean_record_is_not_cut(seed):
 
 def test_an_exponential_is_cut_where_what_is_left_is_one_wander():
     y = _clean(10)
-    y[:, 1] += 0.01 * np.exp(-_t_s() / 120.0)
+    y[:, 1] += 0.02 * np.exp(-_t_s() / 120.0)
     found = find_settling(y, RATE_HZ)
     assert found.axes == (1,)
     first = found.transients[0]
-    assert_allclose(first.amplitude, 0.01, rtol=0.3)
+    assert_allclose(first.amplitude, 0.02, rtol=0.3)
     assert_allclose(first.tau_s, 120.0, rtol=0.4)
     assert first.score > SETTLE_SCORE
     # Cut where a exp(-t / tau) is down to SETTLE_LEFT wanders: within 25 % of the time
     # the true transient takes to get there.
-    true_s = 120.0 * math.log(0.01 / (SETTLE_LEFT * first.wander))
+    true_s = 120.0 * math.log(0.02 / (SETTLE_LEFT * first.wander))
     assert_allclose(found.cut_s, true_s, rtol=0.25)
     assert not found.capped
 

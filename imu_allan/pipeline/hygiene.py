@@ -291,6 +291,12 @@ class WarningLog:
         if self.on_warning is not None and (before + n).bit_length() > before.bit_length():
             self.on_warning(text)
 
+    def forget(self, *keys: str) -> None:
+        """Drop the problems ``keys``: they turned out to have another cause."""
+        for key in keys:
+            self.text.pop(key, None)
+            self.count.pop(key, None)
+
     @property
     def lines(self) -> list[str]:
         """Return the warnings in the order their kinds first appeared."""

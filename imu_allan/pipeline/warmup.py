@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.allan.settling import find_settling, Settling
+from imu_allan.core.allan.settling import find_settling, Settling, Transient
 from imu_allan.errors import InputError
 from imu_allan.pipeline.fills import filled
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, NS, SessionConfig, WarningLog
@@ -72,10 +72,17 @@ class WarmupGate:
         # Held-row offsets before which the segment breaks.
         self._breaks: list[int] = []
         self._windows = 0              # windows of this run left out whole
-        self._run_start_s: float = 0.0  # where the run's window starts in the record [s]
+        self._run_start_s: float = 0.0  # where the run starts in the record [s]
         self._last_ns: int | None = None
         self._elapsed_ns = 0            # the record's time so far, by its stamps
         self._restarts = 0
+        # The motion counters while the window fills: [held rows, episodes, samples
+        # dropped, re-anchors] at the window's start, then at each change.  A settling
+        # output drifts faster than the motion gate's still reference follows.
+        self._marks: list[list[int]] = [[0, 0, 0, 0]] if self.holding else []
+        self._explained = 0             # of the window's episodes, the settling output's
+        # The transients of the window left out whole before this one, in its time.
+        self._whole: Settling | None = None
 
     # ------------------------------------------------------------ the runs
     def follow(self, stamp_ns: np.ndarray) -> None:
@@ -97,6 +104,7 @@ class WarmupGate:
             self.holding = True
             self._windows = 0
             self._run_start_s = self._elapsed_ns / NS
+            self._marks, self._explained = [[0, *self._counters()]], 0
         self._restarts = self.stats.n_clock_restarts
         self._last_ns = int(stamp_ns[-1])
         self._elapsed_ns += int(stamp_ns[-1]) - int(stamp_ns[0])
@@ -124,6 +132,8 @@ class WarmupGate:
         if not self.holding:
             self.feed.queue(samples)
             return
+        if self._marks and self._counters() != self._marks[-1][1:]:
+            self._marks.append([self._n, *self._counters()])
         self._used += _real(samples)
         self.stats.n_used += _real(samples)
         self._rows.append(samples.copy())     # the caller may reuse its array
@@ -147,6 +157,8 @@ class WarmupGate:
     def restart(self) -> None:
         """Discard everything so far (motion restart): the held rows too."""
         self._rows, self._n, self._used, self._breaks = [], 0, 0, []
+        if self._marks:
+            self._marks = [[0, *self._counters()]]
         self.feed.restart()
 
     def close(self) -> None:
@@ -175,7 +187,7 @@ class WarmupGate:
         rows = np.concatenate(self._rows) if len(self._rows) > 1 else self._rows[0]
         n = self._n if final else min(self._n, self.window_rows())
         keep = 0 if not final else int(math.ceil(KEEP_SHARE * n))
-        found = find_settling(rows[:n], rate, max_cut_rows=n - keep)
+        found = _with(find_settling(rows[:n], rate), self._whole, n - keep)
         whole = not final and found.needed_rows > n and self._windows + 1 < MAX_WINDOWS
         cut = n if whole else found.cut_rows
         self._leave_out(rows[:cut], found, whole)
@@ -183,14 +195,16 @@ class WarmupGate:
         breaks = [b - cut for b in self._breaks if b > cut]
         self._rows, self._n, self._used, self._breaks = [], 0, 0, []
         if whole:
-            # The next window starts here and is judged on its own first rows.
+            # The next window starts here and is judged on its own first rows; what
+            # this one's transients still need is cut there at least.
             self._windows += 1
-            self._run_start_s += cut / rate
+            self._whole = _shifted(found, n)
             if rest.shape[0]:
                 self._rows, self._n, self._used = [rest.copy()], rest.shape[0], _real(rest)
             self._breaks = breaks
             return
         self.holding = False
+        self._marks, self._whole = [], None
         if cut and self.feed.acc is not None and self.feed.acc.n_samples:
             self.feed.break_segment()       # the rows kept do not join the earlier ones
         self._hand_on(rest, breaks)
@@ -214,15 +228,45 @@ class WarmupGate:
         s = self.stats
         s.n_used -= real
         s.n_warmup += real
-        cut_s = rows.shape[0] / self.feed.rate_hz
+        dropped = self._explain_motion(rows.shape[0])
+        cut_s = (rows.shape[0] + dropped) / self.feed.rate_hz
         s.warmup_s = round(s.warmup_s + cut_s, 3)
         axes = [AXES[j] for j in found.axes]
         s.warmup_axes = [a for a in AXES if a in set(s.warmup_axes) | set(axes)]
         if whole:
             return              # said once the run has settled, with the whole time
-        self._warn('settling', settling_warning(found, self._run_start_s,
-                                                self._windows * self.window_rows()
-                                                / self.feed.rate_hz), once=False)
+        before_s = self._windows * self.window_rows() / self.feed.rate_hz
+        self._warn('settling', settling_warning(found, self._run_start_s, before_s,
+                                                self._explained), once=False)
+
+    def _counters(self) -> list[int]:
+        s = self.stats
+        return [s.n_motion_events, s.n_motion_dropped, s.n_reanchors]
+
+    def _explain_motion(self, cut: int) -> int:
+        """
+        Count the motion seen before held row ``cut`` as the output settling.
+
+        Its episodes, samples dropped and re-anchors leave the motion counters (the
+        samples dropped join those left out), and when no motion is left, so do the
+        motion warnings.  Returns the samples dropped.
+        """
+        if not self._marks:
+            return 0
+        k = max(i for i, m in enumerate(self._marks) if m[0] <= cut)
+        base = self._marks[0][1:]
+        d = [a - b for a, b in zip(self._marks[k][1:], base)]
+        s = self.stats
+        s.n_motion_events -= d[0]
+        s.n_motion_dropped -= d[1]
+        s.n_reanchors -= d[2]
+        s.n_warmup += d[1]
+        self._explained += d[0]
+        self._marks = [[0, *base]] + [[m[0] - cut] + [a - b for a, b in zip(m[1:], d)]
+                                      for m in self._marks[k + 1:]]
+        if d[0] and not s.n_motion_events and not s.n_reanchors:
+            self._warn.forget('motion', 'reanchor', 'resume')
+        return d[1]
 
     # ---------------------------------------------------------- checkpoint
     def state(self) -> tuple[dict, dict]:
@@ -231,7 +275,11 @@ class WarmupGate:
                 else np.empty((0, N_AXES)))
         return ({'holding': self.holding, 'windows': self._windows,
                  'run_start_s': self._run_start_s, 'last_ns': self._last_ns,
-                 'elapsed_ns': self._elapsed_ns, 'restarts': self._restarts},
+                 'elapsed_ns': self._elapsed_ns, 'restarts': self._restarts,
+                 'marks': [list(m) for m in self._marks], 'explained': self._explained,
+                 'whole': None if self._whole is None else [
+                     self._whole.rows, self._whole.cut_rows, self._whole.rate_hz,
+                     self._whole.needed_rows, [list(t) for t in self._whole.transients]]},
                 {'warmup_rows': rows, 'warmup_breaks': np.asarray(self._breaks, np.int64)})
 
     def restore(self, meta, arrays: dict) -> None:
@@ -253,6 +301,14 @@ class WarmupGate:
             raise InputError('the last stamp of the warm-up hold is invalid')
         if not isinstance(meta['elapsed_ns'], int) or meta['elapsed_ns'] < 0:
             raise InputError('the time of the warm-up hold is invalid')
+        marks, explained = meta['marks'], meta['explained']
+        if (not isinstance(marks, list)
+                or not all(isinstance(m, list) and len(m) == 4
+                           and all(isinstance(v, int) and v >= 0 for v in m) for m in marks)
+                or (marks and marks[0][0] != 0)
+                or any(b[0] < a[0] for a, b in zip(marks, marks[1:]))
+                or not isinstance(explained, int) or explained < 0):
+            raise InputError('the motion counts of the warm-up hold are invalid')
         windows, start, restarts = meta['windows'], meta['run_start_s'], meta['restarts']
         if (not isinstance(windows, int) or not 0 <= windows < MAX_WINDOWS
                 or not isinstance(restarts, int) or restarts < 0
@@ -263,12 +319,15 @@ class WarmupGate:
         self.holding, self._windows = meta['holding'], windows
         self._run_start_s, self._restarts = float(start), restarts
         self._last_ns, self._elapsed_ns = meta['last_ns'], meta['elapsed_ns']
+        self._marks, self._explained = [list(m) for m in marks], explained
+        self._whole = _settling(meta['whole'])
         self._rows = [rows.astype(np.float64)] if rows.shape[0] else []
         self._n, self._used = rows.shape[0], _real(rows)
         self._breaks = [int(b) for b in breaks]
 
 
-def settling_warning(found: Settling, run_start_s: float, before_s: float = 0.0) -> str:
+def settling_warning(found: Settling, run_start_s: float, before_s: float = 0.0,
+                     motion: int = 0) -> str:
     """
     Return the one line that says what was left out, why, and what to do.
 
@@ -277,9 +336,11 @@ def settling_warning(found: Settling, run_start_s: float, before_s: float = 0.0)
     found : Settling
         The judgement of the window.
     run_start_s : float
-        Where the window started in the record [s] (0: the record's start).
+        Where the run started in the record [s] (0: the record's start).
     before_s : float
         Time of the windows before it left out whole [s].
+    motion : int
+        Motion episodes the motion gate saw in the time left out.
 
     """
     sizes = []
@@ -287,15 +348,17 @@ def settling_warning(found: Settling, run_start_s: float, before_s: float = 0.0)
         a = max((t for t in found.transients if t.axis == j), key=lambda t: abs(t.amplitude))
         sizes.append(f'{AXES[j]} {_quoted(j, a.amplitude)} (time constant '
                      f'{_minutes(a.tau_s)})')
-    start = run_start_s - before_s <= 0
+    start = run_start_s <= 0
     where = ('at the start of the record' if start else
-             f'after the sensor restarted at {_minutes(run_start_s - before_s)} into the '
-             'record')
+             f'after the sensor restarted at {_minutes(run_start_s)} into the record')
     total_s = found.cut_s + before_s
     wait_min = math.ceil((found.needed_rows / found.rate_hz + before_s) / 60)
     text = (f'the output was settling after power-on {where}: {"; ".join(sizes)}; the '
             f'first {_minutes(total_s)} {"of the record" if start else "after it"} are '
             'left out')
+    if motion:
+        text += (f' (the {motion} motion episode{"s" if motion > 1 else ""} seen then '
+                 f'{"were" if motion > 1 else "was"} the output settling)')
     if found.capped:
         left = ', '.join(f'{AXES[j]} {_quoted(j, found.left_at_cut(j))}' for j in found.axes
                          if abs(found.left_at_cut(j)) > 0)
@@ -303,6 +366,44 @@ def settling_warning(found: Settling, run_start_s: float, before_s: float = 0.0)
                  'numbers (B, K) of those axes may be too high')
     return text + (f'. Let the IMU settle for {wait_min} min after power-on before '
                    'recording, as the Allan variance procedure asks')
+
+
+def _with(found: Settling, before: Settling | None, cap: int) -> Settling:
+    """
+    Return ``found`` with the transients of the window before, capped at ``cap`` rows.
+
+    ``before`` (:func:`_shifted`) is in this window's time: what it still needs is cut
+    here too, whether or not this window shows it.
+    """
+    needed = max(found.needed_rows, before.needed_rows) if before else found.needed_rows
+    transients = (before.transients if before else ()) + found.transients
+    return Settling(found.rows, min(needed, cap), found.rate_hz, transients, needed)
+
+
+def _shifted(found: Settling, rows: int) -> Settling:
+    """Return ``found`` in the time of the window that starts ``rows`` later."""
+    t_s = rows / found.rate_hz
+    return Settling(0, 0, found.rate_hz,
+                    tuple(t._replace(start_s=t.start_s - t_s, settled_s=t.settled_s - t_s)
+                          for t in found.transients), max(found.needed_rows - rows, 0))
+
+
+def _settling(saved) -> Settling | None:
+    """Return the Settling of :meth:`WarmupGate.state` (None for none); InputError."""
+    if saved is None:
+        return None
+    try:
+        rows, cut, rate, needed, transients = saved
+        found = Settling(int(rows), int(cut), float(rate),
+                         tuple(Transient(int(t[0]), *map(float, t[1:])) for t in transients),
+                         int(needed))
+    except (TypeError, ValueError) as exc:
+        raise InputError(f'the window the warm-up hold left out is invalid: {exc}') from None
+    if not (found.rate_hz > 0 and math.isfinite(found.rate_hz) and found.needed_rows >= 0
+            and all(0 <= t.axis < N_AXES and t.tau_s > 0 and t.wander > 0
+                    for t in found.transients)):
+        raise InputError('the window the warm-up hold left out is invalid')
+    return found
 
 
 def _real(rows: np.ndarray) -> int:
