@@ -1,5 +1,5 @@
 """
-The settling hold of a session: the first still rows of a run wait to be judged.
+The warm-up hold of a session: the first still rows of a run wait to be judged.
 
 A sensor just switched on has not settled (:mod:`imu_allan.core.allan.settling`).
 :class:`WarmupGate` stands between the sample gate and the accumulator feed: it holds
@@ -8,9 +8,12 @@ stamp clock restarted, or the stamps stopped for :data:`RESTART_GAP_S`), until i
 ``warmup_window_s`` of them (at most :data:`MAX_HELD_ROWS`).  It then finds where the
 output settled, leaves the rows before that out, says so in one warning, and passes
 the rest on; from there on rows go straight through.  A window that is all transient
-is left out whole and the next one judged, at most :data:`MAX_WINDOWS` in a row.
-A record that ends, or a curve that is needed, before the window is full is judged
-on what there is, and keeps at least :data:`KEEP_SHARE` of it.
+is left out whole and the next one judged (what the transient still needs is cut
+there at least), at most :data:`MAX_WINDOWS` in a row.  A record that ends, or a curve
+that is needed, before the window is full is judged on what there is, and keeps at
+least :data:`KEEP_SHARE` of it.  Motion the motion gate saw in the time left out was
+the settling output (its still reference lags a fast transient): it leaves the motion
+counters and warnings, and the warning says so.
 
 The rows held count as used (``n_used``) until they are left out.  The window is
 judged on exactly its first rows, so the cut does not depend on how the record was

@@ -4,7 +4,7 @@ Where the output of a sensor that was just switched on has settled.
 A MEMS IMU warms up after power-on: its biases move to their settled levels over
 minutes, a transient that the Allan variance takes for bias instability and random
 walk.  The recording procedure waits for the output to settle before it records
-(the Japanese textbook's step 2; IEEE Std 952-1997 annex C lets the gyro stabilise).
+(step 2 of the Japanese textbook's procedure).
 :func:`find_settling` judges the first stretch of a record and says from which row on
 the output has settled.
 
@@ -12,13 +12,17 @@ Per axis the stretch is cut into about :data:`BLOCKS` block means, fitted by lea
 squares with a level plus a decaying exponential ``c + a exp(-t / tau)`` over a grid
 of time constants.  The transient counts when ``|a|`` is
 :data:`~imu_allan.core.rules.SETTLE_SCORE` times the record's own wander at the scale
-``tau``: the Allan deviation of the fit's residuals over the later half of the
-stretch, extrapolated beyond its longest cluster as a random walk grows, so that the
-flicker, Gauss-Markov and random-walk wander of a settled sensor is not taken for a
-transient.  The output has settled where what is left of the transient,
-``|a| exp(-t / tau)``, is down to :data:`~imu_allan.core.rules.SETTLE_LEFT` times that
-Allan deviation.  What follows the cut is judged again (a second time constant, a
-ramp to a level), at most :data:`~imu_allan.core.rules.SETTLE_PASSES` times.
+``tau``: the Allan deviation of the fit's residuals over the later half of the stretch
+(and from :data:`SETTLED_TAUS` time constants on, whichever is larger), fitted with
+white, flicker and random-walk terms, the random walk taken at a third of the stretch
+(how far apart the early and the settled levels are), so that the flicker,
+Gauss-Markov and random-walk wander of a settled sensor is not taken for a transient.
+The output has settled where what is left of the transient, ``|a| exp(-t / tau)``, is
+down to :data:`~imu_allan.core.rules.SETTLE_LEFT` times that wander, or where a fit
+with two time constants is (when its slower part is
+:data:`~imu_allan.core.rules.SETTLE_TAIL` wanders: a second time constant, a ramp to a
+level).  What follows the cut is judged again, at most
+:data:`~imu_allan.core.rules.SETTLE_PASSES` times.
 """
 
 from dataclasses import dataclass
