@@ -43,6 +43,10 @@ def add_input_options(p: argparse.ArgumentParser, frame_id: bool = True) -> None
                    help='nominal rate in Hz (default: estimated from the stamps)')
     p.add_argument('--on-motion', choices=('warn', 'pause', 'restart'), default='pause',
                    help='what to do with samples where the IMU moved')
+    p.add_argument('--warmup-window', type=float, default=None, metavar='SECONDS',
+                   help='still time at the start (and after a sensor restart) judged for '
+                        'the output settling after power-on; what had not settled is left '
+                        'out, with a warning (default 30 min; 0 keeps everything)')
     p.add_argument('--units', default='', metavar='LIST',
                    help='units the input is written in, converted before the analysis: '
                         'gyro=deg/s, accel=g or accel=mg, time=ms|us|ns (a CSV t column, '
@@ -59,7 +63,11 @@ def session_config_from_args(args) -> 'SessionConfig':
     if not (math.isfinite(args.rate) and args.rate >= 0):
         raise InputError(f'--rate must be a finite number of Hz >= 0 (0: estimated), '
                          f'got {args.rate:g}')
-    return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion,
+    window = SessionConfig.warmup_window_s if args.warmup_window is None else args.warmup_window
+    if not (math.isfinite(window) and window >= 0):
+        raise InputError(f'--warmup-window must be a finite number of seconds >= 0, got '
+                         f'{window:g}')
+    return SessionConfig(rate_hz=args.rate, on_motion=args.on_motion, warmup_window_s=window,
                          units_declared=','.join(parse_units(args.units).declared))
 
 

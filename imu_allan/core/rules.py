@@ -80,3 +80,23 @@ THERMAL_BLOCKS = 512
 #: spans at most this factor (hi / lo; about 17 equivalent degrees of freedom).  Read
 #: at the last taus, where a 3 h record's floor interval spans 70x, it told nothing.
 FLOOR_SPREAD_MAX = 2.0
+
+# ------------------------------------------------------------ settling after power-on
+
+#: A transient at the start of a record (:mod:`imu_allan.core.allan.settling`) counts
+#: when its amplitude is this many times the record's own wander at its time constant
+#: (bench/settle_power.py): settled noise reached 10.3 in 180 simulated windows (white,
+#: Gauss-Markov, random walk at 10-400 Hz) and 8.4 in the six ADIS16405 runs; the
+#: MPU-6050 record's accel_y settles by 0.7 mg in its first minutes, 24.7 wanders, too
+#: little to tell in 11 min.  A transient of 60 Allan deviations is found.
+SETTLE_SCORE = 30.0
+#: The output has settled where what is left of the transient is this many wanders
+#: (about the bias instability: it then adds little to the Allan variance).
+SETTLE_LEFT = 1.0
+#: A second, slower time constant (at least 3 times the first) sets the cut when its
+#: amplitude is this many wanders: noise alone fits a slow part of about one (a
+#: transient of two time constants, or a ramp to a level, has a slower tail than the
+#: one exponential that fits it best).
+SETTLE_TAIL = 5.0
+#: Passes of the settling search: after a cut, what follows is judged again.
+SETTLE_PASSES = 3

@@ -59,18 +59,21 @@ class AccumulatorFeed:
         if self.thermal is not None:
             self.thermal.set_rate(rate_hz)
 
-    def queue(self, samples: np.ndarray, stamp_ns: np.ndarray | None = None) -> None:
+    def queue(self, samples: np.ndarray, stamp_ns: np.ndarray | None = None,
+              counted: bool = False) -> None:
         """
         Take still rows (n, 6) and their stamps (n,) [ns]; on at :meth:`pass_on`.
 
         Rows that fill a short gap (:mod:`imu_allan.pipeline.fills`) reach it marked
-        as missing and do not count as used.
+        as missing and do not count as used; ``counted``: the rows already count as
+        used (held for the settling judgement).
         """
         fill = filled(samples)
         self._queued.append(samples)
         self._filled.append(fill)
         self._stamps.append(stamp_ns)
-        self.stats.n_used += samples.shape[0] - (0 if fill is None else int(fill.sum()))
+        if not counted:
+            self.stats.n_used += samples.shape[0] - (0 if fill is None else int(fill.sum()))
 
     def pass_on(self) -> None:
         """Hand the queued rows to the accumulator, in order."""

@@ -84,6 +84,10 @@ class SessionConfig:
         every gap.
     exact_max_m : int
         Largest cluster size the accumulator computes exactly [samples]; 0 = default.
+    warmup_window_s : float
+        Still time held at the start of the record, and after the sensor restarted,
+        to judge where its output settled after power-on (:mod:`imu_allan.pipeline.warmup`)
+        [s]; at most 2^20 rows.  0 holds nothing and leaves nothing out.
     units_declared : str
         Comma-separated quantities ('gyro', 'accel', 'time') whose units the user
         declared (``--units``): the unit check takes them as declared.  An undeclared
@@ -114,6 +118,7 @@ class SessionConfig:
     min_still_s: float = 10.0
     max_fill_samples: int = 8
     exact_max_m: int = 0
+    warmup_window_s: float = 1800.0
     units_declared: str = ''
 
     def __post_init__(self):
@@ -164,6 +169,12 @@ class HygieneStats:
     n_rate_changes, n_motion_events, n_restarts, n_reanchors : int
         Episodes of a changed rate, of motion, motion restarts, and new still
         references.
+    n_warmup : int
+        Still samples left out because the output was still settling after power-on.
+    warmup_s : float
+        The time they span [s].
+    warmup_axes : list of str
+        The axes whose transient set that time.
     frozen_axes, saturated_axes : list of str
         Axes seen frozen or saturated.
     held : dict
@@ -197,6 +208,9 @@ class HygieneStats:
     n_motion_events: int = 0
     n_restarts: int = 0
     n_reanchors: int = 0
+    n_warmup: int = 0
+    warmup_s: float = 0.0
+    warmup_axes: list = field(default_factory=list)
     frozen_axes: list = field(default_factory=list)
     saturated_axes: list = field(default_factory=list)
     held: dict = field(default_factory=dict)
@@ -208,13 +222,15 @@ class HygieneStats:
         """Counters from :func:`dataclasses.asdict`; InputError when any is invalid."""
         if isinstance(state, dict):
             # Counters written before short gaps were filled: none were.
-            state = {'n_short_gaps': 0, 'n_filled': 0, **state}
+            # ... and before a settling transient was left out: none was.
+            state = {'n_short_gaps': 0, 'n_filled': 0, 'n_warmup': 0, 'warmup_s': 0.0,
+                     'warmup_axes': [], **state}
         if not isinstance(state, dict) or set(state) != {f.name for f in fields(cls)}:
             raise InputError('the counters are incomplete or unknown')
         stats = cls(**state)
         for f in fields(cls):
             value = getattr(stats, f.name)
-            if f.name in ('frozen_axes', 'saturated_axes'):
+            if f.name in ('frozen_axes', 'saturated_axes', 'warmup_axes'):
                 ok = isinstance(value, list) and set(value) <= set(AXES)
             elif f.name == 'spikes':
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
@@ -225,7 +241,7 @@ class HygieneStats:
                               for v in value.values()))
             elif f.name == 'irregular_stamps':
                 ok = isinstance(value, bool)
-            elif f.name == 'jitter_rel':
+            elif f.name in ('jitter_rel', 'warmup_s'):
                 ok = isinstance(value, (int, float)) and math.isfinite(value) and value >= 0
             else:
                 ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
@@ -274,6 +290,12 @@ class WarningLog:
         self.text[key] = text
         if self.on_warning is not None and (before + n).bit_length() > before.bit_length():
             self.on_warning(text)
+
+    def forget(self, *keys: str) -> None:
+        """Drop the problems ``keys``: they turned out to have another cause."""
+        for key in keys:
+            self.text.pop(key, None)
+            self.count.pop(key, None)
 
     @property
     def lines(self) -> list[str]:

@@ -11,7 +11,10 @@ and passes them through three parts, each a plain object that owns its state:
    judgement, so a deg/s gyro is named, not called moving;
 2. the sample gate (:class:`~imu_allan.pipeline.checks.SampleGate`) keeps the still
    rows (saturation, frozen axes, spikes, motion);
-3. the feed (:class:`~imu_allan.pipeline.feed.AccumulatorFeed`) accumulates them in one
+3. the warm-up hold (:class:`~imu_allan.pipeline.warmup.WarmupGate`) holds the first
+   still rows of the record, and of a run after the sensor restarted, until it has
+   judged where the output settled after power-on, and leaves the rows before out;
+4. the feed (:class:`~imu_allan.pipeline.feed.AccumulatorFeed`) accumulates them in one
    :class:`~imu_allan.core.allan.accumulator.AllanAccumulator`.
 
 Because every mode goes through this object, the numbers cannot differ between them.
@@ -33,6 +36,7 @@ from imu_allan.pipeline.feed import AccumulatorFeed
 from imu_allan.pipeline.hygiene import (HygieneStats, MOTION_POLICIES, N_AXES, SessionConfig,
                                         WarningLog)
 from imu_allan.pipeline.thermal import ThermalFeed
+from imu_allan.pipeline.warmup import WarmupGate
 
 __all__ = ['HygieneStats', 'MOTION_POLICIES', 'Session', 'SessionConfig']
 
@@ -60,7 +64,8 @@ class Session:
         self.log = WarningLog(on_warning)
         self.clock = StampClock(config, self.stats, self.log)
         self.feed = AccumulatorFeed(config, self.stats)
-        self.gate = SampleGate(config, self.stats, self.log, self.feed)
+        self.warmup = WarmupGate(config, self.stats, self.log, self.feed)
+        self.gate = SampleGate(config, self.stats, self.log, self.warmup)
         #: The unit mistake that refuses this session (one line), or None.
         self.unit_problem: str | None = None
         # The first finite rows, until the unit check has judged them (None: judged).
@@ -133,6 +138,7 @@ class Session:
         if self._first_rows is not None:
             self._first_rows.append(samples[np.isfinite(samples).all(axis=1)])
             self._judge_units(FIRST_LOOK_ROWS)
+        self.warmup.follow(stamp_ns)
         self.gate.take(stamp_ns, samples, self.clock.rate_hz)
 
     def _judge_units(self, rows: int) -> None:
@@ -168,7 +174,7 @@ class Session:
         self.clock.flush(self._keep_still)
         self.feed.set_rate(self.clock.rate_hz)
         self.gate.flush()
-        self.feed.close()
+        self.warmup.close()
 
     # ----------------------------------------------------------------- output
     @property
@@ -201,12 +207,27 @@ class Session:
 
     @property
     def duration_s(self) -> float:
-        """Duration of the samples used so far [s]."""
+        """Duration of the samples used so far [s] (held for the settling judgement too)."""
         return self.stats.n_used / self.rate_hz if self.rate_hz > 0 else 0.0
+
+    def judge_settling(self) -> None:
+        """Judge the rows held at the start now, on what there is: a curve is needed."""
+        self.warmup.judge_now()
+
+    @property
+    def settling(self) -> tuple[float, float] | None:
+        """(held, window) [s] while rows wait for the settling judgement, else None."""
+        if not self.warmup.holding or self.rate_hz <= 0:
+            return None
+        return (self.warmup.held_rows / self.rate_hz,
+                self.warmup.window_rows() / self.rate_hz)
 
     def curve(self, confidence: float = 0.95, bounds: bool = True) -> AllanCurve | None:
         """
         Allan curve of the samples used so far, or None before any tau is computable.
+
+        Rows held for the settling judgement are not in it (:meth:`flush` and
+        :meth:`judge_settling` judge them).
 
         ``bounds=False`` leaves adev_lo/adev_hi NaN (see
         :meth:`imu_allan.core.allan.accumulator.AllanAccumulator.curve`).

@@ -2,9 +2,10 @@
 A session's checkpoint: each part's own state in one atomic ``.npz`` file (no pickle).
 
 The file holds ``session_meta`` (JSON: format, version, axes, config, the counters, the
-warning log, the stamp clock and the sample gate) and arrays (the accumulator's, the
-rows the spike filter and the motion gate hold).  Every part validates its own state
-when it is restored; anything missing, foreign or inconsistent is one InputError line.
+warning log, the stamp clock, the sample gate and the warm-up hold) and arrays (the
+accumulator's, and the rows the spike filter, the motion gate and the warm-up hold
+keep).  Every part validates its own state when it is restored; anything missing,
+foreign or inconsistent is one InputError line.
 """
 
 from dataclasses import asdict, fields, replace
@@ -30,12 +31,14 @@ def save(session, path) -> None:
     if session.feed.acc is None:
         return
     gate_meta, gate_arrays = session.gate.state()
+    warmup_meta, warmup_arrays = session.warmup.state()
     meta = {
         'format': FORMAT, 'version': VERSION, 'axes': list(AXES),
         'config': asdict(session.config), 'stats': asdict(session.stats),
         'log': session.log.state(), 'clock': session.clock.state(), 'gate': gate_meta,
+        'warmup': warmup_meta,
     }
-    arrays = {**session.feed.state(), **gate_arrays,
+    arrays = {**session.feed.state(), **gate_arrays, **warmup_arrays,
               'session_meta': np.array(json.dumps(meta))}
     write_atomic(path, lambda f: np.savez(f, **arrays))
 
@@ -92,6 +95,8 @@ def restore(path, saved: tuple[dict, dict], session) -> None:
         session.log.restore(meta['log'])
         session.clock.restore(meta['clock'])
         session.gate.restore(meta['gate'], arrays)
+        # A checkpoint from before the warm-up hold has none (its rows were passed on).
+        session.warmup.restore(meta.get('warmup'), arrays)
         session.feed.restore(arrays, session.clock.rate_hz)
     except (InputError, KeyError, TypeError, ValueError, ArithmeticError, AttributeError,
             IndexError) as exc:

@@ -57,9 +57,11 @@ class SessionView:
     def __init__(self, session: Session):
         self._curve = session.curve(confidence=CONFIDENCE, bounds=False)
         self.stats = copy.deepcopy(session.stats)
+        # Rows held for the warm-up judgement after a restart are not in the curve yet.
+        self.stats.n_used -= session.warmup.held_used
         self.config = session.config
         self.rate_hz = session.rate_hz
-        self.duration_s = session.duration_s
+        self.duration_s = self.stats.n_used / self.rate_hz if self.rate_hz > 0 else 0.0
         self.warnings = session.warnings
         #: Why the data cannot be analysed yet (too little still data), or None.
         self.still_problem = session.still_problem
@@ -369,6 +371,8 @@ class LiveInput:
     def snapshot(self) -> tuple:
         """Return (session view, copy of its kept samples or None), taken together."""
         with self.lock:
+            # A fit is due: the rows held at the start are judged on what there is.
+            self.session.judge_settling()
             raw = None
             if self._raw is not None and self._raw[0] is self.session:
                 raw = copy.deepcopy(self._raw[1])

@@ -160,6 +160,11 @@ PARAMS: tuple[NodeParam, ...] = (
               ' so and keeps collecting'),
     NodeParam('min_still_s', float, _S.min_still_s, 's', (0.0, 1.0e6),
               'Less still data than this duration is no analysis'),
+    NodeParam('warmup_window_s', float, _S.warmup_window_s, 's', (0.0, 86400.0),
+              'Still time held at the start (and after a sensor restart) to find where the'
+              ' output settled after power-on; the rows before are left out, with a warning'
+              ' (at most 2^20 rows; judged at the latest when min_duration_s is reached);'
+              ' 0 holds nothing'),
     NodeParam('covering_tau_max_s', float, 100.0, 's', (1.0, 1.0e6),
               'Longest averaging time the covering white + random-walk pair of the VINS and'
               ' OpenVINS files bounds (from the sample period; a VIO window is seconds)'),

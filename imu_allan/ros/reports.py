@@ -124,6 +124,11 @@ class NodeReports:
             text = (f'collecting: {pct:.1f}% of {target:.0f} s, {s.stats.n_used} samples at '
                     f'{s.rate_hz:.2f} Hz, ETA {eta_text}')
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
+        if s.settling is not None:
+            held_s, window_s = s.settling
+            text += (f', waiting for the output to settle after power-on ({held_s / 60:.1f} '
+                     f'of {window_s / 60:.0f} min held)')
+            values.append(('warmup_held_s', f'{held_s:.1f}'))
         if self.live.n_buffer_dropped:
             text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
         plan_text, plan_kv = progress_report(self.plans)
