@@ -217,14 +217,15 @@ class StampClock:
         """Mask out duplicate and out-of-order stamps against the newest before each."""
         dup = t == prev_max
         back = t < prev_max
+        # The lines state the totals so far (the counts in hygiene), not the last block's.
         if dup.any():
             self.stats.n_duplicate += int(dup.sum())
-            self._warn('duplicate', f'{int(dup.sum())} samples with a repeated stamp dropped',
-                       once=False)
+            self._warn.tally('duplicate', f'{self.stats.n_duplicate:,} samples with a '
+                             'repeated stamp dropped', int(dup.sum()))
         if back.any():
             self.stats.n_out_of_order += int(back.sum())
-            self._warn('order', f'{int(back.sum())} samples with out-of-order stamps dropped',
-                       once=False)
+            self._warn.tally('order', f'{self.stats.n_out_of_order:,} samples with '
+                             'out-of-order stamps dropped', int(back.sum()))
         return ~dup & ~back
 
     def _ingest(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:

@@ -4,7 +4,9 @@ The one analysis session that both the live node and the offline readers feed.
 A :class:`Session` takes blocks of ``(stamp_ns (n,), samples (n, 6))`` in AXES order
 and passes them through three parts, each a plain object that owns its state:
 
-1. the stamp clock (:class:`~imu_allan.pipeline.clock.StampClock`) splits them into
+1. the tick clock (:class:`~imu_allan.pipeline.ticks.TickClock`) rebuilds stamps coarser
+   than the sample period from the sample count (and passes others on as they are);
+   the stamp clock (:class:`~imu_allan.pipeline.clock.StampClock`) splits them into
    gap-free runs in stamp order (rate, gaps, duplicate, out-of-order and outlying
    stamps, clock restarts, NaN/Inf rows); the first rows of the runs are checked for
    unit mistakes (:func:`~imu_allan.core.noise.unit_check.first_look`) before any other
@@ -32,6 +34,7 @@ from imu_allan.pipeline.clock import StampClock
 from imu_allan.pipeline.feed import AccumulatorFeed
 from imu_allan.pipeline.hygiene import (HygieneStats, MOTION_POLICIES, N_AXES, SessionConfig,
                                         WarningLog)
+from imu_allan.pipeline.ticks import TickClock
 
 __all__ = ['HygieneStats', 'MOTION_POLICIES', 'Session', 'SessionConfig']
 
@@ -57,6 +60,7 @@ class Session:
         self.config = config
         self.stats = HygieneStats()
         self.log = WarningLog(on_warning)
+        self.ticks = TickClock(config, self.stats, self.log)
         self.clock = StampClock(config, self.stats, self.log)
         self.feed = AccumulatorFeed(config, self.stats)
         self.gate = SampleGate(config, self.stats, self.log, self.feed)
@@ -92,7 +96,14 @@ class Session:
         if stamp_ns.size == 0:
             return
         self.stats.n_received += stamp_ns.size
-        self.clock.split(stamp_ns, samples, self._keep_still)
+        for t, y in self.ticks.take(stamp_ns, samples):
+            self.clock.split(t, y, self._keep_still)
+        self._set_rate()
+
+    def _set_rate(self) -> None:
+        """Follow the clock's rate, or a coarse clock's count rate as it is refined."""
+        if self.ticks.rate_hz > 0 and self.clock.rate_hz > 0:
+            self.clock.rate_hz = self.ticks.rate_hz
         self.feed.set_rate(self.clock.rate_hz)
 
     def _keep_still(self, stamp_ns: np.ndarray, samples: np.ndarray, broken: bool) -> None:
@@ -136,8 +147,10 @@ class Session:
 
     def flush(self) -> None:
         """Accumulate samples still held back (call at the end of a recording)."""
+        for t, y in self.ticks.flush():
+            self.clock.split(t, y, self._keep_still)
         self.clock.flush(self._keep_still)
-        self.feed.set_rate(self.clock.rate_hz)
+        self._set_rate()
         self.gate.flush()
         self.feed.close()
 

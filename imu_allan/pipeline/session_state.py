@@ -34,6 +34,7 @@ def save(session, path) -> None:
         'format': FORMAT, 'version': VERSION, 'axes': list(AXES),
         'config': asdict(session.config), 'stats': asdict(session.stats),
         'log': session.log.state(), 'clock': session.clock.state(), 'gate': gate_meta,
+        'ticks': session.ticks.state(),
     }
     arrays = {**session.feed.state(), **gate_arrays,
               'session_meta': np.array(json.dumps(meta))}
@@ -91,6 +92,7 @@ def restore(path, saved: tuple[dict, dict], session) -> None:
         stats = HygieneStats.restore(meta['stats'])
         session.log.restore(meta['log'])
         session.clock.restore(meta['clock'])
+        session.ticks.restore(meta.get('ticks'))
         session.gate.restore(meta['gate'], arrays)
         session.feed.restore(arrays, session.clock.rate_hz)
     except (InputError, KeyError, TypeError, ValueError, ArithmeticError, AttributeError,
