@@ -4,12 +4,11 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
+from conftest import T0_NS
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.hygiene import SessionConfig
 from imu_allan.pipeline.session import Session
 from imu_allan.pipeline.ticks import coarse_tick, TickClock
-
-from conftest import T0_NS
 
 #: White noise of the simulated gyro and accelerometer [rad/s/sqrt(Hz), m/s^2/sqrt(Hz)].
 N_TRUE = np.array([1e-3] * 3 + [1e-2] * 3)

@@ -198,7 +198,7 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
                     source.warnings.append(
                         f'header.stamp is {block.stamp_ns[0]} ns in every one of the first '
                         f'{block.stamp_ns.size:,} messages on {source.topic} (the publisher '
-                        'does not fill it): the bag\'s log times are used instead (they '
+                        "does not fill it): the bag's log times are used instead (they "
                         'carry the delivery jitter)')
             stamp_ns = block.recv_ns if log_times else block.stamp_ns
             if time_scale != 1.0 and not log_times:   # log times are ns
