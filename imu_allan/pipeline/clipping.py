@@ -103,7 +103,7 @@ class ClipWatch:
         for j in np.flatnonzero(clipped):
             axis = AXES[j]
             if axis not in self.stats.clipped:
-                new.append(j)
+                new.append(int(j))
             self.stats.clipped[axis] = round(float(clipped[j] / self.n), 6)
         for j in new:
             self._warn_clipped(j, pile[:, j])
