@@ -99,14 +99,11 @@ class ClipWatch:
         n1, n2 = self.count[..., 0], self.count[..., 1]
         pile = (n1 >= PILE_MIN) & (n1 >= PILE_RATIO * n2) & np.isfinite(self.value[..., 1])
         clipped = (n1 * pile).sum(axis=0)
-        new = []
+        new = [int(j) for j in np.flatnonzero(clipped) if AXES[j] not in self.stats.clipped]
         for j in np.flatnonzero(clipped):
-            axis = AXES[j]
-            if axis not in self.stats.clipped:
-                new.append(int(j))
-            self.stats.clipped[axis] = round(float(clipped[j] / self.n), 6)
-        for j in new:
-            self._warn_clipped(j, pile[:, j])
+            self.stats.clipped[AXES[j]] = round(float(clipped[j] / self.n), 6)
+        for k in new:
+            self._warn_clipped(k, pile[:, k])
 
     def _warn_clipped(self, j: int, ends: np.ndarray) -> None:
         axis, share = AXES[j], self.stats.clipped[AXES[j]]
