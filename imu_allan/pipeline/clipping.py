@@ -11,9 +11,11 @@ truth.
 how often each was seen.  Noise thins out towards its extremes (the most extreme value
 is rare, a quantised one no more frequent than the value next to it); a clipped axis
 piles its samples on the extreme: at least :data:`PILE_MIN` of them and
-:data:`PILE_RATIO` times the next value's count.  Quantisation repeats values at every
-level alike, and held values (a driver faster than its sensor) repeat every value
-alike, so neither is taken for clipping.
+:data:`PILE_RATIO` times the next value's count, that next value within
+:data:`STEP_MAX` sds of the axis (a fine resolution: a sensor quantised coarser than
+its noise has a few levels only, its top level may well hold most samples).
+Quantisation repeats values at every level alike, and held values (a driver faster
+than its sensor) repeat every value alike, so neither is taken for clipping.
 
 What it means: clipping a white noise of sd sigma at +-c sigma leaves the variance at
 1 - s - 2 c phi(c) + s c^2 of its own (s = 2 (1 - Phi(c)) the share clipped; the
@@ -34,6 +36,9 @@ from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, WarningLog
 PILE_MIN = 10
 #: An extreme value seen at least this many times as often as the next is a pile.
 PILE_RATIO = 4.0
+#: The value next to a pile is within this many of the axis' sds (else: a coarse
+#: quantisation whose levels are the only values).
+STEP_MAX = 0.5
 #: Share of an axis' samples clipped up to which the axis is still analysed.
 KEEP_SHARE = 1e-3
 #: What every clipping warning says (consumer files carry those lines).
@@ -69,12 +74,19 @@ class ClipWatch:
         self.value = np.full((2, N_AXES, 2), -np.inf)
         self.count = np.zeros((2, N_AXES, 2), dtype=np.int64)
         self.n = 0
+        # Sums of the values (less the first row's, against cancellation) and squares.
+        self.sums = np.zeros((3, N_AXES))
 
     def take(self, samples: np.ndarray) -> None:
         """Count a block's extremes (n, 6); warn when an axis is first seen clipped."""
         y = samples[np.isfinite(samples).all(axis=1)]
         if not y.shape[0]:
             return
+        if not self.n:
+            self.sums[0] = y[0]
+        d = y - self.sums[0]
+        self.sums[1] += d.sum(axis=0)
+        self.sums[2] += (d * d).sum(axis=0)
         self.n += y.shape[0]
         for end, vals in ((0, y), (1, -y)):
             for j in range(N_AXES):
@@ -97,7 +109,11 @@ class ClipWatch:
 
     def _judge(self) -> None:
         n1, n2 = self.count[..., 0], self.count[..., 1]
-        pile = (n1 >= PILE_MIN) & (n1 >= PILE_RATIO * n2) & np.isfinite(self.value[..., 1])
+        mean = self.sums[1] / self.n
+        sd = np.sqrt(np.maximum(self.sums[2] / self.n - mean * mean, 0.0))
+        with np.errstate(invalid='ignore'):
+            fine = (self.value[..., 0] - self.value[..., 1]) <= STEP_MAX * sd
+        pile = (n1 >= PILE_MIN) & (n1 >= PILE_RATIO * n2) & fine
         clipped = (n1 * pile).sum(axis=0)
         new = [int(j) for j in np.flatnonzero(clipped) if AXES[j] not in self.stats.clipped]
         for j in np.flatnonzero(clipped):
@@ -120,16 +136,20 @@ class ClipWatch:
     # ------------------------------------------------------------- checkpoint
     def state(self) -> tuple[dict, dict]:
         """Return (JSON-able state, arrays)."""
-        return {'n': self.n}, {'clip_value': self.value.copy(), 'clip_count': self.count.copy()}
+        return {'n': self.n}, {'clip_value': self.value.copy(), 'clip_count': self.count.copy(),
+                               'clip_sums': self.sums.copy()}
 
     def restore(self, meta, arrays: dict) -> None:
         """Take the state of :meth:`state` (nothing saved: a checkpoint from before)."""
         value, count = arrays.get('clip_value'), arrays.get('clip_count')
+        sums = arrays.get('clip_sums')
         if value is None and count is None:
             return
         n = meta.get('n') if isinstance(meta, dict) else None
-        if (value is None or count is None or value.shape != self.value.shape
-                or count.shape != self.count.shape or not isinstance(n, int) or n < 0
-                or (count < 0).any()):
+        if (value is None or count is None or sums is None or value.shape != self.value.shape
+                or count.shape != self.count.shape or sums.shape != self.sums.shape
+                or not isinstance(n, int) or n < 0 or (count < 0).any()
+                or not np.isfinite(sums).all()):
             raise InputError('the clipping counters are invalid')
         self.value, self.count, self.n = value.astype(np.float64), count.astype(np.int64), n
+        self.sums = sums.astype(np.float64)
