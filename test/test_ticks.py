@@ -131,3 +131,21 @@ def test_a_coarse_session_resumes_from_its_checkpoint(tmp_path):
     assert resumed.stats.n_used == whole.stats.n_used == t.size
     assert resumed.stats.n_duplicate == 0
     assert_allclose(resumed.curve().avar[:10], whole.curve().avar[:10], rtol=1e-3)
+
+
+def test_a_resumed_coarse_session_judges_incoming_stamps_by_their_count():
+    # The node checks the rate of the first stamps after a resume against the
+    # checkpoint: coarse raw stamps give the tick's rate step by step, the count's here.
+    t, y = _coarse(4000.0, 1e-3, 2.0, seed=12)
+    s = _session(t[:4000], y[:4000])
+    assert s.ticks.mode == 'coarse'
+    assert_allclose(s.stamp_rate_hz(t[4000:4400]), 4000.0, rtol=0.01)
+    assert_allclose(Session().stamp_rate_hz(t[4000:4400]), 1000.0, rtol=0.01)
+
+
+def test_stamps_that_are_all_one_value_are_named():
+    rng = np.random.default_rng(13)
+    t = np.zeros(5000, dtype=np.int64)
+    s = _session(t, rng.standard_normal((5000, 6)))
+    assert any('stamps are all 0 ns: they carry no time' in w for w in s.warnings)
+    assert s.stats.n_duplicate == 4999

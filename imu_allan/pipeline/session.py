@@ -176,6 +176,8 @@ class Session:
 
     def stamp_rate_hz(self, stamp_ns) -> float:
         """Rate of a run of stamps judged as this session judges its own [Hz]."""
+        if self.ticks.mode == 'coarse':     # coarse stamps: the count over their span
+            return self.ticks.count_rate_hz(stamp_ns)
         return self.clock.stamp_rate_hz(stamp_ns)
 
     @property

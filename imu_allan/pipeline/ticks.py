@@ -140,6 +140,13 @@ class TickClock:
         """Return the rebuilt rate [Hz]; 0 unless the stamps are coarse."""
         return NS / self.period_ns if self.mode == 'coarse' else 0.0
 
+    @staticmethod
+    def count_rate_hz(stamp_ns: np.ndarray) -> float:
+        """Return the rate of the sample count over the span of raw stamps [Hz] (0: none)."""
+        t = np.asarray(stamp_ns, dtype=np.int64)
+        span = float(t.max() - t.min()) if t.size > 1 else 0.0
+        return (t.size - 1) * NS / span if span > 0 else 0.0
+
     def take(self, stamp_ns: np.ndarray, samples: np.ndarray) -> list:
         """
         Return the rows to pass on as [(stamp_ns, samples)], stamps rebuilt if coarse.
@@ -179,6 +186,12 @@ class TickClock:
         self._held_t, self._held_y = [], []
         if found is None:
             self.mode = 'plain'
+            if t.size > 1 and t[0] == t[-1] and (steps == 0).all():
+                self._warn('stamps-constant', f'the first {t.size:,} stamps are all {t[0]} '
+                           'ns: they carry no time (a publisher that does not fill '
+                           'header.stamp?), and every sample after the first is a repeated '
+                           "stamp; give the samples times (a bag's log times are used "
+                           'when its header stamps are one value)')
             return [(t, y)]
         self._start(found, t)
         return [(self._rebuild(t), y)]
