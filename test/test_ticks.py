@@ -149,3 +149,17 @@ def test_stamps_that_are_all_one_value_are_named():
     s = _session(t, rng.standard_normal((5000, 6)))
     assert any('stamps are all 0 ns: they carry no time' in w for w in s.warnings)
     assert s.stats.n_duplicate == 4999
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_a_short_first_block_then_a_long_one_gives_no_false_gaps(seed):
+    # The first judgement times the period over about 20 ticks; a long block after it
+    # is followed piece by piece as the count's span grows (before: up to 574 samples
+    # taken for lost in 20 s).
+    t, y = _coarse(4000.0 + 7.3 * seed, 1e-3, 20.0, seed=seed)
+    s = Session()
+    s.add(t[:85], y[:85])
+    s.add(t[85:], y[85:])
+    s.flush()
+    assert s.stats.n_gaps == 0 and s.stats.n_lost_in_ticks == 0
+    assert s.stats.n_used == t.size

@@ -218,19 +218,22 @@ class TickClock:
         out = np.empty(s.size)
         start = 0
         while start < s.size:
-            idx, end = self._count(s[start:])
+            # A piece no longer than the lock's span so far: the period's error over that
+            # span (under a tick) moves the line by under a tick over the piece.
+            stop = min(s.size, start + max(MIN_ROWS, self._next_idx - self._origin_idx))
+            idx, end = self._count(s[start:stop])
             if end:
                 self._next_idx = int(idx[end - 1]) + 1
                 if not self._fixed:
                     self._refine(int(s[start + end - 1]), int(idx[end - 1]))
                 line = self._origin_ns + (idx[:end] - self._origin_idx) * self.period_ns
                 out[start:start + end] = self._follow(line, idx[:end])
-                start += end
-            if start < s.size:
+            if start + end < stop:
                 # A jump the stamp clock must judge (a gap, a restart, an outlier): the
                 # raw stamp starts a new lock.
-                self._origin_ns, self._origin_idx = int(s[start]), self._next_idx
+                self._origin_ns, self._origin_idx = int(s[start + end]), self._next_idx
                 self._last_out = None
+            start += end
         return np.round(out).astype(np.int64)
 
     def _count(self, s: np.ndarray) -> tuple:
