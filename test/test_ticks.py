@@ -163,3 +163,18 @@ def test_a_short_first_block_then_a_long_one_gives_no_false_gaps(seed):
     s.flush()
     assert s.stats.n_gaps == 0 and s.stats.n_lost_in_ticks == 0
     assert s.stats.n_used == t.size
+
+
+@pytest.mark.parametrize('block', [4096, 333])
+def test_a_glitched_stamp_and_a_restart_in_coarse_stamps(block):
+    t, y = _coarse(4000.0, 1e-3, 20.0, seed=3)
+    glitch = t.copy()
+    glitch[30_001] += 86_400 * 10**9            # one stamp a day ahead: a lone outlier
+    s = _session(glitch, y, block=block)
+    assert s.stats.n_stamp_outliers == 1 and s.stats.n_used == t.size - 1
+    assert s.stats.n_missing == 1 and s.stats.n_clock_restarts == 0
+    restart = t.copy()
+    restart[40_000:] -= 10**12                  # the clock restarts 1000 s back
+    s = _session(restart, y, block=block)
+    assert s.stats.n_clock_restarts == 1 and s.stats.n_used == t.size
+    assert s.stats.n_duplicate == 0 and s.stats.n_out_of_order == 0

@@ -221,13 +221,16 @@ class TickClock:
             # A piece no longer than the lock's span so far: the period's error over that
             # span (under a tick) moves the line by under a tick over the piece.
             stop = min(s.size, start + max(MIN_ROWS, self._next_idx - self._origin_idx))
-            idx, end = self._count(s[start:stop])
+            idx, end, lone = self._count(s[start:stop + 1], stop - start)
             if end:
                 self._next_idx = int(idx[end - 1]) + 1
-                if not self._fixed:
-                    self._refine(int(s[start + end - 1]), int(idx[end - 1]))
+                kept = [k for k in range(end - 1, -1, -1) if k not in lone][:1]
+                if kept and not self._fixed:
+                    self._refine(int(s[start + kept[0]]), int(idx[kept[0]]))
                 line = self._origin_ns + (idx[:end] - self._origin_idx) * self.period_ns
                 out[start:start + end] = self._follow(line, idx[:end])
+                for k in lone:
+                    out[start + k] = s[start + k]
             if start + end < stop:
                 # A jump the stamp clock must judge (a gap, a restart, an outlier): the
                 # raw stamp starts a new lock.
@@ -236,31 +239,39 @@ class TickClock:
             start += end
         return np.round(out).astype(np.int64)
 
-    def _count(self, s: np.ndarray) -> tuple:
+    def _count(self, s: np.ndarray, n: int) -> tuple:
         """
-        Return the rows' sample counts and how many rows the lock keeps.
+        Return the sample counts of rows ``s[:n]``, the rows the lock keeps, lone outliers.
 
         A raw stamp more than a tick and a period ahead of the line marks lost samples:
-        the count moves on by them.  One further than a long gap either way ends the
+        the count moves on by them.  One further than a long gap either way is a lone
+        outlier when the row after it (``s[n]`` at the end, when there) is back on the
+        line (its raw stamp goes on, for the stamp clock to drop); otherwise it ends the
         rows the lock keeps.
         """
         idx = self._next_idx + np.arange(s.size, dtype=np.int64)
         far_ns = max(self.config.irregular_gap_s * NS, 100.0 * self.period_ns)
         ahead_ns = 1.5 * self.tick_ns + self.period_ns
+        lone: list[int] = []
         pos = 0
-        while pos < s.size:
-            d = (s[pos:] - self._origin_ns) - (idx[pos:] - self._origin_idx) * self.period_ns
+        while pos < n:
+            d = (s[pos:n] - self._origin_ns) - (idx[pos:n] - self._origin_idx) * self.period_ns
             bad = np.flatnonzero((d > ahead_ns) | (d < -far_ns))
             if not bad.size:
                 break
             i, off = pos + int(bad[0]), float(d[bad[0]])
             if abs(off) > far_ns:
-                return idx, i
-            lost = max(int(round(off / self.period_ns)), 1)
-            idx[i:] += lost
-            self.stats.n_lost_in_ticks += lost
+                back = (i + 1 < s.size and abs((s[i + 1] - self._origin_ns) - (
+                    idx[i + 1] - self._origin_idx) * self.period_ns) <= ahead_ns)
+                if not back:
+                    return idx[:n], i, lone
+                lone.append(i)
+            else:
+                lost = max(int(round(off / self.period_ns)), 1)
+                idx[i:] += lost
+                self.stats.n_lost_in_ticks += lost
             pos = i + 1
-        return idx, s.size
+        return idx[:n], n, lone
 
     def _refine(self, newest_ns: int, newest_idx: int) -> None:
         """Take the count rate over the lock's whole span (within a tick over it)."""
