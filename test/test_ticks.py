@@ -178,3 +178,14 @@ def test_a_glitched_stamp_and_a_restart_in_coarse_stamps(block):
     s = _session(restart, y, block=block)
     assert s.stats.n_clock_restarts == 1 and s.stats.n_used == t.size
     assert s.stats.n_duplicate == 0 and s.stats.n_out_of_order == 0
+
+
+def test_a_session_flushed_before_any_row_or_twice_is_empty():
+    s = Session()
+    s.flush()                       # the node's ~/save before any message
+    assert s.stats.n_used == 0 and s.ticks.mode == 'detect'
+    t, y = _coarse(100.0, 1e-3, 1.0, seed=14)
+    s.add(t[:10], y[:10])
+    s.flush()
+    s.flush()
+    assert s.ticks.mode == 'plain'

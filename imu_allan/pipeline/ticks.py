@@ -163,7 +163,7 @@ class TickClock:
 
     def flush(self) -> list:
         """Return the rows still held (the end of a recording), judged on what there is."""
-        if self.mode != 'detect':
+        if self.mode != 'detect' or not self._held_t:
             return []
         return self._judge(final=True)
 
