@@ -85,8 +85,9 @@ class ClipWatch:
         if not self.n:
             self.sums[0] = y[0]
         d = y - self.sums[0]
-        self.sums[1] += d.sum(axis=0)
-        self.sums[2] += (d * d).sum(axis=0)
+        with np.errstate(over='ignore', invalid='ignore'):
+            self.sums[1] += d.sum(axis=0)
+            self.sums[2] += (d * d).sum(axis=0)
         self.n += y.shape[0]
         for end, vals in ((0, y), (1, -y)):
             for j in range(N_AXES):
@@ -109,9 +110,11 @@ class ClipWatch:
 
     def _judge(self) -> None:
         n1, n2 = self.count[..., 0], self.count[..., 1]
-        mean = self.sums[1] / self.n
-        sd = np.sqrt(np.maximum(self.sums[2] / self.n - mean * mean, 0.0))
-        with np.errstate(invalid='ignore'):
+        # A value no sensor reads (1e154, a spike for the filter after) overflows the
+        # sums: that axis' sd is NaN and it is not judged clipped.
+        with np.errstate(over='ignore', invalid='ignore'):
+            mean = self.sums[1] / self.n
+            sd = np.sqrt(np.maximum(self.sums[2] / self.n - mean * mean, 0.0))
             fine = (self.value[..., 0] - self.value[..., 1]) <= STEP_MAX * sd
         pile = (n1 >= PILE_MIN) & (n1 >= PILE_RATIO * n2) & fine
         clipped = (n1 * pile).sum(axis=0)
@@ -148,8 +151,7 @@ class ClipWatch:
         n = meta.get('n') if isinstance(meta, dict) else None
         if (value is None or count is None or sums is None or value.shape != self.value.shape
                 or count.shape != self.count.shape or sums.shape != self.sums.shape
-                or not isinstance(n, int) or n < 0 or (count < 0).any()
-                or not np.isfinite(sums).all()):
+                or not isinstance(n, int) or n < 0 or (count < 0).any()):
             raise InputError('the clipping counters are invalid')
         self.value, self.count, self.n = value.astype(np.float64), count.astype(np.int64), n
         self.sums = sums.astype(np.float64)
