@@ -46,7 +46,7 @@ from imu_allan.pipeline.analysis import analyze  # noqa: E402
 from imu_allan.pipeline.hygiene import SessionConfig  # noqa: E402
 from imu_allan.pipeline.session import Session  # noqa: E402
 from imu_allan.pipeline.spikes import CHUNK, CONTEXT  # noqa: E402
-from imu_allan.ros.node import ImuAllanNode  # noqa: E402
+from imu_allan.ros.node import ImuAllanNode, NO_CLOCK  # noqa: E402
 from imu_allan.ros.spin import create_executor  # noqa: E402
 
 WINDOW = 1000
@@ -306,6 +306,39 @@ def test_progress_before_min_duration(rig):
     level, message, kv = statuses(r.last('noise_parameters'))['imu_allan: progress']
     assert message.startswith('collecting: 1.0% of 1000 s, 2000 samples at 200.00 Hz')
     assert {'percent', 'samples', 'rate_hz', 'eta_s'} <= set(kv)
+
+
+class _SpyLogger:
+    """A logger that keeps the warnings it is given and passes everything on."""
+
+    def __init__(self, logger, warned: list):
+        self._logger, self.warned = logger, warned
+
+    def warning(self, text, *args, **kwargs):
+        self.warned.append(text)
+        return self._logger.warning(text, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._logger, name)
+
+
+def test_sim_time_without_a_clock_still_processes_checkpoints_and_reports(rig, monkeypatch):
+    # use_sim_time and no /clock (a bag played without --clock): the ROS clock stands
+    # at 0, and timers on it never fire.  Before: nothing processed, no checkpoint (a
+    # kill -9 lost everything), no progress, no word.
+    r = rig(use_sim_time=True, checkpoint_period_s=0.2, progress_period_s=0.1,
+            min_duration_s=1000.0)
+    warned: list = []
+    spy = _SpyLogger(r.node.get_logger(), warned)
+    monkeypatch.setattr(r.node, 'get_logger', lambda: spy)
+    r.feed(*_record(200.0, 5.0))
+    wait(lambda: r.node.session.stats.n_used > 0, 10, 'the timer to process')
+    wait(lambda: r.node.live.checkpoint_path.exists(), 10, 'a checkpoint')
+    wait(lambda: r.last('noise_parameters') is not None and 'imu_allan: progress' in
+         statuses(r.last('noise_parameters')), 10, 'a progress report')
+    wait(lambda: warned, 10, 'the warning that no /clock arrives')
+    assert warned == [NO_CLOCK] and 'play the bag with --clock' in NO_CLOCK
+    assert r.node.get_clock().now().nanoseconds == 0
 
 
 def test_results_are_published_by_the_timer_once_long_enough(rig):

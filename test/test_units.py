@@ -283,3 +283,26 @@ def test_a_short_record_names_what_it_cannot_determine_in_every_output(tmp_path,
                  'noise_model.yaml'):
         text = (out / name).read_text()
         assert f'# WARNING {k_accel[0]}' in text, name
+
+
+@pytest.mark.parametrize('accel_sd', [0.3, 8.0])
+def test_coarse_raw_counts_with_a_constant_axis_are_named_before_the_motion_check(accel_sd):
+    # An MPU-6050 at +-16 g (2048 counts per g) whose gyro and accel_x hold one count
+    # through the first samples: before, accel_x counted as no counts, the check saw
+    # no unit that explains 2048 "m/s^2", and the motion check called each one-count
+    # step motion (exit 0 with motion warnings, or 'the IMU moved most of the time').
+    from imu_allan.errors import UnitMistake
+    from imu_allan.pipeline.session import Session
+    rng = np.random.default_rng(9)
+    n = 20_000
+    t = 10**18 + np.arange(n, dtype=np.int64) * 10_000_000
+    y = np.round(np.hstack([rng.normal(0, 0.3, (n, 3)),
+                            rng.normal([20, -30, 2048], [0.1, accel_sd, accel_sd], (n, 3))]))
+    session = Session()
+    with pytest.raises(UnitMistake) as err:
+        for k in range(0, n, 4096):
+            session.add(t[k:k + 4096], y[k:k + 4096])
+    text = str(err.value)
+    assert 'raw counts?' in text and 'the LSB of the range set' in text
+    assert 'rerun with --units accel=<value of one count>,gyro=<value of one count>' in text
+    assert session.stats.n_motion_events == 0

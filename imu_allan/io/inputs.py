@@ -203,9 +203,18 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
     time_scale = units.time_scale(1e-9) if units is not None else 1.0
 
     def bag_blocks():
+        log_times = None
         for block in source.blocks():
-            stamp_ns = block.stamp_ns
-            if time_scale != 1.0:
+            if log_times is None:
+                log_times = _stamps_are_constant(block.stamp_ns, block.recv_ns)
+                if log_times:
+                    source.warnings.append(
+                        f'header.stamp is {block.stamp_ns[0]} ns in every one of the first '
+                        f'{block.stamp_ns.size:,} messages on {source.topic} (the publisher '
+                        "does not fill it): the bag's log times are used instead (they "
+                        'carry the delivery jitter)')
+            stamp_ns = block.recv_ns if log_times else block.stamp_ns
+            if time_scale != 1.0 and not log_times:   # log times are ns
                 stamp_ns = np.round(stamp_ns * time_scale).astype(np.int64)
             yield stamp_ns, _to_si(block.samples, units), None
     label = f'{path.name} {source.topic}' + (f' {frame_id}' if frame_id is not None else '')
@@ -220,6 +229,12 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
             stamps = np.round(stamps * time_scale).astype(np.int64)
         opened.temperature = (stamps, temperature.temp_c)
     return opened
+
+
+def _stamps_are_constant(stamp_ns: np.ndarray, recv_ns: np.ndarray) -> bool:
+    """Whether header stamps are all one value (0, or constant) while log times move."""
+    return (stamp_ns.size >= 3 and bool((stamp_ns == stamp_ns[0]).all())
+            and bool((np.diff(recv_ns) > 0).any()))
 
 
 def _to_si(samples: np.ndarray, units: DeclaredUnits | None) -> np.ndarray:

@@ -31,6 +31,7 @@ from imu_allan.core.outputs.reported import report_axes
 from imu_allan.core.outputs.short_record import SHORT_RECORD, short_record_warnings
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
+from imu_allan.pipeline.clipping import CLIPPED, KEEP_SHARE, left_out
 from imu_allan.pipeline.thermal_report import thermal_axes, THERMAL_DRIFT
 from imu_allan.pipeline.workers import worker_pool
 
@@ -218,7 +219,7 @@ class AnalysisResult:
         base = [('samples', str(self.n_samples)), ('duration_s', f'{self.duration_s:.1f}'),
                 ('rate_hz', f'{self.rate_hz:.4f}')]
         if fit is None:
-            return 'error', f'{axis}: no usable noise (frozen or constant axis)', base
+            return 'error', f'{axis}: {self.no_fit(axis)}', base
         values = []
         for sym, p in self.reports[axis].params.items():
             values += [(sym, _g(p.value)), (f'{sym}_ci95_lo', _g(p.ci95[0])),
@@ -237,9 +238,18 @@ class AnalysisResult:
             message += ' | not trusted yet: ' + '; '.join(problems)
         return level, message, values + base
 
+    def no_fit(self, axis: str) -> str:
+        """Say why an axis has no fit: clipped (left out), or no usable noise."""
+        if self.hygiene.get('clipped', {}).get(axis, 0.0) > KEEP_SHARE:
+            return 'left out: clipped at the ends of its range (see the warning)'
+        return 'no usable noise (frozen or constant axis)'
+
     def summary_line(self, axis: str) -> str:
         """One human line of an axis (:func:`imu_allan.core.outputs.lines.axis_line`)."""
-        return axis_line(axis, self.fits.get(axis), self.reports[axis])
+        fit = self.fits.get(axis)
+        if fit is None:
+            return f'{axis}: {self.no_fit(axis)}'
+        return axis_line(axis, fit, self.reports[axis])
 
     def trust_warnings(self) -> list:
         """One top-level warning per axis whose fit is not trusted (conservative values)."""
@@ -266,7 +276,7 @@ class AnalysisResult:
         lines = [f'# WARNING {c}' for a in AXES
                  for c in [self.fits[a].trust_comment(a) if self.fits.get(a) else ''] if c]
         lines += [f'# WARNING {w}' for w in self.warnings
-                  if w.startswith((SHORT_RECORD, THERMAL_DRIFT))]
+                  if w.startswith((SHORT_RECORD, THERMAL_DRIFT)) or CLIPPED in w]
         if not lines:
             return text
         head, sep, rest = text.partition('\n')
@@ -293,7 +303,7 @@ class AnalysisResult:
                 'n_terms': [int(n) for n in self.curve.n_terms]}
             if fit is None:
                 entry.update({'params': {}, 'nominal': {}, 'terms': [],
-                              'notes': ['no usable noise (frozen or constant axis)']})
+                              'notes': [self.no_fit(axis)]})
             else:
                 entry.update(fit.to_json())
                 entry['reported'] = self.reports[axis].to_json()
@@ -399,9 +409,11 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
     samples, raw_rate = raw_evidence(raw, session.rate_hz)
     fits = dict.fromkeys(AXES)
     jobs = {}
+    clipped = left_out(session.stats)     # clipped too much: no honest number (warned)
     for j, axis in enumerate(AXES):
         avar = curve.avar[:, j]
-        if np.all(np.isfinite(avar)) and np.count_nonzero(avar > 0) >= 3:
+        if (np.all(np.isfinite(avar)) and np.count_nonzero(avar > 0) >= 3
+                and axis not in clipped):
             # Held values bias the shortest taus low (core.allan.hold): fit above them.
             first, fitted = held_fit_curve(curve.tau_s, avar, curve.rate_hz,
                                            session.stats.held.get(axis, 0.0))

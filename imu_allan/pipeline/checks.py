@@ -2,7 +2,9 @@
 The sample gate of a session: saturation, frozen axes, spikes, then motion.
 
 :class:`SampleGate` takes the gap-free runs of the stamp clock and passes the rows it
-keeps to the accumulator feed: saturated rows split the run, frozen axes are reported,
+keeps to the accumulator feed: clipped axes are found (values piled at the ends of the
+range, :mod:`imu_allan.pipeline.clipping`), saturated rows split the run, frozen axes
+are reported,
 spikes are interpolated (:mod:`imu_allan.pipeline.spikes`) and windows that moved are
 dropped (:mod:`imu_allan.pipeline.motion`).
 """
@@ -11,6 +13,7 @@ import numpy as np
 
 from imu_allan import AXES
 from imu_allan.errors import InputError
+from imu_allan.pipeline.clipping import ClipWatch
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig, WarningLog
 from imu_allan.pipeline.motion import MotionGate
 from imu_allan.pipeline.spikes import HOLD_MIN, SpikeFilter
@@ -49,6 +52,7 @@ class SampleGate:
         self.feed = feed
         self.spikes = SpikeFilter(config, stats, warn)
         self.motion = MotionGate(config, stats, warn, feed)
+        self.clips = ClipWatch(stats, warn, ('rad/s',) * 3 + ('m/s^2',) * 3)
         self._limits = np.array([config.gyro_range_rad_s] * 3 + [config.accel_range_m_s2] * 3)
         self._last_value = np.full(N_AXES, np.nan)
         self._repeat = np.zeros(N_AXES, dtype=np.int64)
@@ -57,6 +61,7 @@ class SampleGate:
     def take(self, stamp_ns: np.ndarray, samples: np.ndarray, rate_hz: float) -> None:
         """Check a gap-free run; pass the rows kept on towards the accumulator."""
         self._rate_hz = rate_hz
+        self.clips.take(samples)
         rows = None
         if (self._limits > 0).any():      # no range given (the default): nothing saturates
             sat = (np.abs(samples) >= 0.999 * self._limits) & (self._limits > 0)
@@ -135,14 +140,16 @@ class SampleGate:
         """Return (JSON-able state, arrays) of the gate and its parts."""
         spike_meta, spike_arrays = self.spikes.state()
         motion_meta, motion_arrays = self.motion.state()
+        clip_meta, clip_arrays = self.clips.state()
         meta = {'repeat': self._repeat.tolist(), 'rate_hz': self._rate_hz,
-                'spikes': spike_meta, 'motion': motion_meta}
-        return meta, {'last_value': self._last_value, **spike_arrays, **motion_arrays}
+                'spikes': spike_meta, 'motion': motion_meta, 'clips': clip_meta}
+        return meta, {'last_value': self._last_value, **spike_arrays, **motion_arrays,
+                      **clip_arrays}
 
     def restore(self, meta, arrays: dict) -> None:
         """Take the state of :meth:`state`; InputError when it is invalid."""
-        if not isinstance(meta, dict) or set(meta) != {'repeat', 'rate_hz', 'spikes',
-                                                       'motion'}:
+        if not isinstance(meta, dict) or set(meta) - {'clips'} != {'repeat', 'rate_hz',
+                                                                   'spikes', 'motion'}:
             raise InputError('the sample gate state is incomplete')
         repeat, last = meta['repeat'], arrays.get('last_value')
         if (not isinstance(repeat, list) or len(repeat) != N_AXES
@@ -154,6 +161,7 @@ class SampleGate:
             raise InputError('the sample gate rate is invalid')
         self.spikes.restore(meta['spikes'], arrays)
         self.motion.restore(meta['motion'], arrays)
+        self.clips.restore(meta.get('clips'), arrays)
         self._repeat = np.array(repeat, dtype=np.int64)
         self._last_value = last.astype(np.float64)
         self._rate_hz = float(rate)

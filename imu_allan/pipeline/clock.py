@@ -23,9 +23,10 @@ from typing import Callable
 import numpy as np
 
 from imu_allan.errors import InputError
-from imu_allan.pipeline.fills import fill_rows
+from imu_allan.pipeline.clock_state import check_clock_state
+from imu_allan.pipeline.fills import fill_run, missing_line
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, NS, SessionConfig, WarningLog
-from imu_allan.pipeline.steps import is_int, judge_steps, MAX_JITTER, number, split_runs
+from imu_allan.pipeline.steps import judge_steps, ordinary_windows, split_runs, stamp_rate
 
 #: Stamp steps per judged window (jitter, regularity and rate changes).  Fixed step
 #: counts, not blocks, so that the verdicts do not depend on how the record is cut up.
@@ -217,14 +218,15 @@ class StampClock:
         """Mask out duplicate and out-of-order stamps against the newest before each."""
         dup = t == prev_max
         back = t < prev_max
+        # The lines state the totals so far (the counts in hygiene), not the last block's.
         if dup.any():
             self.stats.n_duplicate += int(dup.sum())
-            self._warn('duplicate', f'{int(dup.sum())} samples with a repeated stamp dropped',
-                       once=False)
+            self._warn.tally('duplicate', f'{self.stats.n_duplicate:,} samples with a '
+                             'repeated stamp dropped', int(dup.sum()))
         if back.any():
             self.stats.n_out_of_order += int(back.sum())
-            self._warn('order', f'{int(back.sum())} samples with out-of-order stamps dropped',
-                       once=False)
+            self._warn.tally('order', f'{self.stats.n_out_of_order:,} samples with '
+                             'out-of-order stamps dropped', int(back.sum()))
         return ~dup & ~back
 
     def _ingest(self, stamp_ns: np.ndarray, samples: np.ndarray) -> None:
@@ -266,34 +268,13 @@ class StampClock:
             return
         regular, period_ns, jitter = verdict
         self.rate_hz = NS / period_ns
-        self._note_jitter(jitter, steps.size)
+        self._note_jitters(np.array([jitter]), steps.size)
         if not regular:
             self._flag_irregular(jitter)
 
     def stamp_rate_hz(self, stamp_ns: np.ndarray) -> float:
-        """
-        Rate of a run of stamps judged as this session judges its own [Hz].
-
-        Gaps of a regular clock count as whole periods (lost messages do not lower
-        it); irregular (bursty) stamps give their mean rate.  0 when undecidable.
-
-        Parameters
-        ----------
-        stamp_ns : numpy.ndarray
-            Shape (n,), stamps [ns], in any order.
-
-        """
-        t = np.sort(np.asarray(stamp_ns, dtype=np.int64))
-        steps = np.diff(t)
-        verdict = judge_steps(steps[steps > 0], self.config.gap_factor,
-                              self.config.irregular_gap_s * NS)
-        if verdict is None:
-            span = float(t[-1] - t[0]) if t.size > 1 else 0.0
-            return (t.size - 1) * NS / span if span > 0 else 0.0
-        return NS / verdict[1]
-
-    def _note_jitter(self, jitter: float, n_steps: int) -> None:
-        self._note_jitters(np.array([jitter]), n_steps)
+        """Return the rate of a run of stamps as this session judges its own [Hz]."""
+        return stamp_rate(stamp_ns, self.config.gap_factor, self.config.irregular_gap_s * NS)
 
     def _note_jitters(self, jitters: np.ndarray, n_steps: int) -> None:
         """Add windows' relative jitters, each over ``n_steps`` steps, to the running RMS."""
@@ -337,7 +318,7 @@ class StampClock:
         if verdict is None:
             return
         regular, period_ns, jitter = verdict
-        self._note_jitter(jitter, steps.size)
+        self._note_jitters(np.array([jitter]), steps.size)
         if not regular or self.stats.irregular_stamps:
             settle()
         if not regular:
@@ -358,22 +339,11 @@ class StampClock:
         self._refine_rate()
 
     def _ordinary_windows(self, steps: np.ndarray) -> np.ndarray:
-        """
-        Which whole windows of ``steps`` a clock judgement would only note the jitter of.
-
-        Such a window is regular by :func:`judge_steps`' fast test (every step within
-        25 % of the shortest, none beyond the irregular gap) and on the nominal rate,
-        outside irregular mode: judging it changes nothing but the jitter sums.  Shape
-        (len(steps) // _CLOCK_WINDOW,), bool.
-        """
-        k = steps.size // _CLOCK_WINDOW
-        if k == 0 or self.stats.irregular_stamps or self.rate_hz <= 0:
+        """Which whole windows of ``steps`` only need their jitter noted (bool per window)."""
+        if self.stats.irregular_stamps or self.rate_hz <= 0:
             return np.zeros(0, bool)
-        w = steps[:k * _CLOCK_WINDOW].reshape(k, _CLOCK_WINDOW).astype(np.float64)
-        lo, hi, mean = w.min(axis=1), w.max(axis=1), w.mean(axis=1)
-        return ((lo > 0) & (hi <= (1 + MAX_JITTER) * lo)
-                & (hi <= self.config.irregular_gap_s * NS)
-                & (np.abs(NS / self.rate_hz / mean - 1) <= self.config.rate_tolerance))
+        return ordinary_windows(steps, _CLOCK_WINDOW, NS / self.rate_hz,
+                                self.config.irregular_gap_s * NS, self.config.rate_tolerance)
 
     def _note_ordinary(self, steps: np.ndarray) -> None:
         """Note the jitter of whole ordinary windows (see :meth:`_ordinary_windows`)."""
@@ -480,49 +450,16 @@ class StampClock:
 
     def _fill_and_pass(self, stamp_ns: np.ndarray, samples: np.ndarray, at: np.ndarray,
                        lost: np.ndarray, steps_at: np.ndarray) -> None:
-        """
-        Pass a run on with its short gaps filled.
-
-        Parameters
-        ----------
-        stamp_ns, samples : numpy.ndarray
-            Shapes (n,) and (n, 6): the run's rows.
-        at : numpy.ndarray
-            Shape (g,), the rows each short gap lies before (row 0: a gap after the
-            last row passed on).
-        lost, steps_at : numpy.ndarray
-            Shape (g,), samples lost in each, and its stamp step [ns].
-
-        """
-        n, h = stamp_ns.size, self._last_row.shape[0]
-        self._n_rows += n
-        if at.size:
-            rows = np.concatenate((self._last_row, samples)) if h else samples
-            fills = fill_rows(rows[at + h - 1], samples[at], lost)
-            prev_t = stamp_ns[at] - steps_at
-            gap = np.repeat(np.arange(at.size), lost)
-            step = np.arange(gap.size) - np.repeat(np.cumsum(lost) - lost, lost) + 1
-            t_fill = prev_t[gap] + np.round((stamp_ns[at[gap]] - prev_t[gap]) * step
-                                            / (lost[gap] + 1.0)).astype(np.int64)
-            where = np.repeat(at, lost)
-            self._pass_on(np.insert(stamp_ns, where, t_fill),
-                          np.insert(samples, where, fills, axis=0))
-        else:
-            self._pass_on(stamp_ns, samples)
+        """Pass a run on with its short gaps filled (see :func:`fill_run`)."""
+        self._n_rows += stamp_ns.size
+        self._pass_on(*fill_run(stamp_ns, samples, self._last_row, at, lost, steps_at))
         self._last_row = samples[-1:].copy()
 
     def _note_missing(self, n: int = 0) -> None:
         """Count ``n`` short gaps in the one line on missing samples, with today's share."""
-        s = self.stats
-        if not s.n_short_gaps:
-            return
-        share = s.n_missing / max(self._n_rows + s.n_missing, 1)
-        n_long = s.n_gaps - s.n_short_gaps
-        self._warn.tally('missing', f'{100 * share:.1f} % of samples missing ({s.n_missing:,} '
-                         f'in {s.n_gaps:,} gaps): {s.n_short_gaps:,} short gaps of up to '
-                         f'{self.config.max_fill_samples} samples filled (no Allan term at '
-                         f'short taus uses a filled sample), {n_long:,} long '
-                         f'gap{"s" if n_long != 1 else ""} split the record', n)
+        if self.stats.n_short_gaps:
+            self._warn.tally('missing', missing_line(self.stats, self._n_rows,
+                                                     self.config.max_fill_samples), n)
 
     # ------------------------------------------------------------- checkpoint
     def state(self) -> dict:
@@ -541,46 +478,19 @@ class StampClock:
 
     def restore(self, state) -> None:
         """Take the state of :meth:`state`; InputError when it is invalid."""
-        if isinstance(state, dict) and 'last_row' not in state:
-            # Written before short gaps were filled: no rows to fill from yet.
-            state = {**state, 'last_row': [], 'n_rows': 0}
-        if not isinstance(state, dict) or set(state) != set(self.state()):
-            raise InputError('the stamp clock state is incomplete')
-        last_row = np.asarray(state['last_row'], dtype=np.float64).reshape(-1, N_AXES)
-        if (last_row.shape[0] > 1 or not np.isfinite(last_row).all()
-                or not is_int(state['n_rows']) or state['n_rows'] < 0):
-            raise InputError('the rows before a short gap are invalid')
-        rate = number(state['rate_hz'], 'rate_hz')
-        if rate <= 0:
-            raise InputError(f'the stamp clock has no rate ({rate!r})')
-        for key in ('first_stamp_ns', 'last_stamp_ns', 'newest_stamp_ns'):
-            if state[key] is not None and not is_int(state[key]):
-                raise InputError(f'the stamp clock field {key} is invalid')
-        far = state['far']
-        if far is not None:
-            if (not isinstance(far, list) or len(far) != 2 or not is_int(far[0])
-                    or np.asarray(far[1], dtype=np.float64).shape != (N_AXES,)):
-                raise InputError('the held far stamp is invalid')
-            self._far = (int(far[0]), np.asarray(far[1], dtype=np.float64))
-        steps = state['step_buf']
-        if not isinstance(steps, list) or not all(is_int(s) and s > 0 for s in steps):
-            raise InputError('the stamp steps in progress are invalid')
-        if len(steps) >= _CLOCK_WINDOW:
-            raise InputError('the stamp steps in progress are too many')
-        counts = [state[k] for k in ('clock_n', 'clock_ns', 'jitter_n')]
-        if not all(is_int(c) and c >= 0 for c in counts):
-            raise InputError('the stamp step counts are invalid')
-        off = state['off_period_ns']
-        self.rate_hz = rate
-        self.first_stamp_ns = state['first_stamp_ns']
-        self.last_stamp_ns = state['last_stamp_ns']
-        self._newest_ns = state['newest_stamp_ns']
-        self._break_next = bool(state['break_next'])
+        ok = check_clock_state(state, set(self.state()), _CLOCK_WINDOW)
+        self.rate_hz = ok['rate_hz']
+        self.first_stamp_ns = ok['first_stamp_ns']
+        self.last_stamp_ns = ok['last_stamp_ns']
+        self._newest_ns = ok['newest_stamp_ns']
+        self._break_next = ok['break_next']
+        self._far = ok['far']
+        steps = ok['step_buf']
         self._step_buf = [np.array(steps, dtype=np.int64)] if steps else []
-        self._clock_n, self._clock_ns, self._jitter_n = counts
-        self._jitter_sq = number(state['jitter_sq'], 'jitter_sq')
-        self._off_period_ns = None if off is None else number(off, 'off_period_ns')
-        self._last_row, self._n_rows = last_row, int(state['n_rows'])
+        self._clock_n, self._clock_ns = ok['clock_n'], ok['clock_ns']
+        self._jitter_n, self._jitter_sq = ok['jitter_n'], ok['jitter_sq']
+        self._off_period_ns = ok['off_period_ns']
+        self._last_row, self._n_rows = ok['last_row'], ok['n_rows']
 
 
 def _nowhere(stamp_ns: np.ndarray, samples: np.ndarray, broken: bool) -> None:

@@ -63,6 +63,61 @@ def fill_rows(left: np.ndarray, right: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.where(tag, tagged, rows)
 
 
+def fill_run(stamp_ns: np.ndarray, samples: np.ndarray, last_row: np.ndarray,
+             at: np.ndarray, lost: np.ndarray, steps_at: np.ndarray) -> tuple:
+    """
+    Return a run of rows with its short gaps filled: (stamp_ns (m,), samples (m, 6)).
+
+    Parameters
+    ----------
+    stamp_ns, samples : numpy.ndarray
+        Shapes (n,) and (n, 6): the run's rows [ns], [unit].
+    last_row : numpy.ndarray
+        Shape (0 or 1, 6): the row passed on before the run (a gap before row 0 is
+        filled from it).
+    at : numpy.ndarray
+        Shape (g,), the rows each short gap lies before.
+    lost, steps_at : numpy.ndarray
+        Shape (g,), samples lost in each, and its stamp step [ns].
+
+    """
+    if not at.size:
+        return stamp_ns, samples
+    h = last_row.shape[0]
+    rows = np.concatenate((last_row, samples)) if h else samples
+    fills = fill_rows(rows[at + h - 1], samples[at], lost)
+    prev_t = stamp_ns[at] - steps_at
+    gap = np.repeat(np.arange(at.size), lost)
+    step = np.arange(gap.size) - np.repeat(np.cumsum(lost) - lost, lost) + 1
+    t_fill = prev_t[gap] + np.round((stamp_ns[at[gap]] - prev_t[gap]) * step
+                                    / (lost[gap] + 1.0)).astype(np.int64)
+    where = np.repeat(at, lost)
+    return np.insert(stamp_ns, where, t_fill), np.insert(samples, where, fills, axis=0)
+
+
+def missing_line(stats, n_rows: int, max_fill: int) -> str:
+    """
+    Return the one warning line on missing samples, with the share so far.
+
+    Parameters
+    ----------
+    stats : imu_allan.pipeline.hygiene.HygieneStats
+        Its gap counts.
+    n_rows : int
+        Real rows that reached the gap search.
+    max_fill : int
+        ``SessionConfig.max_fill_samples``.
+
+    """
+    s = stats
+    share = s.n_missing / max(n_rows + s.n_missing, 1)
+    n_long = s.n_gaps - s.n_short_gaps
+    return (f'{100 * share:.1f} % of samples missing ({s.n_missing:,} in {s.n_gaps:,} gaps): '
+            f'{s.n_short_gaps:,} short gaps of up to {max_fill} samples filled (no Allan '
+            f'term at short taus uses a filled sample), {n_long:,} long '
+            f'gap{"s" if n_long != 1 else ""} split the record')
+
+
 def filled(samples: np.ndarray) -> np.ndarray | None:
     """
     Tell which rows are fills (see the module docstring).

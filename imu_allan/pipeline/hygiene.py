@@ -186,6 +186,16 @@ class HygieneStats:
         pooled over the windows judged so far.
     irregular_stamps : bool
         True when the stamps are too jittery to locate gaps step by step.
+    coarse_tick_s : float
+        The tick of a stamp clock coarser than the sample period [s] (its stamps are
+        rebuilt from the sample count, :mod:`imu_allan.pipeline.ticks`); 0 when the
+        stamps are used as they are.
+    n_lost_in_ticks : int
+        Samples a coarse stamp clock shows lost (counted in ``n_missing`` too once the
+        stamp clock sees their gap).
+    clipped : dict
+        Per axis whose values pile up at the ends of its range (a sensor range below
+        the signal), the share of its samples at those ends (0-1).
 
     """
 
@@ -216,15 +226,20 @@ class HygieneStats:
     held: dict = field(default_factory=dict)
     jitter_rel: float = 0.0
     irregular_stamps: bool = False
+    coarse_tick_s: float = 0.0
+    n_lost_in_ticks: int = 0
+    clipped: dict = field(default_factory=dict)
 
     @classmethod
     def restore(cls, state) -> 'HygieneStats':
         """Counters from :func:`dataclasses.asdict`; InputError when any is invalid."""
         if isinstance(state, dict):
             # Counters written before short gaps were filled: none were.
-            # ... and before a settling transient was left out: none was.
+            # ... and before a settling transient was left out, coarse stamps and
+            # clipping were recognised: none were.
             state = {'n_short_gaps': 0, 'n_filled': 0, 'n_warmup': 0, 'warmup_s': 0.0,
-                     'warmup_axes': [], **state}
+                     'warmup_axes': [], 'coarse_tick_s': 0.0, 'n_lost_in_ticks': 0,
+                     'clipped': {}, **state}
         if not isinstance(state, dict) or set(state) != {f.name for f in fields(cls)}:
             raise InputError('the counters are incomplete or unknown')
         stats = cls(**state)
@@ -235,13 +250,13 @@ class HygieneStats:
             elif f.name == 'spikes':
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, int) and v >= 0 for v in value.values()))
-            elif f.name == 'held':
+            elif f.name in ('held', 'clipped'):
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, (int, float)) and 0 <= v <= 1
                               for v in value.values()))
             elif f.name == 'irregular_stamps':
                 ok = isinstance(value, bool)
-            elif f.name in ('jitter_rel', 'warmup_s'):
+            elif f.name in ('jitter_rel', 'warmup_s', 'coarse_tick_s'):
                 ok = isinstance(value, (int, float)) and math.isfinite(value) and value >= 0
             else:
                 ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0

@@ -4,7 +4,9 @@ The one analysis session that both the live node and the offline readers feed.
 A :class:`Session` takes blocks of ``(stamp_ns (n,), samples (n, 6))`` in AXES order
 and passes them through three parts, each a plain object that owns its state:
 
-1. the stamp clock (:class:`~imu_allan.pipeline.clock.StampClock`) splits them into
+1. the tick clock (:class:`~imu_allan.pipeline.ticks.TickClock`) rebuilds stamps coarser
+   than the sample period from the sample count (and passes others on as they are);
+   the stamp clock (:class:`~imu_allan.pipeline.clock.StampClock`) splits them into
    gap-free runs in stamp order (rate, gaps, duplicate, out-of-order and outlying
    stamps, clock restarts, NaN/Inf rows); the first rows of the runs are checked for
    unit mistakes (:func:`~imu_allan.core.noise.unit_check.first_look`) before any other
@@ -36,6 +38,7 @@ from imu_allan.pipeline.feed import AccumulatorFeed
 from imu_allan.pipeline.hygiene import (HygieneStats, MOTION_POLICIES, N_AXES, SessionConfig,
                                         WarningLog)
 from imu_allan.pipeline.thermal import ThermalFeed
+from imu_allan.pipeline.ticks import TickClock
 from imu_allan.pipeline.warmup import WarmupGate
 
 __all__ = ['HygieneStats', 'MOTION_POLICIES', 'Session', 'SessionConfig']
@@ -62,6 +65,7 @@ class Session:
         self.config = config
         self.stats = HygieneStats()
         self.log = WarningLog(on_warning)
+        self.ticks = TickClock(config, self.stats, self.log)
         self.clock = StampClock(config, self.stats, self.log)
         self.feed = AccumulatorFeed(config, self.stats)
         self.warmup = WarmupGate(config, self.stats, self.log, self.feed)
@@ -102,7 +106,14 @@ class Session:
         if temp_c is not None:
             self.add_temperature(stamp_ns, temp_c)
         self.stats.n_received += stamp_ns.size
-        self.clock.split(stamp_ns, samples, self._keep_still)
+        for t, y in self.ticks.take(stamp_ns, samples):
+            self.clock.split(t, y, self._keep_still)
+        self._set_rate()
+
+    def _set_rate(self) -> None:
+        """Follow the clock's rate, or a coarse clock's count rate as it is refined."""
+        if self.ticks.rate_hz > 0 and self.clock.rate_hz > 0:
+            self.clock.rate_hz = self.ticks.rate_hz
         self.feed.set_rate(self.clock.rate_hz)
 
     def add_temperature(self, stamp_ns, temp_c) -> None:
@@ -171,8 +182,10 @@ class Session:
 
     def flush(self) -> None:
         """Accumulate samples still held back (call at the end of a recording)."""
+        for t, y in self.ticks.flush():
+            self.clock.split(t, y, self._keep_still)
         self.clock.flush(self._keep_still)
-        self.feed.set_rate(self.clock.rate_hz)
+        self._set_rate()
         self.gate.flush()
         self.warmup.close()
 
@@ -198,6 +211,8 @@ class Session:
 
     def stamp_rate_hz(self, stamp_ns) -> float:
         """Rate of a run of stamps judged as this session judges its own [Hz]."""
+        if self.ticks.mode == 'coarse':     # coarse stamps: the count over their span
+            return self.ticks.count_rate_hz(stamp_ns)
         return self.clock.stamp_rate_hz(stamp_ns)
 
     @property

@@ -37,6 +37,7 @@ def save(session, path) -> None:
         'config': asdict(session.config), 'stats': asdict(session.stats),
         'log': session.log.state(), 'clock': session.clock.state(), 'gate': gate_meta,
         'warmup': warmup_meta,
+        'ticks': session.ticks.state(),
     }
     arrays = {**session.feed.state(), **gate_arrays, **warmup_arrays,
               'session_meta': np.array(json.dumps(meta))}
@@ -94,6 +95,7 @@ def restore(path, saved: tuple[dict, dict], session) -> None:
         stats = HygieneStats.restore(meta['stats'])
         session.log.restore(meta['log'])
         session.clock.restore(meta['clock'])
+        session.ticks.restore(meta.get('ticks'))
         session.gate.restore(meta['gate'], arrays)
         # A checkpoint from before the warm-up hold has none (its rows were passed on).
         session.warmup.restore(meta.get('warmup'), arrays)

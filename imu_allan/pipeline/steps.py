@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from imu_allan.errors import InputError
+from imu_allan.pipeline.hygiene import NS
 
 #: Relative jitter of the stamp steps above which the stamps are irregular.
 MAX_JITTER = 0.25
@@ -94,3 +95,51 @@ def judge_steps(steps_ns: np.ndarray, gap_factor: float, max_step_ns: float):
             return True, float(s.sum() / np.maximum(np.round(s / period), 1).sum()), jitter
     mean = float(s.mean())
     return False, mean, float(s.std() / mean)
+
+
+def stamp_rate(stamp_ns: np.ndarray, gap_factor: float, max_step_ns: float) -> float:
+    """
+    Return the rate of a run of stamps judged as a stamp clock judges its own [Hz].
+
+    Gaps of a regular clock count as whole periods (lost messages do not lower it);
+    irregular (bursty) stamps give their mean rate.  0 when undecidable.
+
+    Parameters
+    ----------
+    stamp_ns : numpy.ndarray
+        Shape (n,), stamps [ns], in any order.
+    gap_factor, max_step_ns : float
+        As :func:`judge_steps`.
+
+    """
+    t = np.sort(np.asarray(stamp_ns, dtype=np.int64))
+    steps = np.diff(t)
+    verdict = judge_steps(steps[steps > 0], gap_factor, max_step_ns)
+    if verdict is None:
+        span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+        return (t.size - 1) * NS / span if span > 0 else 0.0
+    return NS / verdict[1]
+
+
+def ordinary_windows(steps: np.ndarray, window: int, period_ns: float, max_step_ns: float,
+                     tolerance: float) -> np.ndarray:
+    """
+    Tell which whole windows of stamp steps a clock judgement would only note the jitter of.
+
+    Such a window is regular by :func:`judge_steps`' fast test (every step within 25 %
+    of the shortest, none beyond ``max_step_ns``) and within ``tolerance`` of the
+    nominal ``period_ns``: judging it changes nothing but the jitter sums.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (len(steps) // window,), bool.
+
+    """
+    k = steps.size // window
+    w = steps[:k * window].reshape(k, window).astype(np.float64)
+    if k == 0:
+        return np.zeros(0, bool)
+    lo, hi, mean = w.min(axis=1), w.max(axis=1), w.mean(axis=1)
+    return ((lo > 0) & (hi <= (1 + MAX_JITTER) * lo) & (hi <= max_step_ns)
+            & (np.abs(period_ns / mean - 1) <= tolerance))

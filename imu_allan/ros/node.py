@@ -10,10 +10,13 @@ vectorised step (:func:`~imu_allan.io.imu_cdr.decode_imu_cdr`) and feeds the pip
 ROS-free :class:`~imu_allan.ros.live.LiveInput`.  The fit (seconds
 of CPU) runs on a worker thread on a snapshot of the Allan curve, so the executor keeps
 taking messages while it runs.  Other timers report progress, publish /diagnostics at
-1 Hz and checkpoint.  The statuses come from a :class:`~imu_allan.ros.reports.NodeReports`
-and the services from a :class:`~imu_allan.ros.services.NodeServices`, plain objects the
-node owns.  ``main`` spins the node with rclpy's EventsExecutor (cheaper per message
-than the SingleThreadedExecutor, which it falls back to when unavailable; see
+1 Hz and checkpoint; all run on the steady clock, so a node with ``use_sim_time`` and no
+/clock (a bag played without ``--clock``) still processes, checkpoints and reports (and
+says once that no /clock arrives).  The statuses come from a
+:class:`~imu_allan.ros.reports.NodeReports` and the services from a
+:class:`~imu_allan.ros.services.NodeServices`, plain objects the node owns.  ``main``
+spins the node with rclpy's EventsExecutor (cheaper per message than the
+SingleThreadedExecutor, which it falls back to when unavailable; see
 bench/bench_node.py).
 """
 
@@ -28,6 +31,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -61,6 +65,12 @@ _SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messag
                    'initial_covariance_file', 'diagnose_raw_samples', 'temperature_topic'}
 #: Period of the /diagnostics statuses (the aggregator marks a status stale after 5 s).
 DIAGNOSTICS_PERIOD_S = 1.0
+#: With use_sim_time, a /clock message is expected within this time of the start [s].
+CLOCK_WAIT_S = 3.0
+#: The warning when none came.
+NO_CLOCK = ('use_sim_time is true but no /clock arrives: play the bag with --clock (the '
+            "node's processing, checkpoints and progress run on the steady clock meanwhile; "
+            'published stamps stay at 0)')
 
 
 def _descriptor(p) -> ParameterDescriptor:
@@ -196,8 +206,13 @@ class ImuAllanNode(Node):
         self.create_service(Trigger, '~/reset', self.service_handlers.on_reset)
         self.create_service(Trigger, '~/save', self.service_handlers.on_save)
         self.create_service(Trigger, '~/diagnose', self.service_handlers.on_diagnose)
+        # The node's own work runs on the steady clock: under use_sim_time the ROS clock
+        # stands still until /clock arrives, and with it every timer made on it.
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._make_timers()
-        self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics, clock=self._steady)
+        self._clock_check = self.create_timer(CLOCK_WAIT_S, self._check_sim_clock,
+                                              clock=self._steady)
         self.get_logger().info(
             f'listening on {self.subscription.topic_name} '
             f'({self.values["qos_reliability"]}, depth {self.values["qos_depth"]}); '
@@ -207,7 +222,8 @@ class ImuAllanNode(Node):
     # ------------------------------------------------------------- set-up
     def _make_timers(self) -> None:
         self._period_timers = {
-            key: self.create_timer(max(self.values[f'{key}_period_s'], 1.0), callback)
+            key: self.create_timer(max(self.values[f'{key}_period_s'], 1.0), callback,
+                                   clock=self._steady)
             for key, callback in (('process', self._on_process_timer),
                                   ('publish', self._publish),
                                   ('progress', self._on_progress_timer),
@@ -215,6 +231,13 @@ class ImuAllanNode(Node):
                                   ('checkpoint', self._checkpoint))}
         for key in self._period_timers:
             self._set_period(key, self.values[f'{key}_period_s'])
+
+    def _check_sim_clock(self) -> None:
+        """Warn once when use_sim_time is set and no /clock came (the ROS time is 0)."""
+        self._clock_check.cancel()
+        if (self.get_parameter('use_sim_time').value
+                and self.get_clock().now().nanoseconds == 0):
+            self.get_logger().warning(NO_CLOCK)
 
     def _set_period(self, key: str, period_s: float) -> None:
         timer = self._period_timers[key]

@@ -298,8 +298,10 @@ def first_look(rate_hz: float, samples: np.ndarray) -> list[UnitFinding]:
         means[:3] = np.nan
     if not varies[3:].any():
         means[3:] = np.nan
+    # Whole numbers that change: raw counts (an axis of a coarse sensor may hold one
+    # count through the first samples, so one axis that changes is enough).
     counts = tuple(name for name, cols in (('gyro', slice(0, 3)), ('accel', slice(3, 6)))
-                   if varies[cols].all() and np.all(y[:, cols] == np.round(y[:, cols])))
+                   if varies[cols].any() and np.all(y[:, cols] == np.round(y[:, cols])))
     return unit_findings(rate_hz, means, white, counts)
 
 
@@ -376,7 +378,8 @@ def _accel_warning(norm: float, counts: bool) -> tuple | None:
                     f'accel={unit})', f'accel={unit}')
     if counts:
         return (f'{head}: its values are whole numbers, raw counts? (declare the value of '
-                'one count, e.g. --units accel=3.33mg)', 'accel=<value of one count>')
+                'one count, the LSB of the range set: e.g. --units accel=0.061mg for an '
+                'MPU-6050 at +-2 g, accel=3.33mg for an ADIS16405)', 'accel=<value of one count>')
     if norm < 0.1 * lo:
         return f'{head}: gravity was removed from this output, or it is not in m/s^2', ''
     return f'{head}: a unit or scale mistake?', ''
@@ -399,13 +402,18 @@ def _gyro_warning(bias: np.ndarray | None, white: np.ndarray | None,
         if b > GYRO_BIAS_MAX:
             sure = True
             reasons.append(f'its still bias {b:.3g} rad/s is above {GYRO_BIAS_MAX:g} rad/s')
+    if counts and not sure:
+        # A still gyro in rad/s (or deg/s) does not step by whole units.
+        sure = True
+        reasons.append('its values step by whole units (57 deg/s)')
     if not reasons:
         return None
     if counts:
         return ('the gyro does not look like rad/s: ' + '; '.join(reasons)
                 + ': its values are whole numbers, raw counts? (declare the value of one '
-                'count, e.g. --units gyro=0.05deg/s)',
-                'gyro=<value of one count>' if sure else '')
+                'count, the LSB of the range set: e.g. --units gyro=0.00763deg/s for an '
+                'MPU-6050 at +-250 deg/s, gyro=0.05deg/s for an ADIS16405)',
+                'gyro=<value of one count>')
     return ('the gyro does not look like rad/s: ' + '; '.join(reasons)
             + ': deg/s? (declare --units gyro=deg/s), or the IMU moved',
             'gyro=deg/s' if sure else '')

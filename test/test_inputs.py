@@ -1,0 +1,52 @@
+"""Opening inputs: header stamps that carry no time fall back to the bag's log times."""
+
+import sqlite3
+import struct
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from conftest import still_imu
+from imu_allan.io.bag_writer import write_imu_bag
+from imu_allan.io.inputs import open_input, stream_input
+from imu_allan.pipeline.hygiene import SessionConfig
+
+
+def _bag_with_stamps(path, stamp_of) -> tuple:
+    """Write a 100 Hz db3 bag, then set each header.stamp to stamp_of(i) [ns]."""
+    t, y = still_imu(6000, seed=4)
+    write_imu_bag(path, t, y)
+    with sqlite3.connect(path) as db:
+        rows = db.execute('SELECT id, data FROM messages ORDER BY id').fetchall()
+        patched = []
+        for i, (rowid, data) in enumerate(rows):
+            sec, nsec = divmod(int(stamp_of(i)), 10**9)
+            # CDR: 4-byte encapsulation header, then stamp.sec int32, stamp.nanosec uint32.
+            patched.append((data[:4] + struct.pack('<iI', sec, nsec) + data[12:], rowid))
+        db.executemany('UPDATE messages SET data = ? WHERE id = ?', patched)
+    return t, y
+
+
+@pytest.mark.parametrize('stamp', [0, 1_700_000_000_123_456_789])
+def test_constant_header_stamps_fall_back_to_log_times(tmp_path, stamp):
+    bag = tmp_path / 'zero.db3'
+    t, y = _bag_with_stamps(bag, lambda i: stamp)
+    with open_input(bag) as source:
+        session = stream_input(source, SessionConfig(), prefetch=False)
+        warnings = list(source.warnings)
+    assert session.stats.n_used == t.size and session.stats.n_duplicate == 0
+    assert_allclose(session.rate_hz, 100.0, rtol=1e-9)
+    session.check_usable()      # before: 'not enough still data'
+    assert any("the bag's log times are used instead" in w for w in warnings)
+
+
+def test_header_stamps_that_move_are_used_as_they_are(tmp_path):
+    bag = tmp_path / 'slow.db3'
+    # Stamps at 50 Hz while the log times say 100 Hz: the header is believed.
+    t, _ = _bag_with_stamps(bag, lambda i: 1_700_000_000_000_000_000 + i * 20_000_000)
+    with open_input(bag) as source:
+        session = stream_input(source, SessionConfig(), prefetch=False)
+        assert not any('log times' in w for w in source.warnings)
+    assert_allclose(session.rate_hz, 50.0, rtol=1e-9)
+    assert np.isfinite(session.curve().avar).all()
