@@ -39,27 +39,27 @@ Printed: a markdown table per degradation and size (counts over the inputs), the
 every confident disagreement, refusal and value over its curve with its figures.
 """
 
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+import functools
+import json
+import math
 import os
+from pathlib import Path
+import subprocess
+import sys
+import tempfile
+import time
 
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')     # as the CLI and the node run
+# One BLAS thread, as the CLI and the node run; must precede the numpy import.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-import argparse                                         # noqa: E402
-from concurrent.futures import ProcessPoolExecutor      # noqa: E402
-import functools                                        # noqa: E402
-import json                                             # noqa: E402
-import math                                             # noqa: E402
-from pathlib import Path                                # noqa: E402
-import subprocess                                       # noqa: E402
-import sys                                              # noqa: E402
-import tempfile                                         # noqa: E402
-import time                                             # noqa: E402
-
-import numpy as np                                      # noqa: E402
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from degrade import DEGRADATIONS, degrade, Record       # noqa: E402
+from degrade import DEGRADATIONS, degrade, Record  # noqa: E402, I100
 
-from imu_allan import AXES                              # noqa: E402
+from imu_allan import AXES  # noqa: E402, I100
 
 REPO = Path(__file__).resolve().parents[1]
 REALDATA = REPO.parent / 'shared' / 'realdata'
@@ -75,8 +75,8 @@ SIMS = {'sim10': (10.0, 7200.0), 'sim100': (100.0, 1800.0), 'sim400': (400.0, 60
 def sim_spec():
     """Return the NoiseSpec of the seeded simulations (MEMS-like, gravity on accel_z)."""
     from imu_allan.core.noise.values import AxisNoise, NoiseSpec
-    gyro = dict(N=1.5e-4, B=3e-5, T_B=200.0, K=1e-6)
-    accel = dict(N=1e-3, B=1e-4, T_B=200.0, K=2e-5)
+    gyro = {'N': 1.5e-4, 'B': 3e-5, 'T_B': 200.0, 'K': 1e-6}
+    accel = {'N': 1e-3, 'B': 1e-4, 'T_B': 200.0, 'K': 2e-5}
     bias = {'accel_z': 9.80665}
     axes = {a: AxisNoise(**(gyro if a.startswith('gyro') else accel),
                          bias=bias.get(a, 0.01 if a.startswith('gyro') else 0.1))
@@ -302,10 +302,22 @@ def _commit() -> str:
     return out
 
 
+def _package_tree() -> str:
+    """Return the git tree hash of imu_allan/ ('dirty' when it has local changes)."""
+    def git(*cmd):
+        return subprocess.run(['git', *cmd], cwd=REPO, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    try:
+        return 'dirty' if git('status', '--porcelain', 'imu_allan') else \
+            git('rev-parse', 'HEAD:imu_allan')[:12]
+    except (OSError, subprocess.CalledProcessError):
+        return 'dirty'
+
+
 def clean_summary(name: str, cache: Path | None) -> dict:
-    """Return the clean record's analysis, from the cache when it holds this commit's."""
-    key = f'{name}-{_commit()}.json'
-    if cache is not None and not key.count('dirty') and (cache / key).exists():
+    """Return the clean record's analysis, cached per state of the package's code."""
+    key = f'{name}-{_package_tree()}.json'
+    if cache is not None and 'dirty' not in key and (cache / key).exists():
         return json.loads((cache / key).read_text())
     out = analyse(load(name))
     if cache is not None and out['ok']:
@@ -379,6 +391,33 @@ def table(rows: list) -> str:
     return '\n'.join(lines) + '\n'
 
 
+def verdicts(rows: list) -> dict:
+    """
+    Return one word per degradation class over all its rows (inputs and sizes).
+
+    'not yet' (a confident disagreement or a refusal), 'flagged' (a disagreement whose
+    warning does not name the cause), else 'handled'; with the counts behind it.
+    """
+    out = {}
+    for name in DEGRADATIONS:
+        rs = [r for r in rows if r['degradation'].split('+')[0] == name]
+        if not rs:
+            continue
+        conf = sum(v == 'CONFIDENT' for r in rs for v in r['cells'].values())
+        flag = sum(v == 'flagged' for r in rs for v in r['cells'].values())
+        warned = sum(v == 'warned' for r in rs for v in r['cells'].values())
+        refused = sum(r['outcome'] == 'REFUSED' for r in rs)
+        detected = sum(bool(r['detected']) for r in rs)
+        word = 'not yet' if conf or refused else 'flagged' if flag else 'handled'
+        parts = [f'{conf} confident'] if conf else []
+        parts += [f'{refused} refused'] if refused else []
+        parts += [f'{flag} flagged'] if flag else []
+        parts += [f'{warned} warned'] if warned else []
+        out[name] = f'**{word}**' + (f' ({", ".join(parts)})' if parts else '') + \
+            f'; detected in {detected}/{len(rs)}'
+    return out
+
+
 def _fmt(p: dict | None) -> str:
     if p is None or p.get('value') is None:
         return 'n/a'
@@ -414,6 +453,36 @@ def findings(rows: list, clean: dict) -> str:
     return '\n'.join(out) + '\n'
 
 
+def clean_rows(clean: dict) -> list:
+    """Return a row per clean record: refused, or bounds over its own curve."""
+    return [{'input': name, 'degradation': 'clean', 'size': 0.0, 'detected': False,
+             'cells': {}, 'outcome': 'analysed' if c['ok'] else 'REFUSED',
+             'message': c.get('message', ''),
+             'over': [(a, *o) for a in AXES for o in over_curve(c['axes'][a])]
+             if c['ok'] else [],
+             'over_estimates': [(a, *o) for a in AXES
+                                for o in over_curve(c['axes'][a], ('estimate',))]
+             if c['ok'] else []} for name, c in clean.items()]
+
+
+def report(paths: list, cache: Path) -> None:
+    """Print the table and findings of earlier runs (their clean analyses from the cache)."""
+    rows = [json.loads(line) for p in paths for line in p.read_text().splitlines() if line]
+    names = sorted({r['input'] for r in rows})
+    clean = {}
+    for name in names:
+        found = sorted(cache.glob(f'{name}-*.json'), key=lambda p: p.stat().st_mtime)
+        clean[name] = json.loads(found[-1].read_text())
+    rows = clean_rows(clean) + rows
+    print(f'### Metamorphic bench: {len(rows) - len(names)} cases, inputs {", ".join(names)}\n')
+    print(table(rows))
+    print('### Per class\n')
+    for name, text in verdicts(rows).items():
+        print(f'- {name}: {text}')
+    print('\n### Findings\n')
+    print(findings(rows, clean))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--inputs', '--runs', default='adis1,adis6,mpu,sim10,sim100,sim400',
@@ -428,7 +497,12 @@ def main() -> None:
                         default=Path(tempfile.gettempdir()) / 'imu_allan_metamorphic',
                         help='where clean analyses are kept (per commit)')
     parser.add_argument('--out', type=Path, default=None, help='write every case as JSON lines')
+    parser.add_argument('--report', type=Path, nargs='*', default=None, metavar='JSONL',
+                        help='only print the table of earlier --out files (clean from --cache)')
     args = parser.parse_args()
+    if args.report is not None:
+        report(args.report, args.cache)
+        return
     inputs = [s for s in args.inputs.split(',') if s]
     degradations = [s for s in args.degradations.split(',') if s]
     unknown = [d for d in degradations if d not in DEGRADATIONS]
@@ -443,14 +517,7 @@ def main() -> None:
     jobs = jobs_for(inputs, degradations, size_index, clean, args.seed)
     print(f'{len(jobs)} cases on {len(inputs)} inputs, commit {_commit()}', file=sys.stderr)
     # The clean records themselves: refused, or a value over their own curve.
-    rows = [{'input': name, 'degradation': 'clean', 'size': 0.0, 'detected': False,
-             'cells': {}, 'outcome': 'analysed' if c['ok'] else 'REFUSED',
-             'message': c.get('message', ''),
-             'over': [(a, *o) for a in AXES for o in over_curve(c['axes'][a])]
-             if c['ok'] else [],
-             'over_estimates': [(a, *o) for a in AXES
-                                for o in over_curve(c['axes'][a], ('estimate',))]
-             if c['ok'] else []} for name, c in clean.items()]
+    rows = clean_rows(clean)
     sink = args.out.open('w') if args.out else None
     pool = ProcessPoolExecutor(args.jobs) if args.jobs > 1 else None
     results = pool.map(run_case, jobs) if pool else map(run_case, jobs)

@@ -12,16 +12,14 @@ upper ADEV band.  Cases the pending work (warm-up gate, temperature input) is to
 """
 
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO  # noqa: I100
 sys.path.insert(0, str(REPO / 'bench'))
-
-from degrade import DEGRADATIONS, degrade, Record  # noqa: E402
-import metamorphic as meta  # noqa: E402
+from degrade import DEGRADATIONS, degrade, Record  # noqa: E402, I100, I201
+import metamorphic as meta  # noqa: E402, I100
 
 #: The simulated record: 100 Hz, 20 minutes, the bench's noise model.
 RATE_HZ, DURATION_S = 100.0, 1200.0
