@@ -408,7 +408,7 @@ def jitter_dup_drop(rec: Record, pct: float, rng: np.random.Generator) -> Record
     return arrival_jitter(duplicate(drop_random(rec, pct, rng), pct, rng), 1.0, rng)
 
 
-_GAP = ('gap', 'missing', 'lost', 'dropped', 'drop')
+_GAP = ('gap of', 'gaps of', 'missing', 'messages lost', 'samples lost', 'were lost')
 _STAMP = ('stamp', 'clock', 'irregular', 'jitter', 'order', 'backward', 'rate')
 _SETTLE = ('settl', 'warm', 'transient', 'drift', 'start')
 _THERMAL = ('temperature', 'thermal', 'drift')
