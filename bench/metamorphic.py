@@ -475,6 +475,8 @@ def clean_rows(clean: dict) -> list:
 def report(paths: list, cache: Path) -> None:
     """Print the table and findings of earlier runs (their clean analyses from the cache)."""
     rows = [json.loads(line) for p in paths for line in p.read_text().splitlines() if line]
+    # One row per case: a case run again (a later file) replaces the earlier one.
+    rows = list({(r['input'], r['degradation'], r['size']): r for r in rows}.values())
     names = sorted({r['input'] for r in rows})
     clean = {}
     for name in names:
