@@ -135,7 +135,7 @@ def gaps(rec: Record, gap_s: float, rng: np.random.Generator) -> Record:
 
 def hold(rec: Record, k: float, rng: np.random.Generator) -> Record:
     """
-    A driver publishing k times faster than its sensor updates (zero-order hold).
+    Publish k times faster than the sensor updates (a driver's zero-order hold).
 
     The sensor's update is the mean of its k samples (its own decimation filter, so
     the white-noise density is unchanged); the driver polls every original stamp and
@@ -250,7 +250,7 @@ def frozen(rec: Record, seconds: float, rng: np.random.Generator) -> Record:
 
 
 def knocks(rec: Record, count: float, rng: np.random.Generator) -> Record:
-    """Add ``count`` one-second knocks (a door, a footstep: 0.5 rad/s, 2 m/s^2)."""
+    """Add one-second knocks, ``count`` of them (a door, a footstep: 0.5 rad/s, 2 m/s^2)."""
     y = rec.samples.copy()
     rate = _rate_hz(rec.t_s)
     m = max(int(rate), 2)
@@ -272,26 +272,26 @@ def _settling(rec: Record, level: float, shape: np.ndarray) -> Record:
 
 
 def warmup_exp(rec: Record, minutes: float, rng: np.random.Generator) -> Record:
-    """A bias settling exponentially after power-on: time constant minutes / 3."""
+    """Add a bias settling exponentially after power-on: time constant minutes / 3."""
     age = rec.t_s - rec.t_s[0]
     return _settling(rec, 1.0, np.exp(-age / (minutes * 60.0 / 3.0)))
 
 
 def warmup_ramp(rec: Record, minutes: float, rng: np.random.Generator) -> Record:
-    """A bias falling linearly to its still value over the first ``minutes``."""
+    """Add a bias falling linearly to its still value over the first ``minutes``."""
     age = rec.t_s - rec.t_s[0]
     return _settling(rec, 1.0, np.clip(1.0 - age / (minutes * 60.0), 0.0, None))
 
 
 def warmup_overshoot(rec: Record, minutes: float, rng: np.random.Generator) -> Record:
-    """A heater loop settling with a damped oscillation over the first ``minutes``."""
+    """Add a heater loop settling with a damped oscillation over the first ``minutes``."""
     age = rec.t_s - rec.t_s[0]
     span = minutes * 60.0
     return _settling(rec, 1.0, np.exp(-3 * age / span) * np.cos(2 * math.pi * age / (span / 2)))
 
 
 def restart(rec: Record, minutes: float, rng: np.random.Generator) -> Record:
-    """A sensor restart mid-record: a new bias offset, then a fresh settling transient."""
+    """Restart the sensor mid-record: a new bias offset, then a fresh settling transient."""
     age = rec.t_s - rec.t_s[0]
     t0 = 0.5 * age[-1]
     after = age >= t0
@@ -318,19 +318,19 @@ def _thermal(rec: Record, swing_c: float, keep_temp: bool) -> Record:
 
 
 def thermal_with_temp(rec: Record, swing_c: float, rng: np.random.Generator) -> Record:
-    """A temperature-driven bias, the temperature in the input (a ``temperature`` column)."""
+    """Add a temperature-driven bias, the temperature in the input (a CSV column)."""
     return _thermal(rec, swing_c, True)
 
 
 def thermal_no_temp(rec: Record, swing_c: float, rng: np.random.Generator) -> Record:
-    """The same temperature-driven bias, the temperature not in the input."""
+    """Add the same temperature-driven bias, the temperature not in the input."""
     return _thermal(rec, swing_c, False)
 
 
 # --- units, length, rate ---------------------------------------------------------------------
 
 def _prefix(rec: Record, minutes: float) -> Record:
-    """The first ``minutes`` (the whole record when minutes <= 0 or longer)."""
+    """Keep the first ``minutes`` (the whole record when minutes <= 0 or longer)."""
     if minutes <= 0:
         return rec
     return _keep(rec, rec.t_s - rec.t_s[0] < minutes * 60.0)
@@ -367,13 +367,13 @@ def stamps_ms(rec: Record, minutes: float, rng: np.random.Generator) -> Record:
 
 
 def first_minutes(rec: Record, minutes: float, rng: np.random.Generator) -> Record:
-    """The first ``minutes`` alone (a first day's short record)."""
+    """Keep the first ``minutes`` alone (a first day's short record)."""
     return _prefix(rec, minutes)
 
 
 def low_rate(rec: Record, rate_hz: float, rng: np.random.Generator) -> Record:
     """
-    The sensor configured at ``rate_hz``: block means of the record (its own filter).
+    Configure the sensor at ``rate_hz``: block means of the record (its own filter).
 
     No-op (the record itself) when rate_hz is not below the record's rate.
     """
@@ -389,17 +389,17 @@ def low_rate(rec: Record, rate_hz: float, rng: np.random.Generator) -> Record:
 # --- combinations -----------------------------------------------------------------------------
 
 def drop_and_gap(rec: Record, pct: float, rng: np.random.Generator) -> Record:
-    """pct % dropped at random plus one 30 s hiccup (issue 35's first example)."""
+    """Drop pct % at random plus one 30 s hiccup (issue 35's first example)."""
     return gaps(drop_random(rec, pct, rng), 30.0, rng)
 
 
 def hold_and_drop(rec: Record, k: float, rng: np.random.Generator) -> Record:
-    """A k-times hold with 2 % of the messages dropped in bursts."""
+    """Hold k times and drop 2 % of the messages in bursts."""
     return drop_bursts(hold(rec, k, rng), 2.0, rng)
 
 
 def warmup_and_thermal(rec: Record, minutes: float, rng: np.random.Generator) -> Record:
-    """A settling transient of ``minutes`` plus a +-2 C thermal bias, no temperature."""
+    """Add a settling transient of ``minutes`` and a +-2 C thermal bias, no temperature."""
     return warmup_exp(thermal_no_temp(rec, 2.0, rng), minutes, rng)
 
 

@@ -1,9 +1,9 @@
-"""
+r"""
 The clean record is the oracle: degrade real and simulated records, compare with the clean.
 
 Usage (from the repository, ``../shared`` beside it for the real records)::
 
-    nice -n 5 .venv/bin/python bench/metamorphic.py --inputs adis1,adis6,mpu,sim10,sim100,sim400 \\
+    nice -n 5 .venv/bin/python bench/metamorphic.py --inputs adis1,adis6,mpu,sim10,sim100,sim400 \
         --jobs 1 --out /tmp/meta.jsonl
 
 Each input (ADIS16405 runs ``adis1``..``adis6``, the MPU-6050 record ``mpu``, seeded
