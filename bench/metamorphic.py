@@ -57,7 +57,9 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+# This checkout's package first (a script's sys.path[0] is bench/, and the venv's
+# editable install may point at another checkout), then bench/ for degrade.
+sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).resolve().parent)]
 from degrade import DEGRADATIONS, degrade, Record  # noqa: E402, I100
 
 from imu_allan import AXES  # noqa: E402, I100
@@ -414,14 +416,16 @@ def verdicts(rows: list) -> dict:
         flag = sum(v == 'flagged' for r in rs for v in r['cells'].values())
         warned = sum(v == 'warned' for r in rs for v in r['cells'].values())
         refused = sum(r['outcome'] == 'REFUSED' for r in rs)
-        detected = sum(bool(r['detected']) for r in rs)
+        # Declared units must agree, not warn: the power is over the records as written.
+        asis = [r for r in rs if not r['degradation'].endswith('+declared')]
+        detected = sum(bool(r['detected']) for r in asis)
         word = 'not yet' if conf or refused else 'flagged' if flag else 'handled'
         parts = [f'{conf} confident'] if conf else []
         parts += [f'{refused} refused'] if refused else []
         parts += [f'{flag} flagged'] if flag else []
         parts += [f'{warned} warned'] if warned else []
         out[name] = f'**{word}**' + (f' ({", ".join(parts)})' if parts else '') + \
-            f'; detected in {detected}/{len(rs)}'
+            f'; detected in {detected}/{len(asis)}'
     return out
 
 
