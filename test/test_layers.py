@@ -414,6 +414,7 @@ TEST_TOPICS = {
     'fuzz_readers': 'every reader on damaged files', 'launch': 'launch/imu_allan.launch.py',
     'package_xml': 'package.xml', 'paper': "the reference paper's numbers",
     'realdata': 'the real recordings end to end', 'registry': 'a toy term through the package',
+    'robustness': 'degraded records against the clean one (bench/metamorphic.py)',
     'speed_paths': 'no compiled code, no timing in comments, one BLAS thread',
 }
 
