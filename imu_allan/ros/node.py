@@ -28,8 +28,7 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
@@ -50,6 +49,7 @@ from imu_allan.io.imu_cdr import imu_frame_id
 from imu_allan.io.report import result_json, write_outputs
 from imu_allan.pipeline.analysis import analyze
 from imu_allan.pipeline.session import Session
+from imu_allan.ros.declare import as_declared_types, descriptor
 from imu_allan.ros.live import LiveInput, SessionView
 from imu_allan.ros.params import as_declared_type, BY_NAME, default_output_dir, PARAMS, RENAMED
 from imu_allan.ros.pictures import CurvePictures
@@ -59,10 +59,6 @@ from imu_allan.ros.reports import matrix_msg, NodeReports
 from imu_allan.ros.services import NodeServices
 from imu_allan.ros.spin import create_executor, spin_until_shutdown
 
-#: Parameters that shape the session: fixed while it runs (change them and ~/reset).
-_SESSION_PARAMS = {'rate_hz', 'qos_depth', 'qos_reliability', 'max_buffer_messages',
-                   'output_dir', 'resume', 'publish_imu_with_covariance',
-                   'initial_covariance_file', 'diagnose_raw_samples', 'temperature_topic'}
 #: Period of the /diagnostics statuses (the aggregator marks a status stale after 5 s).
 DIAGNOSTICS_PERIOD_S = 1.0
 #: With use_sim_time, a /clock message is expected within this time of the start [s].
@@ -71,30 +67,6 @@ CLOCK_WAIT_S = 3.0
 NO_CLOCK = ('use_sim_time is true but no /clock arrives: play the bag with --clock (the '
             "node's processing, checkpoints and progress run on the steady clock meanwhile; "
             'published stamps stay at 0)')
-
-
-def _descriptor(p) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=f'{p.description} [{p.unit}]' if p.unit
-                            else p.description,
-                            read_only=p.name in _SESSION_PARAMS)
-    if p.value_type is float and p.limits:
-        d.floating_point_range = [FloatingPointRange(from_value=float(p.limits[0]),
-                                                     to_value=float(p.limits[1]), step=0.0)]
-    elif p.value_type is int and p.limits:
-        d.integer_range = [IntegerRange(from_value=int(p.limits[0]),
-                                        to_value=int(p.limits[1]), step=1)]
-    elif p.value_type is str and p.limits:
-        d.additional_constraints = 'one of: ' + ', '.join(p.limits)
-    return d
-
-
-def _as_declared_types(params: list) -> list:
-    """Return the parameters to set, an integer for a double parameter made a float."""
-    out = []
-    for p in params:
-        value = as_declared_type(p.name, p.value)
-        out.append(p if value is p.value else Parameter(p.name, value=value))
-    return out
 
 
 def _result_qos() -> QoSProfile:
@@ -137,7 +109,7 @@ class ImuAllanNode(Node):
                 self._parameter_overrides[name] = Parameter(name, value=value)
         for p in PARAMS:
             try:
-                self.declare_parameter(p.name, p.default, _descriptor(p))
+                self.declare_parameter(p.name, p.default, descriptor(p))
             except ParameterException as exc:
                 self.destroy_node()
                 raise InputError(f'invalid parameter {p.name}: {exc}') from None
@@ -149,7 +121,7 @@ class ImuAllanNode(Node):
                 raise InputError(f'invalid parameter: {why}')
         # `ros2 param set ... min_duration_s 600` sends an integer: converted before rclpy
         # checks the type, as the start-up overrides above.
-        self.add_pre_set_parameters_callback(_as_declared_types)
+        self.add_pre_set_parameters_callback(as_declared_types)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # Statuses, files and checkpoints are named after the node, so two nodes (two
         # IMUs, two namespaces) never collide.
