@@ -62,3 +62,8 @@ RAMP_BLOCKS = 256
 #: Likelihood-ratio statistic a ramp must exceed: chi2(1) at about 1e-5, since the
 #: search asks this of every axis (few false ramps over a fleet of axes).
 RAMP_LR_MIN = 19.5
+#: A plan's time longer than this many times the record it came from is a lower limit:
+#: the fitted model has only seen taus up to a fraction of the record, and a term that
+#: surfaces at longer taus (B flattening, K rising) adds width, so the true time is longer
+#: (the ADIS16405's 2-min plan said K in 22 min, its 2.78 h record 17 h).
+LOWER_LIMIT_RATIO = 3.0

@@ -476,7 +476,7 @@ def short_record_warnings(fits: dict, plans: dict, duration_s: float) -> list:
         One line per sensor and parameter (N, K, B) with an undetermined axis.
 
     """
-    from imu_allan.core.plan.result import hours
+    from imu_allan.core.plan.result import hours, more_total
     out = []
     for (sensor, sym), name in CONSUMER_NAMES.items():
         axes = [a for a in AXES if a.startswith(sensor) and fits.get(a) is not None]
@@ -498,11 +498,14 @@ def short_record_warnings(fits: dict, plans: dict, duration_s: float) -> list:
             worst = max(planned, key=lambda q: q.time_s if not math.isnan(q.time_s)
                         else math.inf)
             at_least = any(q.kind in ('at_least', 'open') for q in planned)
-            if worst.kind == 'open' or math.isnan(worst.time_s):
+            if math.isinf(worst.target):
+                line += '; the plan sets it no target (its profile does not need it)'
+            elif worst.kind == 'open' or math.isnan(worst.time_s):
                 line += '; a longer record (this one cannot say how long) would'
             else:
-                line += (f'; {"at least " if at_least else ""}{hours(worst.time_s)} '
-                         f'would (the time the plan gives to +-{100 * worst.target:.0f} %)')
+                at_least = at_least or worst.lower_limit(duration_s)
+                line += (f'; {more_total(worst.time_s, duration_s, at_least)} would (the '
+                         f'time the plan gives to +-{100 * worst.target:.0f} %)')
         else:
             line += ('; a longer record would (plan it: imu-allan plan, or analyze without '
                      '--no-plan)')

@@ -10,7 +10,63 @@ come with the analysis (:func:`imu_allan.pipeline.analysis.analyze` with ``plan`
 
 import math
 
-from imu_allan.core.plan.result import AxisPlan, hours
+from imu_allan.core.plan.result import AxisPlan, more_total
+from imu_allan.core.plan.targets import profile_targets, targeted
+
+#: The node's first plan comes after this long, or one plan_period_s if shorter [s]: a
+#: user asks "how long?" in the first minutes, and a minute of data already bounds the
+#: answer from below (the plan says 'at least' while it extrapolates).
+FIRST_PLAN_S = 60.0
+
+
+def plan_due(values: dict, since_s: float, planned: bool) -> bool:
+    """
+    Whether the node should plan now.
+
+    Parameters
+    ----------
+    values : dict
+        The node's parameter values (plan_period_s).
+    since_s : float
+        Wall time since the last plan, or since the start or ~/reset [s].
+    planned : bool
+        Whether a plan was made since the start or ~/reset.
+
+    """
+    period = values['plan_period_s']
+    if period <= 0:
+        return False
+    return since_s >= (period if planned else min(period, FIRST_PLAN_S))
+
+
+def node_targets(values: dict) -> dict:
+    """Return the node's targets: plan_profile, with plan_targets over it."""
+    return profile_targets(values['plan_profile'], values['plan_targets'])
+
+
+def targets_label(values: dict) -> str:
+    """Return e.g. 'vio targets (N, K)' for the progress line and the stop message."""
+    return f'{values["plan_profile"]} targets ({", ".join(targeted(node_targets(values)))})'
+
+
+def remaining(plans: dict) -> tuple[float, float, bool]:
+    """
+    Return the record time still needed, the record at that time, and 'at least'.
+
+    Returns
+    -------
+    more_s : float
+        The longest further recording over the axes [s] (NaN: bounds only).
+    total_s : float
+        The record length then [s].
+    at_least : bool
+        Whether that time is a lower limit (an axis' plan extrapolates or has a bound).
+
+    """
+    more = [p.remaining_s() for p in plans.values()]
+    more_s = math.nan if any(math.isnan(r) for r in more) else max(more)
+    duration_s = max(p.duration_s for p in plans.values())
+    return more_s, duration_s + more_s, any(p.lower_limit() for p in plans.values())
 
 
 def _num(x: float) -> str:
@@ -52,12 +108,14 @@ def progress_report(plans: dict) -> tuple[str, list]:
     Returns
     -------
     text : str
-        '' without plans; else e.g. ' | gyro_x met: N; B, T_B in 2.1 h more | ...',
+        '' without plans; else e.g. ' | every target met in at least 2.1 h more (2.3 h
+        total) | gyro_x met: N; K at least 2.1 h more (2.3 h total) | ...',
         or ' | every target met' when all axes meet them; the axes whose model does not
         hold are named at the end.
     values : list of (str, str)
-        ``<axis>_met`` (the parameters that meet their target), ``<axis>_remaining_s`` per axis and
-        ``plan_remaining_s`` (the longest).
+        ``<axis>_met`` (the parameters that meet their target), ``<axis>_remaining_s``
+        per axis, ``plan_remaining_s`` (the longest) and ``plan_lower_limit`` (whether
+        that time is a lower limit).
 
     """
     if not plans:
@@ -70,16 +128,18 @@ def progress_report(plans: dict) -> tuple[str, list]:
                    (f'{axis}_remaining_s', _num(plan.remaining_s()))]
         if not plan.all_met():
             parts.append(f'{axis} {plan.progress_line()}')
-    remaining = [p.remaining_s() for p in plans.values()]
-    longest = math.nan if any(math.isnan(r) for r in remaining) else max(remaining)
+    longest = remaining(plans)[0]
     values.append(('plan_remaining_s', _num(longest)))
     caveats = [axis for axis, plan in plans.items() if plan.caveat]
     tail = (f' | model does not hold on {", ".join(caveats)}: times may be short'
             if caveats else '')
     if not parts:
         return ' | every target met' + tail, values
-    when = f'in {hours(longest)} more' if not math.isnan(longest) else 'later (bounds only)'
-    return f' | every target met {when} | ' + ' | '.join(parts) + tail, values
+    more_s, total_s, at_least = remaining(plans)
+    when = (more_total(total_s, total_s - more_s, at_least) if not math.isnan(more_s)
+            else 'later (bounds only)')
+    values.append(('plan_lower_limit', str(at_least).lower()))
+    return f' | every target met in {when} | ' + ' | '.join(parts) + tail, values
 
 
 def targets_met(plans: dict, n_axes_fitted: int) -> bool:
