@@ -73,12 +73,12 @@ def units_from_args(args) -> 'DeclaredUnits | None':
 def add_target_option(p: argparse.ArgumentParser) -> None:
     """Add ``--profile`` and ``--target P=WIDTH`` (shared with ``plan``)."""
     p.add_argument('--profile', choices=tuple(PROFILES), default=DEFAULT_PROFILE,
-                   help='precision targets by use: vio (= kalibr: N +-10 %%, K +-25 %%), '
+                   help='precision targets by use: vio (= kalibr: N +-10 %%, K +-50 %%), '
                         'ekf (N +-10 %%, B and K +-25 %%), full (N, B +-10 %%, every other '
                         'term +-25 %%; the default)')
     p.add_argument('--target', action='append', default=[], metavar='P=WIDTH',
                    help='target relative 95 %% half-width of a parameter, over the '
-                        "profile's, e.g. N=0.05, K=25%% or B=none")
+                        "profile's, e.g. N=0.05 or K=25%% (B=none: no target)")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

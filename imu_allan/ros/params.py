@@ -82,7 +82,7 @@ PARAMS: tuple[NodeParam, ...] = (
               'Stop collecting once every axis meets every target of plan_profile '
               '(min_duration_s stays a floor)'),
     NodeParam('plan_profile', str, DEFAULT_PROFILE, '', tuple(PROFILES),
-              'Precision targets by use: vio (= kalibr) N +-10 %, K +-25 %; ekf N +-10 %,'
+              'Precision targets by use: vio (= kalibr) N +-10 %, K +-50 %; ekf N +-10 %,'
               ' B and K +-25 %; full N, B +-10 %, every other term +-25 %'),
     NodeParam('plan_targets', str, '', '', (),
               "Targets over the profile's, as relative 95 % half-widths, e.g. "

@@ -56,17 +56,21 @@ def remaining(plans: dict) -> tuple[float, float, bool]:
     Returns
     -------
     more_s : float
-        The longest further recording over the axes [s] (NaN: bounds only).
+        The longest further recording over the axes that have a time [s] (NaN when
+        none has: bounds only).
     total_s : float
         The record length then [s].
     at_least : bool
-        Whether that time is a lower limit (an axis' plan extrapolates or has a bound).
+        Whether that time is a lower limit (an axis' plan extrapolates, has a bound or
+        has no time yet).
 
     """
     more = [p.remaining_s() for p in plans.values()]
-    more_s = math.nan if any(math.isnan(r) for r in more) else max(more)
+    known = [r for r in more if not math.isnan(r)]
+    more_s = max(known) if known else math.nan
     duration_s = max(p.duration_s for p in plans.values())
-    return more_s, duration_s + more_s, any(p.lower_limit() for p in plans.values())
+    at_least = len(known) < len(more) or any(p.lower_limit() for p in plans.values())
+    return more_s, duration_s + more_s, at_least
 
 
 def _num(x: float) -> str:
@@ -136,10 +140,10 @@ def progress_report(plans: dict) -> tuple[str, list]:
     if not parts:
         return ' | every target met' + tail, values
     more_s, total_s, at_least = remaining(plans)
-    when = (more_total(total_s, total_s - more_s, at_least) if not math.isnan(more_s)
-            else 'later (bounds only)')
+    when = (f'in {more_total(total_s, total_s - more_s, at_least)}'
+            if not math.isnan(more_s) else 'later: bounds only yet')
     values.append(('plan_lower_limit', str(at_least).lower()))
-    return f' | every target met in {when} | ' + ' | '.join(parts) + tail, values
+    return f' | every target met {when} | ' + ' | '.join(parts) + tail, values
 
 
 def targets_met(plans: dict, n_axes_fitted: int) -> bool:

@@ -116,15 +116,17 @@ class NodeReports:
         speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
         more_s, total_s, at_least = (remaining(self.plans) if self.plans
                                      else (math.nan, math.nan, False))
-        if self.plans and not math.isnan(more_s) and not self.collection_stopped:
+        if self.plans and not self.collection_stopped:
             # Progress and ETA toward the profile's targets, as the last plan says.
-            met = more_s == 0
-            more_s = max(total_s - s.duration_s, 0.0)
-            pct = 100.0 * min(s.duration_s / total_s, 1.0) if total_s > 0 else 100.0
-            eta = 0.0 if met else more_s / speed if speed > 0 else math.inf
+            met, known = more_s == 0, not math.isnan(more_s)
+            more_s = max(total_s - s.duration_s, 0.0) if known else math.nan
+            pct = (100.0 if met else 100.0 * min(s.duration_s / total_s, 1.0) if known
+                   else 0.0)
+            eta = 0.0 if met else more_s / speed if speed > 0 and known else math.inf
             text = (f'collecting: {s.duration_s:.0f} s, {s.stats.n_used} samples at '
                     f'{s.rate_hz:.2f} Hz; {targets_label(self.values)}: '
-                    + ('met' if met else more_total(total_s, s.duration_s, at_least)
+                    + ('met' if met else 'not yet known (bounds only)' if not known
+                       else more_total(total_s, s.duration_s, at_least)
                        + f', ETA {_eta(eta)}'))
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
         elif s.duration_s >= target:

@@ -383,8 +383,11 @@ def _unplanned(plan: AxisPlan, optimised: Mapping, targets) -> tuple:
         if q is None or plan.param(name) is not None or q.kind == 'estimate':
             continue
         kind = 'at_least' if q.kind == 'upper_bound' else 'open'
-        out.append(ParamPlan(name, float(q.value), math.inf, target_of(name, targets),
-                             math.nan, kind, {}))
+        target = target_of(name, targets)
+        if math.isinf(target):          # no target: nothing to wait for
+            kind = 'met'
+        out.append(ParamPlan(name, float(q.value), math.inf, target,
+                             plan.duration_s if kind == 'met' else math.nan, kind, {}))
     return tuple(out)
 
 

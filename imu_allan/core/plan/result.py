@@ -15,11 +15,13 @@ PLAN_KINDS = ('met', 'predicted', 'at_least', 'beyond', 'open')
 
 
 def hours(t_s: float) -> str:
-    """Return a record length for people: '42 min', '3.1 h', '> 1000 h', '?'."""
+    """Return a record length for people: '40 s', '42 min', '3.1 h', '> 1000 h', '?'."""
     if math.isnan(t_s):
         return '?'
     if math.isinf(t_s):
         return '> 1000 h'
+    if t_s < 60.0:
+        return f'{t_s:.0f} s'
     if t_s < 3600.0:
         return f'{t_s / 60.0:.0f} min'
     return f'{t_s / 3600.0:.2g} h' if t_s < 36000.0 else f'{t_s / 3600.0:.0f} h'
@@ -36,7 +38,7 @@ def more_total(total_s: float, duration_s: float, at_least: bool = False) -> str
     total_s : float
         Record length at which the target is met [s] (inf: beyond the horizon).
     duration_s : float
-        Length of the present record [s] (0: none yet).
+        Length of the present record [s] (0 or less: none yet, the total alone).
     at_least : bool
         Whether the time is a lower limit ('at least ...').
 
@@ -45,8 +47,11 @@ def more_total(total_s: float, duration_s: float, at_least: bool = False) -> str
         return 'unknown yet'
     if math.isinf(total_s):
         return 'more than 1000 h'
-    more = max(total_s - max(duration_s, 0.0), 0.0)
-    return f'{"at least " if at_least else ""}{hours(more)} more ({hours(total_s)} total)'
+    lower = 'at least ' if at_least else ''
+    if duration_s <= 0:             # no record yet (a datasheet): the total is all
+        return f'{lower}{hours(total_s)} total'
+    more = max(total_s - duration_s, 0.0)
+    return f'{lower}{hours(more)} more ({hours(total_s)} total)'
 
 
 def percent(w: float, tight: bool = False) -> str:
@@ -206,7 +211,8 @@ class AxisPlan(NamedTuple):
 
     def progress_line(self) -> str:
         """One line: which parameters meet their target, and the time to each of the rest."""
-        met = [p.name for p in self.params if p.kind == 'met']
+        # A parameter without a target (not in the profile) is not listed.
+        met = [p.name for p in self.params if p.kind == 'met' and not math.isinf(p.target)]
         rest = []
         for p in self.params:
             if p.kind == 'met':
@@ -225,7 +231,7 @@ class AxisPlan(NamedTuple):
 
     def table_lines(self) -> list:
         """Human table: parameter, width now, target, record length, widths at 1/3/10 h."""
-        lines = [f'  {"param":<18} {"now":>10} {"target":>8} {"record to target":>31} '
+        lines = [f'  {"param":<18} {"now":>10} {"target":>8} {"record to target":>33} '
                  f'{"at 1 h":>10} {"at 3 h":>10} {"at 10 h":>10}']
         for p in self.params:
             need = more_total(p.time_s, self.duration_s, p.lower_limit(self.duration_s))
@@ -237,7 +243,7 @@ class AxisPlan(NamedTuple):
                 need = 'open'
             cells = [percent(p.widths_at.get(h, math.nan)) for h in (1.0, 3.0, 10.0)]
             lines.append(f'  {p.name:<18} {percent(p.width_now):>10} '
-                         f'{percent(p.target, tight=True):>8} {need:>31} ' + ' '.join(
+                         f'{percent(p.target, tight=True):>8} {need:>33} ' + ' '.join(
                              f'{c:>10}' for c in cells))
         for s in self.separations:
             state = ('separated now' if s.separated
