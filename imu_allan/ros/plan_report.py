@@ -73,6 +73,49 @@ def remaining(plans: dict) -> tuple[float, float, bool]:
     return more_s, duration_s + more_s, at_least
 
 
+def toward_targets(values: dict, plans: dict, duration_s: float,
+                   speed: float) -> tuple[str, float, float]:
+    """
+    Return the node's progress toward its profile's targets, as the last plan says.
+
+    Parameters
+    ----------
+    values : dict
+        The node's parameter values (plan_profile, plan_targets).
+    plans : dict of str to AxisPlan
+        The last plans (not empty).
+    duration_s : float
+        The record's length now [s] (the plans may be older).
+    speed : float
+        Record seconds per wall second lately [-] (0: no data now).
+
+    Returns
+    -------
+    text : str
+        e.g. 'vio targets (N, K): at least 9 min more (16 min total), ETA 2.1 min'.
+    percent : float
+        The share of the record needed that is recorded [%] (0 while unknown).
+    eta_s : float
+        Wall time until then [s] (inf while unknown).
+
+    """
+    more_s, total_s, at_least = remaining(plans)
+    met, known = more_s == 0, not math.isnan(more_s)
+    more_s = max(total_s - duration_s, 0.0) if known else math.nan
+    pct = 100.0 if met else 100.0 * min(duration_s / total_s, 1.0) if known else 0.0
+    eta = 0.0 if met else more_s / speed if speed > 0 and known else math.inf
+    when = ('met' if met else 'not yet known (bounds only)' if not known
+            else f'{more_total(total_s, duration_s, at_least)}, ETA {eta_text(eta)}')
+    return f'{targets_label(values)}: {when}', pct, eta
+
+
+def eta_text(eta_s: float) -> str:
+    """Return a wall-clock ETA for people ('unknown (no data now)' without a speed)."""
+    if not math.isfinite(eta_s):
+        return 'unknown (no data now)'
+    return f'{eta_s / 60:.1f} min' if eta_s < 3600.0 else f'{eta_s / 3600:.1f} h'
+
+
 def _num(x: float) -> str:
     return f'{x:.6g}' if math.isfinite(x) else ('inf' if x > 0 else 'nan')
 

@@ -17,10 +17,9 @@ import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from imu_allan import AXES
-from imu_allan.core.plan.result import more_total
 from imu_allan.ros.live import LiveInput
-from imu_allan.ros.plan_report import (plan_values, progress_report, remaining, targets_label,
-                                       targets_met)
+from imu_allan.ros.plan_report import (eta_text, plan_values, progress_report, targets_label,
+                                       targets_met, toward_targets)
 
 #: No message for this long is reported as a WARN on /diagnostics.
 NO_DATA_WARN_S = 2.0
@@ -114,20 +113,11 @@ class NodeReports:
         if log:
             self._progress_mark = (now, s.duration_s)
         speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
-        more_s, total_s, at_least = (remaining(self.plans) if self.plans
-                                     else (math.nan, math.nan, False))
         if self.plans and not self.collection_stopped:
             # Progress and ETA toward the profile's targets, as the last plan says.
-            met, known = more_s == 0, not math.isnan(more_s)
-            more_s = max(total_s - s.duration_s, 0.0) if known else math.nan
-            pct = (100.0 if met else 100.0 * min(s.duration_s / total_s, 1.0) if known
-                   else 0.0)
-            eta = 0.0 if met else more_s / speed if speed > 0 and known else math.inf
+            head, pct, eta = toward_targets(self.values, self.plans, s.duration_s, speed)
             text = (f'collecting: {s.duration_s:.0f} s, {s.stats.n_used} samples at '
-                    f'{s.rate_hz:.2f} Hz; {targets_label(self.values)}: '
-                    + ('met' if met else 'not yet known (bounds only)' if not known
-                       else more_total(total_s, s.duration_s, at_least)
-                       + f', ETA {_eta(eta)}'))
+                    f'{s.rate_hz:.2f} Hz; {head}')
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
         elif s.duration_s >= target:
             text = (f'characterising: {s.duration_s:.0f} s, {s.stats.n_used} samples at '
@@ -137,7 +127,7 @@ class NodeReports:
             pct = 100.0 * s.duration_s / target
             eta = (target - s.duration_s) / speed if speed > 0 else math.inf
             text = (f'collecting: {pct:.1f}% of min_duration_s {target:.0f} s (no plan yet), '
-                    f'{s.stats.n_used} samples at {s.rate_hz:.2f} Hz, ETA {_eta(eta)}')
+                    f'{s.stats.n_used} samples at {s.rate_hz:.2f} Hz, ETA {eta_text(eta)}')
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
         if self.live.n_buffer_dropped:
             text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
@@ -180,13 +170,6 @@ class NodeReports:
         if session.duration_s >= self.values['min_duration_s'] and not waiting:
             return []
         return [self.progress_status(log=True), self.input_status(session)]
-
-
-def _eta(eta_s: float) -> str:
-    """Return a wall-clock ETA for people ('unknown (no data now)' without a speed)."""
-    if not math.isfinite(eta_s):
-        return 'unknown (no data now)'
-    return f'{eta_s / 60:.1f} min' if eta_s < 3600.0 else f'{eta_s / 3600:.1f} h'
 
 
 def matrix_msg(matrix: np.ndarray, labels: list) -> Float64MultiArray:
