@@ -19,7 +19,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from imu_allan import AXES
 from imu_allan.ros.live import LiveInput
 from imu_allan.ros.plan_report import (eta_text, plan_values, progress_report, targets_label,
-                                       targets_met, toward_targets)
+                                       toward_targets)
 
 #: No message for this long is reported as a WARN on /diagnostics.
 NO_DATA_WARN_S = 2.0
@@ -159,15 +159,13 @@ class NodeReports:
 
     def progress(self) -> list[DiagnosticStatus]:
         """
-        Progress and input statuses while collecting.
+        Progress and input statuses while collecting (empty once min_duration_s is met).
 
-        Empty once min_duration_s is reached and the plan's targets are met (or the
-        collection stopped).
+        Later the fits' statuses own ~/noise_parameters (its last message is what a late
+        subscriber gets); the progress, with the plan's ETA, stays on /diagnostics.
         """
         session = self.live.session
-        waiting = (bool(self.plans) and not self.collection_stopped
-                   and not targets_met(self.plans, len(self.plans)))
-        if session.duration_s >= self.values['min_duration_s'] and not waiting:
+        if session.duration_s >= self.values['min_duration_s']:
             return []
         return [self.progress_status(log=True), self.input_status(session)]
 
