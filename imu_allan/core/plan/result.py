@@ -247,6 +247,8 @@ class AxisPlan(NamedTuple):
                              f'{c:>10}' for c in cells))
         for s in self.separations:
             state = ('separated now' if s.separated
+                     else 'not separated yet, although a record of this length should'
+                     if 0 < s.time_s <= self.duration_s
                      else 'needs ' + more_total(s.time_s, self.duration_s))
             lines.append(f'  {s.question}: {state}')
         if self.caveat:
