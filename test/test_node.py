@@ -304,7 +304,8 @@ def test_progress_before_min_duration(rig):
     wait(lambda: float(statuses(r.last('noise_parameters'))['imu_allan: progress'][2]
                        ['percent']) > 0.9, 10, 'the progress of the fed data')
     level, message, kv = statuses(r.last('noise_parameters'))['imu_allan: progress']
-    assert message.startswith('collecting: 1.0% of 1000 s, 2000 samples at 200.00 Hz')
+    assert message.startswith('collecting: 1.0% of min_duration_s 1000 s (no plan yet), '
+                              '2000 samples at 200.00 Hz')
     assert {'percent', 'samples', 'rate_hz', 'eta_s'} <= set(kv)
 
 

@@ -28,6 +28,7 @@ from imu_allan.core.noise.values import AxisNoise, GaussMarkov, Sinusoid
 from imu_allan.core.plan import (noise_components, parse_targets, plan_axes, plan_fits,
                                  planning_model)
 from imu_allan.core.plan.precision import _avar, CurveModel, relative_width
+from imu_allan.core.plan.result import AxisPlan, ParamPlan
 from imu_allan.core.plan.separation import LAMBDA_SEPARATED, ORDERING, rivals, SLOW_PROCESS
 from imu_allan.core.search import search_axis
 from imu_allan.errors import InputError
@@ -106,7 +107,7 @@ def test_a_bound_is_planned_at_its_bound_and_reads_at_least():
     n = plan.param('N')
     assert n.kind == 'met' and n.time_s == 1200.0
     assert n.width_now == relative_width(fit.optimised['N'].value, fit.optimised['N'].ci95)
-    assert 'K in >= ' in plan.progress_line() or 'K only bounded' in plan.progress_line()
+    assert 'K at least ' in plan.progress_line() or 'K only bounded' in plan.progress_line()
 
 
 def test_a_parameter_the_model_cannot_plan_is_still_to_come():
@@ -258,7 +259,7 @@ def test_plan_command_from_datasheet_numbers(capsys):
                  '--K', '1e-3 deg/s/sqrt(s)', '--rate', '100', '--target', 'B=20%',
                  '--format', 'json'])
     doc = json.loads(capsys.readouterr().out)
-    assert code == 0 and doc['targets'] == {'B': 0.2}
+    assert code == 0 and doc['targets']['B'] == 0.2 and doc['profile'] == 'full'
     params = doc['axes']['gyro']['params']
     assert set(params) == {'N', 'B', 'T_B', 'K'}
     assert params['B']['target'] == 0.2 and params['B']['time_s'] > 3600.0
@@ -342,3 +343,30 @@ def test_a_plan_from_a_model_that_does_not_hold_says_so():
         p._replace(kind='met') for p in plans['gyro_x'].params))
     assert targets_met({'gyro_x': met}, 1)
     assert not targets_met({'gyro_x': met._replace(caveat=plans['gyro_y'].caveat)}, 1)
+
+
+def test_profiles_name_their_targets_and_explicit_targets_override_them():
+    from imu_allan.core.plan.targets import PROFILES, profile_targets
+    from imu_allan.core.plan.planner import target_of
+    vio = profile_targets('vio')
+    assert PROFILES['kalibr'] == vio and profile_targets(None) == PROFILES['full']
+    assert [k for k, v in vio.items() if math.isfinite(v)] == ['N', 'K']
+    # The extra terms follow '*': no target for vio, +-25 % for full.
+    assert math.isinf(target_of('sinusoid.A', vio))
+    assert target_of('sinusoid.A', profile_targets('full')) == 0.25
+    assert profile_targets('vio', 'K=25%')['K'] == 0.25
+    with pytest.raises(InputError, match='unknown target profile'):
+        profile_targets('slam')
+
+
+def test_times_read_more_and_total_and_extrapolations_read_at_least():
+    from imu_allan.core.plan.result import more_total
+    assert more_total(5.0 * 3600, 1.8 * 3600) == '3.2 h more (5 h total)'
+    assert more_total(7200.0, 0.0) == '2 h total'
+    assert more_total(math.inf, 60.0) == 'more than 1000 h'
+    p = ParamPlan('K', 1e-3, 0.8, 0.25, 1320.0, 'predicted', {})
+    # 22 min planned from 2 min: a lower limit; from 10 min: not.
+    assert p.lower_limit(120.0) and not p.lower_limit(600.0)
+    plan = AxisPlan(120.0, (p,), ())
+    assert plan.progress_line() == 'met: none; K at least 20 min more (22 min total)'
+    assert plan.lower_limit() and plan.to_json()['params']['K']['lower_limit']

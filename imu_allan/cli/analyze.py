@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 from imu_allan import AXES
 from imu_allan.cli.outdir import prepare_out_dir, remove_if_unused, writing
-from imu_allan.core.plan.targets import parse_targets
+from imu_allan.core.plan.targets import DEFAULT_PROFILE, profile_targets, PROFILES
 from imu_allan.errors import InputError
 from imu_allan.pipeline.workers import start_workers, worker_pool
 
@@ -79,10 +79,14 @@ def units_from_args(args) -> 'DeclaredUnits | None':
 
 
 def add_target_option(p: argparse.ArgumentParser) -> None:
-    """Add ``--target P=WIDTH`` (shared with ``plan``)."""
+    """Add ``--profile`` and ``--target P=WIDTH`` (shared with ``plan``)."""
+    p.add_argument('--profile', choices=tuple(PROFILES), default=DEFAULT_PROFILE,
+                   help='precision targets by use: vio (= kalibr: N +-10 %%, K +-50 %%), '
+                        'ekf (N +-10 %%, B and K +-25 %%), full (N, B +-10 %%, every other '
+                        'term +-25 %%; the default)')
     p.add_argument('--target', action='append', default=[], metavar='P=WIDTH',
-                   help='target relative 95 %% half-width of a parameter, e.g. N=0.05 or '
-                        'K=25%% (defaults: N and B 10 %%, K, T_B and other terms 25 %%)')
+                   help='target relative 95 %% half-width of a parameter, over the '
+                        "profile's, e.g. N=0.05 or K=25%% (B=none: no target)")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -268,7 +272,7 @@ def _run(args, config, units, paths: list, plot: bool, workers: int) -> int:
     if not (math.isfinite(args.cover_tau_max) and args.cover_tau_max > 0):
         raise InputError(f'--cover-tau-max must be a positive number of seconds, got '
                          f'{args.cover_tau_max}')
-    plan = None if args.no_plan else parse_targets(args.target)
+    plan = None if args.no_plan else profile_targets(args.profile, args.target)
     jobs = [(p, args.topic, args.frame_id, config, o, plot, units, args.cover_tau_max, plan,
              args.temperature_topic) for p, o in zip(paths, outs)]
     if several:

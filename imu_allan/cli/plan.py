@@ -13,7 +13,8 @@ import json
 from pathlib import Path
 import sys
 
-from imu_allan.core.plan.targets import parse_targets
+from imu_allan.core.plan.result import more_total
+from imu_allan.core.plan.targets import profile_targets, targeted
 from imu_allan.errors import InputError
 
 #: Datasheet flags: option -> parameter key of the units module.
@@ -85,7 +86,7 @@ def _models_from_numbers(args) -> tuple[dict, float, str]:
 
 def run(args) -> int:
     """Plan from a record or from numbers; print the tables or one JSON document."""
-    targets = parse_targets(args.target)
+    targets = profile_targets(args.profile, args.target)
     if args.input is not None:
         if args.params is not None or any(getattr(args, f'ds_{k}') for k in _FLAGS):
             raise InputError('give either INPUT or datasheet numbers, not both')
@@ -104,15 +105,22 @@ def run(args) -> int:
         plans, duration = plan_axes(models, rate, 0.0, targets), 0.0
     if args.format == 'json':
         doc = {'source': label, 'rate_hz': rate, 'duration_s': duration,
-               'targets': targets, 'axes': {a: p.to_json() for a, p in plans.items()}}
+               'profile': args.profile,
+               'targets': {k: (v if v != float('inf') else None) for k, v in targets.items()},
+               'axes': {a: p.to_json() for a, p in plans.items()}}
         json.dump(doc, sys.stdout, allow_nan=False)
         sys.stdout.write('\n')
         return 0
     where = (f'a record of {duration / 60.0:.1f} min' if duration > 0
              else 'the given numbers')
-    print(f'== {label}: predicted from {where} at {rate:.4g} Hz (relative 95 % half-widths)')
+    print(f'== {label}: predicted from {where} at {rate:.4g} Hz (relative 95 % half-widths; '
+          f'profile {args.profile}: targets on {", ".join(targeted(targets))})')
     for axis, plan in plans.items():
-        print(f'{axis}: {plan.progress_line()}' if duration > 0 else f'{axis}:')
+        if duration > 0:
+            print(f'{axis}: {plan.progress_line()}')
+        else:
+            total = max((p.time_s for p in plan.params if p.kind != 'met'), default=0.0)
+            print(f'{axis}: every target after {more_total(total, 0.0)}')
         for line in plan.table_lines():
             print(line)
     return 0

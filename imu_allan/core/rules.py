@@ -100,3 +100,9 @@ SETTLE_LEFT = 1.0
 SETTLE_TAIL = 5.0
 #: Passes of the settling search: after a cut, what follows is judged again.
 SETTLE_PASSES = 3
+
+#: A plan's time longer than this many times the record it came from is a lower limit:
+#: the fitted model has only seen taus up to a fraction of the record, and a term that
+#: surfaces at longer taus (B flattening, K rising) adds width, so the true time is longer
+#: (the ADIS16405's 2-min plan said K in 22 min, its 2.78 h record 17 h).
+LOWER_LIMIT_RATIO = 3.0

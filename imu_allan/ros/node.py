@@ -43,7 +43,6 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from imu_allan.core.allan.raw import RawKeeper
-from imu_allan.core.plan.targets import parse_targets
 from imu_allan.errors import InputError
 from imu_allan.io.imu_cdr import imu_frame_id
 from imu_allan.io.report import result_json, write_outputs
@@ -53,7 +52,7 @@ from imu_allan.ros.declare import as_declared_types, descriptor
 from imu_allan.ros.live import LiveInput, SessionView
 from imu_allan.ros.params import as_declared_type, BY_NAME, default_output_dir, PARAMS, RENAMED
 from imu_allan.ros.pictures import CurvePictures
-from imu_allan.ros.plan_report import targets_met
+from imu_allan.ros.plan_report import node_targets, plan_due, targets_label, targets_met
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 from imu_allan.ros.reports import matrix_msg, NodeReports
 from imu_allan.ros.services import NodeServices
@@ -328,12 +327,15 @@ class ImuAllanNode(Node):
         return self._fit_thread is not None and self._fit_thread.is_alive()
 
     def _publish(self) -> None:
-        if (self.session.duration_s < self.values['min_duration_s'] or self.fitting
-                or self.collection_stopped or self.session.unit_problem is not None):
+        early = self.session.duration_s < self.values['min_duration_s']
+        if (self.fitting or self.collection_stopped or self.session.unit_problem is not None
+                or (early and not self._plan_due())):
             return
         self.live.process()
         view, raw = self.live.snapshot()
-        self._fit_thread = threading.Thread(target=self._fit_and_publish, args=(view, raw),
+        # Before min_duration_s only the plan: "how long?" is answered from the start.
+        work = self._plan_early if early else self._fit_and_publish
+        self._fit_thread = threading.Thread(target=work, args=(view, raw),
                                             name='imu_allan_fit', daemon=True)
         self._fit_thread.start()
 
@@ -372,21 +374,28 @@ class ImuAllanNode(Node):
         self.get_logger().info('published: ' + '; '.join(result.summary_lines()))
         return result
 
+    def _plan_due(self) -> bool:
+        return plan_due(self.values, time.monotonic() - self._plan_mark,
+                        bool(self.reports.plans))
+
+    def _plan_early(self, view: SessionView, raw: RawKeeper | None) -> None:
+        """Plan before min_duration_s (fit, nothing published) and log the plan."""
+        if view.curve(bounds=False) is not None and self._analyze(view, raw)[1]:
+            self.get_logger().info('plan: ' + self.reports.progress_status().message)
+
     def _analyze(self, view: SessionView, raw: RawKeeper | None) -> tuple:
         """
         Analyse a snapshot; plan the record length when plan_period_s has passed.
 
         The plan costs several fits' CPU, so it runs at most every plan_period_s (the
-        first one plan_period_s after the start or ~/reset); between plans the last one
-        rides along with each result.  Returns the result (or None) and whether it
-        was planned now.
+        first sooner: plan_report.plan_due); between plans the last one rides along with
+        each result.  Returns the result (or None) and whether it was planned now.
         """
-        period = self.values['plan_period_s']
-        plan = period > 0 and time.monotonic() - self._plan_mark >= period
+        plan = self._plan_due()
         result = analyze(view, source=self.subscription.topic_name, raw=raw,
                          topic=self.subscription.topic_name,
                          covering_tau_max_s=self.values['covering_tau_max_s'], plan=plan,
-                         plan_targets=parse_targets(self.values['plan_targets']))
+                         plan_targets=node_targets(self.values))
         if result is not None and plan:
             self._plan_mark = time.monotonic()
             self.reports.plans = result.plans
@@ -403,7 +412,7 @@ class ImuAllanNode(Node):
             return
         self.reports.collection_stopped = True
         self.get_logger().info(
-            f'every precision target met on every axis after {duration_s:.0f} s: '
+            f'{targets_label(self.values)} met on every axis after {duration_s:.0f} s: '
             'stopped collecting (stop_when_met); the results stay published, '
             '~/reset starts over')
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import sys
 
 from imu_allan.core.allan.raw import RAW_ROWS
-from imu_allan.core.plan.targets import parse_targets
+from imu_allan.core.plan.targets import DEFAULT_PROFILE, parse_targets, PROFILES
 from imu_allan.errors import InputError
 from imu_allan.pipeline.hygiene import MOTION_POLICIES, SessionConfig
 
@@ -79,14 +79,17 @@ PARAMS: tuple[NodeParam, ...] = (
     NodeParam('min_duration_s', float, 3600.0, 's', (1.0, 1.0e6),
               'Recording length before results are published'),
     NodeParam('stop_when_met', bool, False, '', (),
-              'Stop collecting once every axis meets every precision target '
+              'Stop collecting once every axis meets every target of plan_profile '
               '(min_duration_s stays a floor)'),
+    NodeParam('plan_profile', str, DEFAULT_PROFILE, '', tuple(PROFILES),
+              'Precision targets by use: vio (= kalibr) N +-10 %, K +-50 %; ekf N +-10 %,'
+              ' B and K +-25 %; full N, B +-10 %, every other term +-25 %'),
     NodeParam('plan_targets', str, '', '', (),
-              "Precision targets as relative 95 % half-widths, e.g. 'N=0.05,K=25%'; "
-              "'' keeps the defaults (N, B 10 %; K, T_B and other terms 25 %)"),
+              "Targets over the profile's, as relative 95 % half-widths, e.g. "
+              "'N=0.05,K=25%,B=none'; '' keeps the profile's"),
     NodeParam('plan_period_s', float, 300.0, 's', (0.0, 86400.0),
-              'Period of the precision plan (a few fits of CPU), first after one period; '
-              '0 never plans'),
+              'Period of the precision plan (a few fits of CPU), the first after'
+              ' min(60 s, one period), also before min_duration_s; 0 never plans'),
     NodeParam('publish_period_s', float, 30.0, 's', (0.1, 86400.0),
               'Period of the fit and of the result topics once min_duration_s is reached'),
     NodeParam('process_period_s', float, 0.2, 's', (0.005, 10.0),

@@ -10,7 +10,110 @@ come with the analysis (:func:`imu_allan.pipeline.analysis.analyze` with ``plan`
 
 import math
 
-from imu_allan.core.plan.result import AxisPlan, hours
+from imu_allan.core.plan.result import AxisPlan, more_total
+from imu_allan.core.plan.targets import profile_targets, targeted
+
+#: The node's first plan comes after this long, or one plan_period_s if shorter [s]: a
+#: user asks "how long?" in the first minutes, and a minute of data already bounds the
+#: answer from below (the plan says 'at least' while it extrapolates).
+FIRST_PLAN_S = 60.0
+
+
+def plan_due(values: dict, since_s: float, planned: bool) -> bool:
+    """
+    Whether the node should plan now.
+
+    Parameters
+    ----------
+    values : dict
+        The node's parameter values (plan_period_s).
+    since_s : float
+        Wall time since the last plan, or since the start or ~/reset [s].
+    planned : bool
+        Whether a plan was made since the start or ~/reset.
+
+    """
+    period = values['plan_period_s']
+    if period <= 0:
+        return False
+    return since_s >= (period if planned else min(period, FIRST_PLAN_S))
+
+
+def node_targets(values: dict) -> dict:
+    """Return the node's targets: plan_profile, with plan_targets over it."""
+    return profile_targets(values['plan_profile'], values['plan_targets'])
+
+
+def targets_label(values: dict) -> str:
+    """Return e.g. 'vio targets (N, K)' for the progress line and the stop message."""
+    return f'{values["plan_profile"]} targets ({", ".join(targeted(node_targets(values)))})'
+
+
+def remaining(plans: dict) -> tuple[float, float, bool]:
+    """
+    Return the record time still needed, the record at that time, and 'at least'.
+
+    Returns
+    -------
+    more_s : float
+        The longest further recording over the axes that have a time [s] (NaN when
+        none has: bounds only).
+    total_s : float
+        The record length then [s].
+    at_least : bool
+        Whether that time is a lower limit (an axis' plan extrapolates, has a bound or
+        has no time yet).
+
+    """
+    more = [p.remaining_s() for p in plans.values()]
+    known = [r for r in more if not math.isnan(r)]
+    more_s = max(known) if known else math.nan
+    duration_s = max(p.duration_s for p in plans.values())
+    at_least = len(known) < len(more) or any(p.lower_limit() for p in plans.values())
+    return more_s, duration_s + more_s, at_least
+
+
+def toward_targets(values: dict, plans: dict, duration_s: float,
+                   speed: float) -> tuple[str, float, float]:
+    """
+    Return the node's progress toward its profile's targets, as the last plan says.
+
+    Parameters
+    ----------
+    values : dict
+        The node's parameter values (plan_profile, plan_targets).
+    plans : dict of str to AxisPlan
+        The last plans (not empty).
+    duration_s : float
+        The record's length now [s] (the plans may be older).
+    speed : float
+        Record seconds per wall second lately [-] (0: no data now).
+
+    Returns
+    -------
+    text : str
+        e.g. 'vio targets (N, K): at least 9 min more (16 min total), ETA 2.1 min'.
+    percent : float
+        The share of the record needed that is recorded [%] (0 while unknown).
+    eta_s : float
+        Wall time until then [s] (inf while unknown).
+
+    """
+    more_s, total_s, at_least = remaining(plans)
+    met, known = more_s == 0, not math.isnan(more_s)
+    more_s = max(total_s - duration_s, 0.0) if known else math.nan
+    pct = 100.0 if met else 100.0 * min(duration_s / total_s, 1.0) if known else 0.0
+    eta = 0.0 if met else more_s / speed if speed > 0 and known else math.inf
+    when = ('met' if met else 'not yet known (bounds only)' if not known
+            else f'{more_total(total_s, duration_s, at_least)}, ETA {eta_text(eta)}')
+    return f'{targets_label(values)}: {when}', pct, eta
+
+
+def eta_text(eta_s: float) -> str:
+    """Return a wall-clock ETA for people ('unknown (no data now)' without a speed)."""
+    if not math.isfinite(eta_s):
+        return 'unknown (no data now)'
+    return f'{eta_s / 60:.1f} min' if eta_s < 3600.0 else f'{eta_s / 3600:.1f} h'
 
 
 def _num(x: float) -> str:
@@ -52,12 +155,14 @@ def progress_report(plans: dict) -> tuple[str, list]:
     Returns
     -------
     text : str
-        '' without plans; else e.g. ' | gyro_x met: N; B, T_B in 2.1 h more | ...',
+        '' without plans; else e.g. ' | every target met in at least 2.1 h more (2.3 h
+        total) | gyro_x met: N; K at least 2.1 h more (2.3 h total) | ...',
         or ' | every target met' when all axes meet them; the axes whose model does not
         hold are named at the end.
     values : list of (str, str)
-        ``<axis>_met`` (the parameters that meet their target), ``<axis>_remaining_s`` per axis and
-        ``plan_remaining_s`` (the longest).
+        ``<axis>_met`` (the parameters that meet their target), ``<axis>_remaining_s``
+        per axis, ``plan_remaining_s`` (the longest) and ``plan_lower_limit`` (whether
+        that time is a lower limit).
 
     """
     if not plans:
@@ -70,15 +175,17 @@ def progress_report(plans: dict) -> tuple[str, list]:
                    (f'{axis}_remaining_s', _num(plan.remaining_s()))]
         if not plan.all_met():
             parts.append(f'{axis} {plan.progress_line()}')
-    remaining = [p.remaining_s() for p in plans.values()]
-    longest = math.nan if any(math.isnan(r) for r in remaining) else max(remaining)
+    longest = remaining(plans)[0]
     values.append(('plan_remaining_s', _num(longest)))
     caveats = [axis for axis, plan in plans.items() if plan.caveat]
     tail = (f' | model does not hold on {", ".join(caveats)}: times may be short'
             if caveats else '')
     if not parts:
         return ' | every target met' + tail, values
-    when = f'in {hours(longest)} more' if not math.isnan(longest) else 'later (bounds only)'
+    more_s, total_s, at_least = remaining(plans)
+    when = (f'in {more_total(total_s, total_s - more_s, at_least)}'
+            if not math.isnan(more_s) else 'later: bounds only yet')
+    values.append(('plan_lower_limit', str(at_least).lower()))
     return f' | every target met {when} | ' + ' | '.join(parts) + tail, values
 
 

@@ -18,7 +18,8 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from imu_allan import AXES
 from imu_allan.ros.live import LiveInput
-from imu_allan.ros.plan_report import plan_values, progress_report
+from imu_allan.ros.plan_report import (eta_text, plan_values, progress_report, targets_label,
+                                       toward_targets)
 
 #: No message for this long is reported as a WARN on /diagnostics.
 NO_DATA_WARN_S = 2.0
@@ -107,22 +108,26 @@ class NodeReports:
         values = [('samples', str(s.stats.n_used)), ('rate_hz', f'{s.rate_hz:.4f}'),
                   ('duration_s', f'{s.duration_s:.1f}'), ('fits', str(self.n_fits)),
                   ('warnings', ' | '.join(s.warnings))]
-        if s.duration_s >= target:
+        now = time.monotonic()
+        wall0, dur0 = self._progress_mark
+        if log:
+            self._progress_mark = (now, s.duration_s)
+        speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
+        if self.plans and not self.collection_stopped:
+            # Progress and ETA toward the profile's targets, as the last plan says.
+            head, pct, eta = toward_targets(self.values, self.plans, s.duration_s, speed)
+            text = (f'collecting: {s.duration_s:.0f} s, {s.stats.n_used} samples at '
+                    f'{s.rate_hz:.2f} Hz; {head}')
+            values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
+        elif s.duration_s >= target:
             text = (f'characterising: {s.duration_s:.0f} s, {s.stats.n_used} samples at '
                     f'{s.rate_hz:.2f} Hz, {self.n_fits} fits published')
             values.append(('percent', '100.00'))
         else:
             pct = 100.0 * s.duration_s / target
-            now = time.monotonic()
-            wall0, dur0 = self._progress_mark
-            if log:
-                self._progress_mark = (now, s.duration_s)
-            speed = (s.duration_s - dur0) / (now - wall0) if now > wall0 else 0.0
             eta = (target - s.duration_s) / speed if speed > 0 else math.inf
-            eta_text = (f'{eta / 60:.1f} min' if math.isfinite(eta)
-                        else 'unknown (no data now)')
-            text = (f'collecting: {pct:.1f}% of {target:.0f} s, {s.stats.n_used} samples at '
-                    f'{s.rate_hz:.2f} Hz, ETA {eta_text}')
+            text = (f'collecting: {pct:.1f}% of min_duration_s {target:.0f} s (no plan yet), '
+                    f'{s.stats.n_used} samples at {s.rate_hz:.2f} Hz, ETA {eta_text(eta)}')
             values += [('percent', f'{pct:.2f}'), ('eta_s', f'{eta:.0f}')]
         if s.settling is not None:
             held_s, window_s = s.settling
@@ -133,7 +138,8 @@ class NodeReports:
             text += f', {self.live.n_buffer_dropped} messages dropped by a full buffer'
         plan_text, plan_kv = progress_report(self.plans)
         if self.collection_stopped:
-            plan_text = ' | stopped collecting: every precision target met (stop_when_met)'
+            plan_text = (f' | stopped collecting: {targets_label(self.values)} met on every '
+                         'axis (stop_when_met)')
         text, values = text + plan_text, values + plan_kv
         level = DiagnosticStatus.WARN if s.warnings else DiagnosticStatus.OK
         if s.unit_problem is not None:      # nothing is published until ~/reset
@@ -157,7 +163,12 @@ class NodeReports:
                 + [self.input_status(session)])
 
     def progress(self) -> list[DiagnosticStatus]:
-        """Progress and input statuses while collecting (empty once min_duration_s is met)."""
+        """
+        Progress and input statuses while collecting (empty once min_duration_s is met).
+
+        Later the fits' statuses own ~/noise_parameters (its last message is what a late
+        subscriber gets); the progress, with the plan's ETA, stays on /diagnostics.
+        """
         session = self.live.session
         if session.duration_s >= self.values['min_duration_s']:
             return []

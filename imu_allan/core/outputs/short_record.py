@@ -10,7 +10,7 @@ determine it (from the plan).
 import math
 
 from imu_allan import AXES
-from imu_allan.core.plan.result import hours
+from imu_allan.core.plan.result import hours, more_total
 
 #: What consumers call N, K and B of a sensor (Kalibr keys; B is the Kalman b_gm state).
 CONSUMER_NAMES = {('gyro', 'N'): 'gyroscope_noise_density (N)',
@@ -68,11 +68,14 @@ def short_record_warnings(fits: dict, plans: dict, duration_s: float) -> list:
             worst = max(planned, key=lambda q: q.time_s if not math.isnan(q.time_s)
                         else math.inf)
             at_least = any(q.kind in ('at_least', 'open') for q in planned)
-            if worst.kind == 'open' or math.isnan(worst.time_s):
+            if math.isinf(worst.target):
+                line += '; the plan sets it no target (its profile does not need it)'
+            elif worst.kind == 'open' or math.isnan(worst.time_s):
                 line += '; a longer record (this one cannot say how long) would'
             else:
-                line += (f'; {"at least " if at_least else ""}{hours(worst.time_s)} '
-                         f'would (the time the plan gives to +-{100 * worst.target:.0f} %)')
+                at_least = at_least or worst.lower_limit(duration_s)
+                line += (f'; {more_total(worst.time_s, duration_s, at_least)} would (the '
+                         f'time the plan gives to +-{100 * worst.target:.0f} %)')
         else:
             line += ('; a longer record would (plan it: imu-allan plan, or analyze without '
                      '--no-plan)')

@@ -14,8 +14,9 @@ docs/planning.md.
 import importlib
 from typing import TYPE_CHECKING
 
-from imu_allan.core.plan.result import AxisPlan, hours, ParamPlan, percent, Separation
-from imu_allan.core.plan.targets import parse_targets
+from imu_allan.core.plan.result import (AxisPlan, hours, more_total, ParamPlan, percent,
+                                        Separation)
+from imu_allan.core.plan.targets import parse_targets, profile_targets, PROFILES
 
 if TYPE_CHECKING:
     from imu_allan.core.plan.planner import (DEFAULT_TARGETS, HORIZON_S, noise_components,
@@ -34,6 +35,7 @@ def __getattr__(name: str):
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
-__all__ = ['AxisPlan', 'DEFAULT_TARGETS', 'HORIZON_S', 'hours', 'noise_components',
-           'ParamPlan', 'parse_targets', 'percent', 'plan_axes', 'plan_fits', 'planning_model',
-           'REPORT_HOURS', 'Separation', 'target_of']
+__all__ = ['AxisPlan', 'DEFAULT_TARGETS', 'HORIZON_S', 'hours', 'more_total',
+           'noise_components', 'ParamPlan', 'parse_targets', 'percent', 'plan_axes',
+           'plan_fits', 'planning_model', 'PROFILES', 'profile_targets', 'REPORT_HOURS',
+           'Separation', 'target_of']

@@ -27,12 +27,14 @@ from imu_allan.core.plan.reading import as_read, crossing, inflation, present_wi
 from imu_allan.core.plan.result import AxisPlan, ParamPlan, Separation
 from imu_allan.core.plan.separation import (LAMBDA_SEPARATED, mismatch, ORDERING, ordering,
                                             rivals, scaled, SLOW_PROCESS)
+from imu_allan.core.plan.targets import DEFAULT_PROFILE, PROFILES
 from imu_allan.core.search.choice import SLOWER_PROCESS_RIVAL
 
-#: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise).
-DEFAULT_TARGETS = {'N': 0.10, 'B': 0.10, 'K': 0.25, 'T_B': 0.25}
-#: Target of every other parameter (the extra terms).
-DEFAULT_OTHER_TARGET = 0.25
+#: Default targets: relative 95 % half-widths (+-10 % for N and B, +-25 % otherwise),
+#: those of the 'full' profile.
+DEFAULT_TARGETS = {k: v for k, v in PROFILES[DEFAULT_PROFILE].items() if k != '*'}
+#: Target of every other parameter (the extra terms), unless the targets give '*'.
+DEFAULT_OTHER_TARGET = PROFILES[DEFAULT_PROFILE]['*']
 #: Longest record the planner looks at [s] (1000 h).
 HORIZON_S = 3.6e6
 #: Record lengths at which the expected widths are always reported [h].
@@ -46,7 +48,8 @@ _CORE_ORDER = ('N', 'B', 'T_B', 'K')
 def target_of(name: str, targets: Mapping[str, float] | None) -> float:
     """Target relative half-width of one parameter (``targets`` override the defaults)."""
     merged = dict(DEFAULT_TARGETS, **(targets or {}))
-    return float(merged.get(name, merged.get(name.split('.')[-1], DEFAULT_OTHER_TARGET)))
+    other = merged.get('*', DEFAULT_OTHER_TARGET)
+    return float(merged.get(name, merged.get(name.split('.')[-1], other)))
 
 
 def planning_model(components: Sequence, optimised: Mapping | None = None) -> tuple:
@@ -380,8 +383,11 @@ def _unplanned(plan: AxisPlan, optimised: Mapping, targets) -> tuple:
         if q is None or plan.param(name) is not None or q.kind == 'estimate':
             continue
         kind = 'at_least' if q.kind == 'upper_bound' else 'open'
-        out.append(ParamPlan(name, float(q.value), math.inf, target_of(name, targets),
-                             math.nan, kind, {}))
+        target = target_of(name, targets)
+        if math.isinf(target):          # no target: nothing to wait for
+            kind = 'met'
+        out.append(ParamPlan(name, float(q.value), math.inf, target,
+                             plan.duration_s if kind == 'met' else math.nan, kind, {}))
     return tuple(out)
 
 

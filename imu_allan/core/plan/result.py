@@ -8,20 +8,50 @@ import math
 from typing import NamedTuple
 
 from imu_allan.core.fit.result import json_num
+from imu_allan.core.rules import LOWER_LIMIT_RATIO
 
 #: Kinds of a parameter's plan.
 PLAN_KINDS = ('met', 'predicted', 'at_least', 'beyond', 'open')
 
 
 def hours(t_s: float) -> str:
-    """Return a record length for people: '42 min', '3.1 h', '> 1000 h', '?'."""
+    """Return a record length for people: '40 s', '42 min', '3.1 h', '> 1000 h', '?'."""
     if math.isnan(t_s):
         return '?'
     if math.isinf(t_s):
         return '> 1000 h'
+    if t_s < 60.0:
+        return f'{t_s:.0f} s'
     if t_s < 3600.0:
         return f'{t_s / 60.0:.0f} min'
     return f'{t_s / 3600.0:.2g} h' if t_s < 36000.0 else f'{t_s / 3600.0:.0f} h'
+
+
+def more_total(total_s: float, duration_s: float, at_least: bool = False) -> str:
+    """
+    Return a time to a target as people read it: '3.2 h more (5.0 h total)'.
+
+    The one format of every time the planner shows (plan lines, tables, node progress).
+
+    Parameters
+    ----------
+    total_s : float
+        Record length at which the target is met [s] (inf: beyond the horizon).
+    duration_s : float
+        Length of the present record [s] (0 or less: none yet, the total alone).
+    at_least : bool
+        Whether the time is a lower limit ('at least ...').
+
+    """
+    if math.isnan(total_s):
+        return 'unknown yet'
+    if math.isinf(total_s):
+        return 'more than 1000 h'
+    lower = 'at least ' if at_least else ''
+    if duration_s <= 0:             # no record yet (a datasheet): the total is all
+        return f'{lower}{hours(total_s)} total'
+    more = max(total_s - duration_s, 0.0)
+    return f'{lower}{hours(more)} more ({hours(total_s)} total)'
 
 
 def percent(w: float, tight: bool = False) -> str:
@@ -74,11 +104,23 @@ class ParamPlan(NamedTuple):
     kind: str
     widths_at: dict
 
-    def to_json(self) -> dict:
+    def lower_limit(self, duration_s: float) -> bool:
+        """
+        Whether the time to target is a lower limit.
+
+        Planned at an upper bound ('at_least'), or extrapolated from a record shorter
+        than 1 / :data:`~imu_allan.core.rules.LOWER_LIMIT_RATIO` of it: the model has not
+        seen the taus that decide it (a datasheet's plan, ``duration_s`` 0, is not).
+        """
+        return self.kind == 'at_least' or (
+            self.kind == 'predicted' and duration_s > 0
+            and self.time_s > LOWER_LIMIT_RATIO * duration_s)
+
+    def to_json(self, duration_s: float = 0.0) -> dict:
         """Return the JSON entry (None for NaN/inf)."""
         return {'value': json_num(self.value), 'width_now': json_num(self.width_now),
                 'target': json_num(self.target), 'time_s': json_num(self.time_s),
-                'kind': self.kind,
+                'kind': self.kind, 'lower_limit': self.lower_limit(duration_s),
                 'widths_at_h': {f'{h:g}': json_num(w) for h, w in self.widths_at.items()}}
 
 
@@ -147,6 +189,10 @@ class AxisPlan(NamedTuple):
             return math.nan
         return max(max(times) - self.duration_s, 0.0)
 
+    def lower_limit(self) -> bool:
+        """Whether the time to every target is a lower limit (a parameter's is)."""
+        return any(p.kind != 'met' and p.lower_limit(self.duration_s) for p in self.params)
+
     def all_met(self) -> bool:
         """Whether every parameter meets its target now."""
         return all(p.kind == 'met' for p in self.params)
@@ -158,13 +204,15 @@ class AxisPlan(NamedTuple):
     def to_json(self) -> dict:
         """Return the JSON entry of the axis."""
         return {'duration_s': self.duration_s,
-                'params': {p.name: p.to_json() for p in self.params},
+                'params': {p.name: p.to_json(self.duration_s) for p in self.params},
                 'separations': {s.question: s.to_json() for s in self.separations},
-                'remaining_s': json_num(self.remaining_s()), 'caveat': self.caveat}
+                'remaining_s': json_num(self.remaining_s()),
+                'lower_limit': self.lower_limit(), 'caveat': self.caveat}
 
     def progress_line(self) -> str:
         """One line: which parameters meet their target, and the time to each of the rest."""
-        met = [p.name for p in self.params if p.kind == 'met']
+        # A parameter without a target (not in the profile) is not listed.
+        met = [p.name for p in self.params if p.kind == 'met' and not math.isinf(p.target)]
         rest = []
         for p in self.params:
             if p.kind == 'met':
@@ -175,31 +223,33 @@ class AxisPlan(NamedTuple):
             if p.kind == 'open':
                 rest.append(f'{p.name} not constrained yet')
                 continue
-            more = hours(max(p.time_s - self.duration_s, 0.0))
-            at_least = p.kind == 'at_least' and math.isfinite(p.time_s)
-            rest.append(f'{p.name} in {">= " if at_least else ""}{more}')
+            when = more_total(p.time_s, self.duration_s, p.lower_limit(self.duration_s))
+            rest.append(f'{p.name} {when}')
         text = f'met: {", ".join(met) or "none"}'
         text += '; ' + ', '.join(rest) if rest else ''
         return text + (' (model does not hold: times may be short)' if self.caveat else '')
 
     def table_lines(self) -> list:
         """Human table: parameter, width now, target, record length, widths at 1/3/10 h."""
-        lines = [f'  {"param":<18} {"now":>10} {"target":>8} {"needs":>12} '
+        lines = [f'  {"param":<18} {"now":>10} {"target":>8} {"record to target":>33} '
                  f'{"at 1 h":>10} {"at 3 h":>10} {"at 10 h":>10}']
         for p in self.params:
-            need = hours(p.time_s)
-            if math.isfinite(p.time_s):
-                need = {'at_least': '>= ' + need}.get(p.kind, need)
-            if p.kind == 'at_least' and math.isnan(p.time_s):
+            need = more_total(p.time_s, self.duration_s, p.lower_limit(self.duration_s))
+            if p.kind == 'met':
+                need = 'no target' if math.isinf(p.target) else 'met now'
+            elif p.kind == 'at_least' and math.isnan(p.time_s):
                 need = 'bound only'
             elif p.kind == 'open':
                 need = 'open'
             cells = [percent(p.widths_at.get(h, math.nan)) for h in (1.0, 3.0, 10.0)]
             lines.append(f'  {p.name:<18} {percent(p.width_now):>10} '
-                         f'{percent(p.target, tight=True):>8} {need:>12} ' + ' '.join(
+                         f'{percent(p.target, tight=True):>8} {need:>33} ' + ' '.join(
                              f'{c:>10}' for c in cells))
         for s in self.separations:
-            state = 'separated now' if s.separated else f'needs {hours(s.time_s)}'
+            state = ('separated now' if s.separated
+                     else 'not separated yet, although a record of this length should'
+                     if 0 < s.time_s <= self.duration_s
+                     else 'needs ' + more_total(s.time_s, self.duration_s))
             lines.append(f'  {s.question}: {state}')
         if self.caveat:
             lines.append(f'  caveat: {self.caveat}')
