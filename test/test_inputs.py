@@ -50,3 +50,24 @@ def test_header_stamps_that_move_are_used_as_they_are(tmp_path):
         assert not any('log times' in w for w in source.warnings)
     assert_allclose(session.rate_hz, 50.0, rtol=1e-9)
     assert np.isfinite(session.curve().avar).all()
+
+
+def test_a_csv_whose_t_does_not_step_is_read_at_a_set_rate(tmp_path):
+    # 100 Hz stamped in 0.1 s ticks: the median step is 0, so the rate cannot come from
+    # t; refused with the way out, read at --rate (the tick clock rebuilds the stamps).
+    from imu_allan import AXES
+    from imu_allan.errors import InputError
+    from imu_allan.io.csv_io import write_csv
+    from imu_allan.io.inputs import analyze_input
+
+    stamps, y = still_imu(30_000, seed=4)
+    t_s = np.floor((stamps - stamps[0]) / 1e8) * 0.1
+    path = tmp_path / 'ticks.csv'
+    write_csv(path, t_s, y, AXES)
+    with pytest.raises(InputError, match=r'give the rate \(--rate HZ\)'):
+        open_input(path)
+    result, _ = analyze_input(path, None, SessionConfig(rate_hz=100.0), quiet=True,
+                              progress=False)
+    assert result.n_samples == 30_000 and result.rate_hz == pytest.approx(100.0)
+    # White noise of sd 1e-3 per sample at 100 Hz: N = 1e-4 (within 3 %).
+    assert_allclose(result.fits['gyro_x'].optimised['N'].value, 1e-4, rtol=0.03)

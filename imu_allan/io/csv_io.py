@@ -291,7 +291,7 @@ def read_csv(path: PathLike, columns: Sequence[str] | None = None,
         step = float(np.median(np.diff(t_s)))
         if not step > 0:
             raise InputError(f'{path}: the time column t does not increase (median step '
-                             f'{step:g} s); fix the stamps or give the rate')
+                             f'{step:g} s); fix the stamps or give the rate (--rate HZ)')
         rate = 1.0 / step
     else:
         raise InputError(f'{path}: no time column (t): give the sample rate (--rate HZ)')

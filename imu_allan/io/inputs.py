@@ -140,8 +140,8 @@ def check_path(path: Path) -> None:
 
 
 def open_input(path, topic: str | None = None, units: DeclaredUnits | None = None,
-               frame_id: str | None = None,
-               temperature_topic: str | None = None) -> InputSource:
+               frame_id: str | None = None, temperature_topic: str | None = None,
+               rate_hz: float = 0.0) -> InputSource:
     """
     Open any supported input for streaming.
 
@@ -162,6 +162,9 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
     temperature_topic : str, optional
         The sensor_msgs/Temperature topic of a bag; by default its only one, if any
         (:mod:`imu_allan.io.temperature_bag`).  A CSV gives a ``temperature`` column.
+    rate_hz : float
+        A set sample rate [Hz] (``--rate``; 0: none): a CSV whose t column does not
+        step (stamps rounded coarser than the samples) is then read, not refused.
 
     Returns
     -------
@@ -181,7 +184,10 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
         from imu_allan.io.csv_io import read_csv
         if path.is_dir():
             raise InputError(f'{path}: is a directory, not a CSV file')
-        data = read_csv(path, columns=list(AXES), optional=[TEMPERATURE_COLUMN])
+        # A set rate (--rate) reads a CSV whose t does not step (stamps rounded coarser
+        # than the samples): the tick clock rebuilds them.
+        data = read_csv(path, columns=list(AXES), optional=[TEMPERATURE_COLUMN],
+                        rate_hz=rate_hz if rate_hz > 0 else None)
         if data.t_s is None:
             raise InputError(f'{path}: a t column (seconds) is needed for analyze')
         # The declared time unit applies before nanoseconds (ms since the epoch in ns
@@ -414,7 +420,8 @@ def analyze_input(path: str | Path, topic: str | None, config: SessionConfig,
 
     show = (not quiet) if progress is None else progress
     tap, keeper = raw_tap()
-    with open_input(path, topic, units, frame_id, temperature_topic) as source:
+    with open_input(path, topic, units, frame_id, temperature_topic,
+                    config.rate_hz) as source:
         bar = Progress(path.name, source.n_messages) if show else None
         try:
             try:
