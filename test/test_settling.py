@@ -12,7 +12,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from imu_allan.core.allan.settling import find_settling
+from imu_allan.core.allan.settling import find_settling, nnls_few
 from imu_allan.core.noise.simulate import simulate_axis
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.rules import SETTLE_LEFT, SETTLE_SCORE
@@ -92,3 +92,14 @@ def test_a_frozen_axis_and_a_short_stretch_are_not_judged():
     y[:, 2] = 0.25
     assert find_settling(y, RATE_HZ).transients == ()
     assert find_settling(y[:20], RATE_HZ).cut_rows == 0
+
+
+def test_the_small_nnls_equals_scipys():
+    # numpy only (the main process of an analysis imports no scipy.optimize), exact.
+    from scipy.optimize import nnls
+
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        a = rng.normal(size=(int(rng.integers(3, 12)), 3))
+        b = rng.normal(size=a.shape[0])
+        assert_allclose(nnls_few(a, b), nnls(a, b)[0], atol=1e-10)

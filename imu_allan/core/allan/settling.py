@@ -252,6 +252,42 @@ def _settled_two(ec: np.ndarray, cov: np.ndarray, taus: np.ndarray, wander: floa
     return float(t_s[over[-1] + 1]) if over.size else 0.0
 
 
+def nnls_few(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """
+    Return the non-negative least-squares solution of a few unknowns.
+
+    Every subset of the columns solved by least squares, the best one whose
+    coefficients are all non-negative: the optimum of a convex problem is the
+    least-squares solution on its own support.  Three unknowns make 7 subsets; numpy
+    only, so the main process of an analysis imports no scipy.optimize.
+
+    Parameters
+    ----------
+    a : numpy.ndarray
+        Shape (m, k), the design, k small.
+    b : numpy.ndarray
+        Shape (m,), the data.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (k,), the coefficients (>= 0).
+
+    """
+    k = a.shape[1]
+    best, best_ss = np.zeros(k), float(b @ b)
+    for mask in range(1, 2 ** k):
+        cols = [j for j in range(k) if mask >> j & 1]
+        sol = np.linalg.lstsq(a[:, cols], b, rcond=None)[0]
+        if (sol < 0).any():
+            continue
+        r = b - a[:, cols] @ sol
+        if float(r @ r) < best_ss:
+            best_ss, best = float(r @ r), np.zeros(k)
+            best[cols] = sol
+    return best
+
+
 def _wander(x: np.ndarray, block_s: float, tau_s: float, apart_s: float) -> float:
     """
     Return how far a level fitted over ``tau_s`` wanders from one ``apart_s`` away [unit].
@@ -265,7 +301,6 @@ def _wander(x: np.ndarray, block_s: float, tau_s: float, apart_s: float) -> floa
     ``tau_s``, the random walk at ``apart_s`` at least: it moves the early level away
     from the later one, and they are about that far apart.
     """
-    from scipy.optimize import nnls
     h = x.size
     c = np.concatenate(([0.0], np.cumsum(x)))
     rows, avar = [], []
@@ -286,6 +321,6 @@ def _wander(x: np.ndarray, block_s: float, tau_s: float, apart_s: float) -> floa
     model = np.full_like(v, v.mean())
     for _ in range(3):
         w = np.sqrt(clusters / 2) / model
-        coef = nnls(design * w[:, None], v * w)[0]
+        coef = nnls_few(design * w[:, None], v * w)
         model = np.maximum(design @ coef, 1e-3 * v.mean())
     return math.sqrt(float(coef @ [1 / tau_s, 1.0, max(tau_s, apart_s)]))
