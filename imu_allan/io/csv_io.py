@@ -20,7 +20,7 @@ import io
 import os
 from pathlib import Path
 import re
-from typing import NamedTuple, Sequence
+from typing import Iterator, NamedTuple, Sequence
 import warnings
 import zlib
 
@@ -189,6 +189,93 @@ def _line_of_row(data: memoryview, row: int, first_line: int) -> int:
     return first_line + row
 
 
+def _columns(header: list, has_header: bool, columns: Sequence[str] | None,
+             optional: Sequence[str], path: Path) -> tuple[list, list, list, int | None]:
+    """
+    Choose the columns to return: (names, their indexes, the indexes checked finite, t).
+
+    The columns asked for (default the six axes, else every column but t) must all be
+    there; ``optional`` ones follow when the header has them.
+    """
+    time_col = next((i for i, h in enumerate(header) if h.lower() in TIME_COLUMNS), None)
+    if columns is None:
+        if all(a in header for a in AXES):
+            want = list(AXES)
+        else:
+            want = [h for i, h in enumerate(header) if i != time_col]
+            if not want:
+                raise InputError(f'{path}: no data columns besides the time column')
+    else:
+        want = [str(c) for c in columns]
+        missing = [c for c in want if c not in header]
+        if missing:
+            where = 'header' if has_header else 'headerless file (columns'
+            avail = ', '.join(header)
+            tail = '' if has_header else ')'
+            raise InputError(f'{path}: column(s) {", ".join(missing)} not in the {where} '
+                             f'{avail}{tail}')
+    used = [header.index(c) for c in want] + ([time_col] if time_col is not None else [])
+    want += [c for c in optional if c in header and c not in want]
+    return want, [header.index(c) for c in want], used, time_col
+
+
+def _check_lines(raw: bytes, path: Path, first_line: int = 1) -> None:
+    """Refuse a lone carriage return (a line end to some readers, blank to others)."""
+    if raw.count(b'\r') != raw.count(b'\r\n'):
+        # A lone carriage return ends a line for some readers and is blank space for
+        # others (a flipped '-' is one): refuse rather than guess.
+        found = re.search(b'\r(?!\n)', raw)
+        line = first_line + raw.count(b'\n', 0, found.start() if found is not None else 0)
+        raise InputError(f'{path}: line {line}: carriage return inside a line (old Mac line '
+                         'ends or a damaged file)')
+
+
+def _table(data: memoryview, header: list, path: Path, first_line: int,
+           plain: Path | None, used: list) -> np.ndarray:
+    """Parse data rows (fast, else line by line naming the first bad row); check finite."""
+    n_cols = len(header)
+    table = _parse_fast(data, n_cols, plain, first_line - 1)
+    if table is None:
+        table = _parse_careful(data, n_cols, header, path, first_line)
+    # Column by column: strided views, no copy of the table.
+    bad = [int(np.argmin(np.isfinite(table[:, j]))) for j in used
+           if not np.isfinite(table[:, j]).all()]
+    if bad:
+        row = min(bad)
+        line = _line_of_row(data, row, first_line)
+        col = next(header[j] for j in used if not np.isfinite(table[row, j]))
+        raise InputError(f'{path}: row {line}: column {col} is {table[row, header.index(col)]}'
+                         ' (NaN or infinite values are not allowed)')
+    return table
+
+
+def _headerless(raw: bytes, data: memoryview) -> list:
+    """Name the columns of a file without header: value, or column1, column2 ..."""
+    start = len(raw) - len(data)
+    end = raw.find(b'\n', start)
+    first = raw[start:end if end >= 0 else len(raw)].strip()
+    n_cols = len(first.split(b','))
+    return ['value'] if n_cols == 1 else [f'column{i + 1}' for i in range(n_cols)]
+
+
+def _rate(t_s: np.ndarray | None, rate_hz: float | None, path: Path) -> float:
+    """The sample rate [Hz]: as given, else 1 / the median step of t."""
+    if rate_hz is not None:
+        rate = float(rate_hz)
+        if not (np.isfinite(rate) and rate > 0):
+            raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
+        return rate
+    if t_s is None:
+        raise InputError(f'{path}: no time column (t): give the sample rate (--rate HZ)')
+    if t_s.size < 2:
+        raise InputError(f'{path}: one row is too few to derive a sample rate from t')
+    step = float(np.median(np.diff(t_s)))
+    if not step > 0:
+        raise InputError(f'{path}: the time column t does not increase (median step '
+                         f'{step:g} s); fix the stamps or give the rate (--rate HZ)')
+    return 1.0 / step
+
+
 def read_csv(path: PathLike, columns: Sequence[str] | None = None,
              rate_hz: float | None = None, optional: Sequence[str] = ()) -> CsvData:
     """
@@ -225,77 +312,146 @@ def read_csv(path: PathLike, columns: Sequence[str] | None = None,
     path = Path(path)
     raw = _read_bytes(path)
     header, data, first_line = _split_header(raw, path)
-    if raw.count(b'\r') != raw.count(b'\r\n'):
-        # A lone carriage return ends a line for some readers and is blank space for
-        # others (a flipped '-' is one): refuse rather than guess.
-        found = re.search(b'\r(?!\n)', raw)
-        line = raw.count(b'\n', 0, found.start() if found is not None else 0) + 1
-        raise InputError(f'{path}: line {line}: carriage return inside a line (old Mac line '
-                         'ends or a damaged file)')
-    if header is None:
-        start = len(raw) - len(data)
-        end = raw.find(b'\n', start)
-        first = raw[start:end if end >= 0 else len(raw)].strip()
-        n_cols = len(first.split(b','))
-        header = ['value'] if n_cols == 1 else [f'column{i + 1}' for i in range(n_cols)]
-        has_header = False
-    else:
-        has_header = True
-    n_cols = len(header)
-    plain = not path.name.lower().endswith('.gz')
-    table = _parse_fast(data, n_cols, path if plain else None, first_line - 1)
-    if table is None:
-        table = _parse_careful(data, n_cols, header, path, first_line)
+    _check_lines(raw, path)
+    has_header = header is not None
+    header = header if header is not None else _headerless(raw, data)
+    want, idx, used, time_col = _columns(header, has_header, columns, optional, path)
+    plain = path if not path.name.lower().endswith('.gz') else None
+    table = _table(data, header, path, first_line, plain, used)
     if table.shape[0] == 0:
         raise InputError(f'{path}: file has a header but no data rows')
-
-    time_col = next((i for i, h in enumerate(header) if h.lower() in TIME_COLUMNS), None)
-    if columns is None:
-        if all(a in header for a in AXES):
-            want = list(AXES)
-        else:
-            want = [h for i, h in enumerate(header) if i != time_col]
-            if not want:
-                raise InputError(f'{path}: no data columns besides the time column')
-    else:
-        want = [str(c) for c in columns]
-        missing = [c for c in want if c not in header]
-        if missing:
-            where = 'header' if has_header else 'headerless file (columns'
-            avail = ', '.join(header)
-            tail = '' if has_header else ')'
-            raise InputError(f'{path}: column(s) {", ".join(missing)} not in the {where} '
-                             f'{avail}{tail}')
-    used = [header.index(c) for c in want] + ([time_col] if time_col is not None else [])
-    want += [c for c in optional if c in header and c not in want]
-    idx = [header.index(c) for c in want]
-    # Column by column: strided views, no copy of the table.
-    bad = [int(np.argmin(np.isfinite(table[:, j]))) for j in used
-           if not np.isfinite(table[:, j]).all()]
-    if bad:
-        row = min(bad)
-        line = _line_of_row(data, row, first_line)
-        col = next(header[j] for j in used if not np.isfinite(table[row, j]))
-        raise InputError(f'{path}: row {line}: column {col} is {table[row, header.index(col)]}'
-                         ' (NaN or infinite values are not allowed)')
     # All columns in file order (a one-column record): the table itself, no copy.
-    samples = table if idx == list(range(n_cols)) else np.ascontiguousarray(table[:, idx])
+    samples = table if idx == list(range(len(header))) else np.ascontiguousarray(table[:, idx])
     t_s = np.ascontiguousarray(table[:, time_col]) if time_col is not None else None
-    if rate_hz is not None:
-        rate = float(rate_hz)
-        if not (np.isfinite(rate) and rate > 0):
-            raise InputError(f'sample rate must be a positive number of Hz, got {rate_hz!r}')
-    elif t_s is not None:
-        if t_s.size < 2:
-            raise InputError(f'{path}: one row is too few to derive a sample rate from t')
-        step = float(np.median(np.diff(t_s)))
-        if not step > 0:
-            raise InputError(f'{path}: the time column t does not increase (median step '
-                             f'{step:g} s); fix the stamps or give the rate (--rate HZ)')
-        rate = 1.0 / step
-    else:
-        raise InputError(f'{path}: no time column (t): give the sample rate (--rate HZ)')
-    return CsvData(t_s=t_s, samples=samples, columns=tuple(want), rate_hz=rate)
+    return CsvData(t_s=t_s, samples=samples, columns=tuple(want),
+                   rate_hz=_rate(t_s, rate_hz, path))
+
+
+#: Bytes of text parsed per block of a streamed CSV (about 200,000 rows of seven values).
+BLOCK_BYTES = 1 << 24
+
+
+class CsvStream(NamedTuple):
+    """
+    A CSV file opened for reading in blocks (:func:`open_csv`).
+
+    Attributes
+    ----------
+    columns : tuple of str
+        The column names of every block's samples.
+    rate_hz : float
+        The rate [Hz] as given, else from the first block's median step of t.
+    blocks : Iterator of CsvData
+        The blocks, in file order; each parsed and checked as :func:`read_csv` checks
+        a whole file (the same one-line errors, with the file's line numbers).
+
+    """
+
+    columns: tuple
+    rate_hz: float
+    blocks: Iterator
+
+
+def open_csv(path: PathLike, columns: Sequence[str] | None = None,
+             rate_hz: float | None = None, optional: Sequence[str] = (),
+             block_bytes: int = BLOCK_BYTES) -> CsvStream:
+    """
+    Open a CSV record to read in blocks: memory bounded by ``block_bytes``, not the file.
+
+    Parameters
+    ----------
+    path : str or Path
+        File name; ``.gz`` files are decompressed as they are read.
+    columns, rate_hz, optional
+        As :func:`read_csv`; the rate, when not given, comes from the first block.
+    block_bytes : int
+        Bytes of text per block (whole lines; at least one line).
+
+    Returns
+    -------
+    CsvStream
+        The columns, the rate and the blocks.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_csv`, for the header and the first block at once, for a later
+        block when it is reached.
+
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f'{path}: no such file or directory')
+    if path.is_dir():
+        raise InputError(f'{path}: is a directory, not a CSV file')
+    gz = path.name.lower().endswith('.gz')
+    try:
+        f = gzip.open(path, 'rb') if gz else open(path, 'rb')
+    except OSError as exc:
+        raise InputError(f'{path}: cannot read: {exc}') from None
+
+    def read(n: int) -> bytes:
+        try:
+            return f.read(n)
+        except (OSError, EOFError, zlib.error, ValueError) as exc:
+            f.close()
+            raise InputError(f'{path}: cannot read: {exc}') from None
+
+    raw = read(block_bytes)
+    while raw and raw.count(b'\n') < 2:          # the header and one whole line at least
+        more = read(block_bytes)
+        if not more:
+            break
+        raw += more
+    header, data, first_line = _split_header(raw, path)
+    has_header = header is not None
+    header = header if header is not None else _headerless(raw, data)
+    want, idx, used, time_col = _columns(header, has_header, columns, optional, path)
+
+    def parse(chunk: bytes, line: int) -> CsvData | None:
+        _check_lines(chunk, path, line)
+        table = _table(memoryview(chunk), header, path, line, None, used)
+        if table.shape[0] == 0:
+            return None
+        return CsvData(None if time_col is None else np.ascontiguousarray(table[:, time_col]),
+                       np.ascontiguousarray(table[:, idx]), tuple(want), 0.0)
+
+    pending, line = bytes(data), first_line
+    at_end = False
+
+    def next_block() -> CsvData | None:
+        # Whole lines up to the last line end of what is read; the rest waits.
+        nonlocal pending, line, at_end
+        while not at_end:
+            more = read(block_bytes)
+            at_end = not more
+            buf = pending + more
+            cut = len(buf) if at_end else buf.rfind(b'\n') + 1
+            if cut == 0:
+                pending = buf
+                continue
+            chunk, pending = buf[:cut], buf[cut:]
+            first, line = line, line + chunk.count(b'\n')
+            block = parse(chunk, first)
+            if block is not None:
+                return block
+        return None
+
+    first_block = next_block()
+    if first_block is None:
+        f.close()
+        raise InputError(f'{path}: file has a header but no data rows')
+    rate = _rate(first_block.t_s, rate_hz, path)
+
+    def blocks() -> Iterator:
+        try:
+            block: CsvData | None = first_block
+            while block is not None:
+                yield block._replace(rate_hz=rate)
+                block = next_block()
+        finally:
+            f.close()
+    return CsvStream(tuple(want), rate, blocks())
 
 
 def write_csv(path: PathLike, t_s: np.ndarray, samples: np.ndarray,

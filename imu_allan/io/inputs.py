@@ -139,6 +139,27 @@ def check_path(path: Path) -> None:
         raise InputError(f'{path}: permission denied')
 
 
+def _whole_blocks(held: list, final: bool) -> Iterator:
+    """
+    Yield CSV_BLOCK rows at a time from the parts in ``held`` (emptied as it goes).
+
+    ``held`` holds (stamp_ns (n,), samples (n, 6), temp_c (n,) or None) parts; what is
+    short of a block stays for the next call, unless ``final``.
+    """
+    n = sum(p[0].size for p in held)
+    if not n or (n < CSV_BLOCK and not final):
+        return
+    parts = [np.concatenate([p[i] for p in held]) if p0 is not None else None
+             for i, p0 in enumerate(held[0])]
+    held.clear()
+    whole = n if final else n - n % CSV_BLOCK
+    for k in range(0, whole, CSV_BLOCK):
+        end = min(k + CSV_BLOCK, whole)
+        yield tuple(None if p is None else p[k:end] for p in parts)
+    if whole < n:
+        held.append(tuple(None if p is None else p[whole:] for p in parts))
+
+
 def open_input(path, topic: str | None = None, units: DeclaredUnits | None = None,
                frame_id: str | None = None, temperature_topic: str | None = None,
                rate_hz: float = 0.0) -> InputSource:
@@ -181,27 +202,35 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
     path = Path(path)
     check_path(path)
     if is_csv(path):
-        from imu_allan.io.csv_io import read_csv
+        from imu_allan.io.csv_io import open_csv
         if path.is_dir():
             raise InputError(f'{path}: is a directory, not a CSV file')
-        # A set rate (--rate) reads a CSV whose t does not step (stamps rounded coarser
-        # than the samples): the tick clock rebuilds them.
-        data = read_csv(path, columns=list(AXES), optional=[TEMPERATURE_COLUMN],
-                        rate_hz=rate_hz if rate_hz > 0 else None)
-        if data.t_s is None:
-            raise InputError(f'{path}: a t column (seconds) is needed for analyze')
-        # The declared time unit applies before nanoseconds (ms since the epoch in ns
-        # would overflow int64).
-        t_s = data.t_s * units.time_scale(1.0) if units is not None else data.t_s
-        stamp_ns = np.round(t_s * 1e9).astype(np.int64)
-        samples = _to_si(data.samples[:, :len(AXES)], units)
-        temp_c = data.samples[:, len(AXES)] if len(data.columns) > len(AXES) else None
+        # Read in blocks: memory bounded whatever the record's length.  A set rate
+        # (--rate) reads a CSV whose t does not step (stamps rounded coarser than the
+        # samples): the tick clock rebuilds them.
+        stream = open_csv(path, columns=list(AXES), optional=[TEMPERATURE_COLUMN],
+                          rate_hz=rate_hz if rate_hz > 0 else None)
+        with_temp = len(stream.columns) > len(AXES)
+        n_read = [0]
 
         def csv_blocks():
-            for k in range(0, stamp_ns.size, CSV_BLOCK):
-                yield stamp_ns[k:k + CSV_BLOCK], samples[k:k + CSV_BLOCK], \
-                    None if temp_c is None else temp_c[k:k + CSV_BLOCK]
-        return InputSource(path, path.name, 'csv', None, int(stamp_ns.size), csv_blocks, [])
+            # Blocks of CSV_BLOCK rows, as the whole file was cut before: the same
+            # blocks reach the session, so the same numbers come out.
+            held: list = []
+            for data in stream.blocks:
+                if data.t_s is None:
+                    raise InputError(f'{path}: a t column (seconds) is needed for analyze')
+                n_read[0] += data.t_s.size
+                # The declared time unit applies before nanoseconds (ms since the epoch
+                # in ns would overflow int64).
+                t_s = data.t_s * units.time_scale(1.0) if units is not None else data.t_s
+                held.append((np.round(t_s * 1e9).astype(np.int64),
+                             _to_si(data.samples[:, :len(AXES)], units),
+                             data.samples[:, len(AXES)] if with_temp else None))
+                yield from _whole_blocks(held, final=False)
+            yield from _whole_blocks(held, final=True)
+        return InputSource(path, path.name, 'csv', None, None, csv_blocks, [],
+                           counts=lambda: (n_read[0], 0))
     from imu_allan.io.bag_reader import open_imu
     from imu_allan.io.temperature_bag import read_temperature
     temperature = read_temperature(path, temperature_topic)
