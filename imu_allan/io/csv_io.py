@@ -259,7 +259,7 @@ def _headerless(raw: bytes, data: memoryview) -> list:
 
 
 def _rate(t_s: np.ndarray | None, rate_hz: float | None, path: Path) -> float:
-    """The sample rate [Hz]: as given, else 1 / the median step of t."""
+    """Return the sample rate [Hz]: as given, else 1 / the median step of t."""
     if rate_hz is not None:
         rate = float(rate_hz)
         if not (np.isfinite(rate) and rate > 0):

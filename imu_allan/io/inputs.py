@@ -140,12 +140,7 @@ def check_path(path: Path) -> None:
 
 
 def _whole_blocks(held: list, final: bool) -> Iterator:
-    """
-    Yield CSV_BLOCK rows at a time from the parts in ``held`` (emptied as it goes).
-
-    ``held`` holds (stamp_ns (n,), samples (n, 6), temp_c (n,) or None) parts; what is
-    short of a block stays for the next call, unless ``final``.
-    """
+    """Yield CSV_BLOCK rows of held (stamp_ns, samples, temp_c) parts; a rest waits."""
     n = sum(p[0].size for p in held)
     if not n or (n < CSV_BLOCK and not final):
         return

@@ -32,6 +32,7 @@ from imu_allan.core.outputs.short_record import SHORT_RECORD, short_record_warni
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clipping import CLIPPED, KEEP_SHARE, left_out
+from imu_allan.pipeline.session import Session
 from imu_allan.pipeline.thermal_report import thermal_axes, THERMAL_DRIFT
 from imu_allan.pipeline.workers import worker_pool
 
@@ -403,6 +404,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
 
     """
     # The bounds (chi-square quantiles) are computed while the workers search.
+    if isinstance(session, Session):    # a fit is due: rows held for the warm-up judged
+        session.judge_settling()
     curve = session.curve(confidence=CONFIDENCE, bounds=False)
     if curve is None or curve.tau_s.size < 3:
         return None

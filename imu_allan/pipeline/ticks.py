@@ -2,10 +2,10 @@
 Stamp clocks coarser than the sample period: recognised, and the stamps rebuilt.
 
 A driver that stamps at a coarse resolution gives several samples one stamp (a 4 kHz
-IMU stamped in 1 ms ticks: four per tick), or steps of one and two ticks in a fixed
-pattern (800 Hz in 1 ms ticks: 1, 1, 1, 2 ms).  Read as they are, the repeated stamps
-are dropped as re-sent messages and the rate is the tick's; the pattern of 800 Hz
-reads as 1 kHz that lost every fifth sample.
+IMU stamped in millisecond ticks: four per tick), or steps of one and two ticks in a
+fixed pattern (800 Hz in millisecond ticks: steps of 1, 1, 1 and 2 ticks).  Read as
+they are, the repeated stamps are dropped as re-sent messages and the rate is the
+tick's; the pattern of 800 Hz reads as 1 kHz that lost every fifth sample.
 
 :class:`TickClock` stands before the stamp clock
 (:class:`~imu_allan.pipeline.clock.StampClock`).  It holds the first rows until it can
@@ -40,7 +40,7 @@ MIN_TICKS = 20
 #: Stamps within this share of a tick of a whole number of ticks are on the grid.
 GRID_TOLERANCE = 0.1
 #: One sample per tick within this share is a clock that stamps every sample on its own
-#: tick (a jittered 1 kHz IMU in 1 ms ticks): a repeated stamp there is a late one, and
+#: tick (a jittered 1 kHz IMU in millisecond ticks): a repeated stamp there is a late one, and
 #: the stamp clock's rules apply.
 ONE_PER_TICK = 0.02
 #: The stamps of a quantised clock lie within one tick of the count's line; lost
