@@ -12,6 +12,7 @@ command with the line ``imu-allan: interrupted`` and exit code 130.
 
 import argparse
 import importlib
+import signal
 import sys
 
 from imu_allan import __version__
@@ -142,6 +143,9 @@ def main(argv=None) -> int:
         return _fail(f'imu-allan: error: {exc}', str(exc), getattr(exc, 'exit_code', 2),
                      json_out)
     except KeyboardInterrupt:
+        # A second Ctrl-C (a terminal's, to the whole group) while the workers stop
+        # would end the process by the signal instead of exit 130.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         workers = sys.modules.get('imu_allan.pipeline.workers')   # its server, if started
         if workers is not None:
             workers.stop_workers()
