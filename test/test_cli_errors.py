@@ -224,6 +224,11 @@ def _fork_server_started(pgid: int) -> bool:
     return False
 
 
+def _terminal_sigint() -> None:
+    """Give the child a terminal's SIGINT: a shell's background job inherits it ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.fixture(scope='module')
 def long_csv(tmp_path_factory) -> Path:
     """Return a CSV of a still Xsens MTi-7, 30 min at 100 Hz (its fit takes seconds)."""
@@ -244,7 +249,7 @@ def test_ctrl_c_is_one_line_and_exit_130_promptly(tmp_path, long_csv, when):
             [sys.executable, '-m', 'imu_allan', 'analyze', str(long_csv), '--out',
              str(tmp_path / 'o'), '--jobs', '2', '--format', 'json'],
             stdout=subprocess.PIPE, stderr=err_file, process_group=0,
-            env=dict(os.environ, PYTHONPATH=str(REPO)))
+            env=dict(os.environ, PYTHONPATH=str(REPO)), preexec_fn=_terminal_sigint)
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and proc.poll() is None:

@@ -930,8 +930,10 @@ def test_the_client_watches_until_ctrl_c_and_names_a_missing_node(rig):
     r = rig()
     r.feed(*_record(200.0, 5.0))
     r.publish()                 # the latched results: what a watcher hears first
+    # A terminal's SIGINT (a shell's background job would inherit it ignored).
     proc = subprocess.Popen([sys.executable, '-m', 'imu_allan', 'node', 'watch'],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines: list = []
     reader = threading.Thread(target=lambda: lines.append(proc.stdout.readline()),
                               daemon=True)
