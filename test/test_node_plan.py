@@ -5,15 +5,17 @@ Uses the rig of test_node.py (a node and a peer on SingleThreadedExecutors in th
 """
 
 import math
+from pathlib import Path
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
+import pytest
 from rclpy.parameter import Parameter
 from test_node import context, rig, statuses, wait  # noqa: F401 - fixtures
 
 from conftest import T0_NS
-from imu_allan.core.noise.params import parse_params
+from imu_allan.core.noise.params import load_params, parse_params
 from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.plan import plan_fits
 from imu_allan.ros import plan_report
@@ -103,6 +105,39 @@ def test_stop_when_met_stops_collecting_after_the_floor(rig):  # noqa: F811
     # ~/reset starts over: collecting again.
     r.node.service_handlers.on_reset(None, type('R', (), {})())
     assert not r.node.collection_stopped
+
+
+#: The README's simulated MTi-7 (paper table 2) at 2 Hz: hours of stamps in seconds of
+#: messages.  The vio targets (N +-10 %, K +-50 %) need about 16 h on its gyros.
+MTI7 = load_params(Path(__file__).resolve().parents[1] / 'config' / 'xsens_mti7.yaml')
+
+
+@pytest.mark.slow
+def test_the_vio_profile_stops_by_itself_once_n_and_k_of_an_mti7_are_met(rig):  # noqa: F811
+    r = rig(plan_period_s=0.001, stop_when_met=True, plan_profile='vio',
+            min_duration_s=3600.0)
+    t_s, y = simulate_imu(MTI7, 2.0, 20 * 3600.0, seed=4)
+    t_ns = T0_NS + np.round(t_s * 1e9).astype(np.int64)
+    half = t_s.size // 2
+    r.feed(t_ns[:half], y[:half])
+    result = r.publish()
+    # 10 h: N is met on every axis, K not yet on some: collection goes on.
+    assert all(p.param('N').kind == 'met' for p in result.plans.values())
+    assert not all(p.all_met() for p in result.plans.values())
+    assert not r.node.collection_stopped
+    r.feed(t_ns[half:], y[half:])
+    result = r.publish()
+    # 20 h: K meets +-50 % too; the node stops collecting and says so.
+    assert all(p.all_met() for p in result.plans.values()), \
+        {a: p.progress_line() for a, p in result.plans.items()}
+    assert all(result.reports[a].params['K'].kind == 'estimate' for a in result.plans)
+    assert r.node.collection_stopped
+    assert ('stopped collecting: vio targets (N, K) met'
+            in r.node.reports.progress_status().message)
+    n_used = r.node.session.stats.n_used
+    r.feed(t_ns[-10:] + 10 ** 10, y[-10:])        # received, no longer collected
+    r.node.live.process()
+    assert r.node.session.stats.n_used == n_used
 
 
 def test_the_old_name_stop_when_pinned_is_read_with_a_warning(rig, capfd):  # noqa: F811

@@ -22,6 +22,7 @@ import yaml
 from imu_allan.atomic import write_atomic
 from imu_allan.core.noise.params import dump_params
 from imu_allan.core.noise.values import NoiseSpec
+from imu_allan.core.noise.words import speak
 from imu_allan.io import FIGURE_FORMATS
 from imu_allan.pipeline.analysis import AnalysisResult, B_CONVENTION
 from imu_allan.pipeline.thermal_report import thermal_lines
@@ -82,7 +83,7 @@ def summary_text(result: AnalysisResult) -> str:
     lines += ['', "[lo, hi]: the 95 % interval; '<' an upper bound (95 %), '>' a lower bound; "
               'n/a: not identified; ADEV floor: the lowest Allan deviation (what a '
               'datasheet calls in-run bias stability), shown where the curve measures it']
-    notes = [f'  {axis}: {n}' for axis, fit in result.fits.items() if fit is not None
+    notes = [f'  {axis}: {speak(n)}' for axis, fit in result.fits.items() if fit is not None
              for n in distinct_notes(fit.notes)]
     if notes:
         lines += ['', 'notes (why a value is a bound, what the model leaves open):'] + notes

@@ -97,6 +97,9 @@ class Term:
         of one instance, ``params`` the dict of ``to_params``.
     title : str
         What the term is, for summaries ('white noise').
+    noun : str
+        Its short name in a user's words ('sinusoid', 'extra Gauss-Markov'), which
+        :func:`imu_allan.core.noise.words.spoken` puts where the label would be.
     plain : bool
         The fit reports its symbols without the '<term>.' prefix (N, B, T_B, K ...).
     state_space : bool
@@ -160,6 +163,7 @@ class Term:
     keys: tuple[Key, ...] = ()
     simulate: Callable[..., np.ndarray] | None = None
     title: str = ''
+    noun: str = ''
     plain: bool = False
     state_space: bool = False
     kalman: str = ''
@@ -281,14 +285,15 @@ TERMS: dict[str, Term] = {
         _gcov_quantization, lambda c: {'Q': _sqrt(c)}, lambda v: v * v, ('u*s',),
         keys=(_key('Q'),),
         simulate=lambda p, f, n, rng: gen.quantization_noise(p['Q'], f, n, rng),
-        title='quantization', plain=True, effect=True, search_rank=3,
+        title='quantization', noun='quantization', plain=True, effect=True, search_rank=3,
         read=_scalar('Q')[0], write=_scalar('Q')[1], discrete=True,
         psd_phase=_PSD_PHASE['quantization']),
     'white': Term(
         'white', ('N',), (), lambda tau: 1.0 / _as_tau(tau), _gcov_white,
         lambda c: {'N': _sqrt(c)}, lambda v: v * v, ('u*s^0.5',), keys=(_key('N'),),
         simulate=lambda p, f, n, rng: gen.white_noise(p['N'], f, n, rng),
-        title='white noise', plain=True, state_space=True, kalman='white', effect=True,
+        title='white noise', noun='white noise',
+        plain=True, state_space=True, kalman='white', effect=True,
         exclusive=('filtered_white',), read=_scalar('N')[0], write=_scalar('N')[1],
         psd_phase=_PSD_PHASE['white']),
     # White noise seen through the sensor's own low-pass filter (anti-aliasing,
@@ -303,7 +308,8 @@ TERMS: dict[str, Term] = {
         lambda c, T: {'N': _sqrt(c), 'T_f': T}, lambda v, T: v * v, ('u*s^0.5', 's'),
         keys=(_key('N'), Key('')),
         simulate=lambda p, f, n, rng: gen.filtered_white_noise(p['N'], p['T_f'], f, n, rng),
-        title="white noise through the sensor's filter", plain=True, kalman='white',
+        title="white noise through the sensor's filter", noun='filtered white noise',
+        plain=True, kalman='white',
         exclusive=('white',), read=lambda noise: [], write=lambda kw, v: kw.update(N=v[0]),
         bounds=lambda tau, rate_hz: ((0.01 / rate_hz, 4.0 / rate_hz),),
         reach=_reach_gauss_markov,
@@ -313,7 +319,8 @@ TERMS: dict[str, Term] = {
         'flicker', ('B',), (), lambda tau: np.full(_as_tau(tau).shape, FLICKER_AVAR),
         _gcov_flicker, lambda c: {'B': _sqrt(c)}, lambda v: v * v, ('u',),
         keys=(_key('B'),), simulate=lambda p, f, n, rng: gen.flicker_noise(p['B'], f, n, rng),
-        title='flicker bias instability', plain=True, effect=True, search_rank=2,
+        title='flicker bias instability', noun='flicker noise',
+        plain=True, effect=True, search_rank=2,
         read=_read_flicker, write=_write_flicker, reach=_reach_flicker,
         psd_phase=_PSD_PHASE['flicker']),
     # The paper's Gauss-Markov floor (Maia et al. eq. 8): level B, correlation time T_B.
@@ -324,7 +331,8 @@ TERMS: dict[str, Term] = {
         ('u', 's'), keys=(_key('B'), Key('T_B')),
         simulate=lambda p, f, n, rng: gen.gauss_markov_noise(
             GaussMarkov(p['B'], p['T_B']), f, n, rng),
-        title='Gauss-Markov bias instability', plain=True, state_space=True, kalman='b_gm',
+        title='Gauss-Markov bias instability', noun='bias instability',
+        plain=True, state_space=True, kalman='b_gm',
         read=_read_floor, write=_write_floor, bounds=_gm_range, reach=_reach_gauss_markov,
         tail=_tail_gauss_markov, psd_phase=_PSD_PHASE['gauss_markov']),
     'gauss_markov': Term(
@@ -333,7 +341,8 @@ TERMS: dict[str, Term] = {
         lambda v, T: GM_PSD_FACTOR * v * v / T, ('u', 's'), keys=(_key('B'), Key('T')),
         simulate=lambda p, f, n, rng: gen.gauss_markov_noise(
             GaussMarkov(p['B'], p['T']), f, n, rng),
-        title='a further Gauss-Markov process', state_space=True, effect=True, search_rank=1,
+        title='a further Gauss-Markov process', noun='extra Gauss-Markov',
+        state_space=True, effect=True, search_rank=1,
         repeats=2, list_key='gauss_markov',
         read=lambda noise: [(g.B, g.T) for g in noise.gauss_markov if g.B],
         write=lambda kw, v: kw['gauss_markov'].append(GaussMarkov(*v)),
@@ -343,12 +352,14 @@ TERMS: dict[str, Term] = {
         'random_walk', ('K',), (), lambda tau: _as_tau(tau) / 3.0, _gcov_random_walk,
         lambda c: {'K': _sqrt(c)}, lambda v: v * v, ('u/s^0.5',), keys=(_key('K'),),
         simulate=lambda p, f, n, rng: gen.random_walk_noise(p['K'], f, n, rng),
-        title='rate random walk', plain=True, state_space=True, kalman='b_rw', effect=True,
+        title='rate random walk', noun='random walk',
+        plain=True, state_space=True, kalman='b_rw', effect=True,
         read=_scalar('K')[0], write=_scalar('K')[1], psd_phase=_PSD_PHASE['random_walk']),
     'rate_ramp': Term(
         'rate_ramp', ('R',), (), lambda tau: _as_tau(tau) ** 2 / 2.0, None,
         lambda c: {'R': _sqrt(c)}, lambda v: v * v, ('u/s',), keys=(_key('R'),),
-        simulate=lambda p, f, n, rng: _ramp(p, f, n), title='rate ramp', plain=True,
+        simulate=lambda p, f, n, rng: _ramp(p, f, n), title='rate ramp', noun='rate ramp',
+        plain=True,
         effect=True, search_rank=4, read=_scalar('R')[0], write=_scalar('R')[1],
         signed=('R',)),
     'sinusoid': Term(
@@ -359,7 +370,8 @@ TERMS: dict[str, Term] = {
         keys=(_key('A'), Key('f0_hz')),
         simulate=lambda p, f, n, rng: gen.sinusoid(p['A'], p['f0_hz'], np.arange(n) / float(f),
                                                    rng),
-        title='sinusoid', effect=True, search_rank=0, repeats=2, list_key='sinusoid',
+        title='sinusoid', noun='sinusoid',
+        effect=True, search_rank=0, repeats=2, list_key='sinusoid',
         read=lambda noise: [(s.A, s.f0_hz) for s in noise.sinusoids if s.A],
         write=lambda kw, v: kw['sinusoids'].append(Sinusoid(*v)),
         bounds=lambda tau, rate_hz: ((0.371 / (2.0 * tau.max()),

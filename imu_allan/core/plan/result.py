@@ -8,6 +8,7 @@ import math
 from typing import NamedTuple
 
 from imu_allan.core.fit.result import json_num
+from imu_allan.core.noise.words import spoken
 from imu_allan.core.rules import LOWER_LIMIT_RATIO
 
 #: Kinds of a parameter's plan.
@@ -212,26 +213,27 @@ class AxisPlan(NamedTuple):
     def progress_line(self) -> str:
         """One line: which parameters meet their target, and the time to each of the rest."""
         # A parameter without a target (not in the profile) is not listed.
-        met = [p.name for p in self.params if p.kind == 'met' and not math.isinf(p.target)]
+        met = [spoken(p.name) for p in self.params
+               if p.kind == 'met' and not math.isinf(p.target)]
         rest = []
         for p in self.params:
             if p.kind == 'met':
                 continue
             if p.kind == 'at_least' and math.isnan(p.time_s):
-                rest.append(f'{p.name} only bounded yet')
+                rest.append(f'{spoken(p.name)} only bounded yet')
                 continue
             if p.kind == 'open':
-                rest.append(f'{p.name} not constrained yet')
+                rest.append(f'{spoken(p.name)} not constrained yet')
                 continue
             when = more_total(p.time_s, self.duration_s, p.lower_limit(self.duration_s))
-            rest.append(f'{p.name} {when}')
+            rest.append(f'{spoken(p.name)} {when}')
         text = f'met: {", ".join(met) or "none"}'
         text += '; ' + ', '.join(rest) if rest else ''
         return text + (' (model does not hold: times may be short)' if self.caveat else '')
 
     def table_lines(self) -> list:
         """Human table: parameter, width now, target, record length, widths at 1/3/10 h."""
-        lines = [f'  {"param":<18} {"now":>10} {"target":>8} {"record to target":>33} '
+        lines = [f'  {"param":<24} {"now":>10} {"target":>8} {"record to target":>33} '
                  f'{"at 1 h":>10} {"at 3 h":>10} {"at 10 h":>10}']
         for p in self.params:
             need = more_total(p.time_s, self.duration_s, p.lower_limit(self.duration_s))
@@ -242,7 +244,7 @@ class AxisPlan(NamedTuple):
             elif p.kind == 'open':
                 need = 'open'
             cells = [percent(p.widths_at.get(h, math.nan)) for h in (1.0, 3.0, 10.0)]
-            lines.append(f'  {p.name:<18} {percent(p.width_now):>10} '
+            lines.append(f'  {spoken(p.name):<24} {percent(p.width_now):>10} '
                          f'{percent(p.target, tight=True):>8} {need:>33} ' + ' '.join(
                              f'{c:>10}' for c in cells))
         for s in self.separations:

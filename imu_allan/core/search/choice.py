@@ -191,17 +191,17 @@ def with_rivals(fit: AxisFit, model: FinalModel) -> AxisFit:
         lo, hi = min([p.ci95[0]] + values), max([p.ci95[1]] + values)
         if (lo, hi) != p.ci95:
             optimised[sym] = p._replace(ci95=(float(lo), float(hi)),
-                                        reason='interval widened to span rival models')
+                                        reason='interval widened to span models that fit as well')
     if flips and t_b is not None:
         optimised['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified', t_b.unit,
-                                 'fitted', 'rival models give it other values')
-        notes.append(f'T_B: flips between rival models that fit about as well ('
+                                 'fitted', 'other models that fit as well give it other values')
+        notes.append(f'T_B: differs between models that fit about as well ('
                      f'{t_b.value:.3g} s; {", ".join(flips)}): not identified')
     elif t_b is not None and t_b.kind == 'estimate':
         ts = [r.levels['T_B'] for r in rivals if math.isfinite(r.levels['T_B'])]
         optimised['T_B'] = t_b._replace(ci95=(float(min([t_b.ci95[0]] + ts)),
                                               float(max([t_b.ci95[1]] + ts))))
-    notes.append('intervals of N, B, K span the rival models: '
+    notes.append('intervals of N, B, K span the models that fit about as well: '
                  + ', '.join(r.model for r in rivals))
     listed = tuple({'model': r.model, 'criterion_rise': r.criterion_rise, **r.levels}
                    for r in rivals)
