@@ -55,7 +55,8 @@ def spoken(name: str) -> str:
         return name if noun is None else f'{noun} {SYMBOL_WORDS.get(symbol, symbol)}'
     if name in SYMBOL_WORDS:
         return SYMBOL_WORDS[name]
-    return _noun(name) if '_' in name and _noun(name) is not None else name
+    noun = _noun(name) if '_' in name else None
+    return name if noun is None else noun
 
 
 def speak(text: str) -> str:
