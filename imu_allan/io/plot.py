@@ -6,6 +6,7 @@ contribution, gyro and accelerometer in two panels with units.
 """
 
 from pathlib import Path
+import textwrap
 
 from matplotlib import colormaps
 from matplotlib.figure import Figure
@@ -14,6 +15,7 @@ import numpy as np
 
 from imu_allan import ACCEL_AXES, AXES, GYRO_AXES
 from imu_allan.core.noise.terms import base_name, TERMS
+from imu_allan.core.noise.words import spoken
 from imu_allan.io import FIGURE_FORMATS
 
 _COLOURS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
@@ -326,7 +328,7 @@ def plot_diagnosis(diag, path) -> Path:
     ax.loglog(tau, diag.adev_before, '--', color='tab:red', lw=1.4,
               label=f'simulated base model (gap {diag.gap_before:.2g})')
     if diag.missing:
-        added = ' + '.join(f.effect for f in diag.missing)
+        added = ' + '.join(spoken(f.effect) for f in diag.missing)
         ax.loglog(tau, diag.adev_after, '-', color='tab:blue', lw=1.6,
                   label=f'simulated with {added} (gap {diag.gap_after:.2g})')
     for k, band in enumerate(diag.bands_before):
@@ -337,8 +339,8 @@ def plot_diagnosis(diag, path) -> Path:
     ax.set_ylabel(f'ADEV [{diag.unit}]')
     ax.grid(True, which='both', alpha=0.3)
     ax.legend(fontsize=7, loc='best')
-    title = diag.summary if len(diag.summary) < 95 else diag.summary[:92] + '...'
-    ax.set_title(title, fontsize=7)
+    # The whole summary, wrapped: a cut sentence hides the effects named last.
+    ax.set_title('\n'.join(textwrap.wrap(diag.summary, 100)), fontsize=7)
     path.parent.mkdir(parents=True, exist_ok=True)
     _plain_log_labels(fig)
     fig.savefig(path, dpi=90, bbox_inches='tight')

@@ -236,6 +236,9 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     if len(set(candidates)) != len(candidates):
         raise InputError('each term may appear once; number repeats, e.g. gauss_markov_2')
     nominal = nominal_fit(tau, avar, edf, unit)
+    # The curve's own bounds of B and K read every point, not only the thinned ones
+    # the fit weighs: a bound may lie above no point of the curve (the joint band).
+    whole = (tau, avar, edf)
     keep = thin(tau)
     tau, avar, edf = tau[keep], avar[keep], edf[keep]
     notes: list[str] = []
@@ -293,7 +296,8 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
 
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
-    optimised = bound_by_curve(optimised, tau, avar, edf, notes)
+    past_filter = whole[0] >= tau[0]
+    optimised = bound_by_curve(optimised, *(a[past_filter] for a in whole), notes)
     if dof > 0 and chi2_sf(chi2_value, dof) < P_CONSISTENT:
         notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
                      f'{dof} dof): a missing effect? (imu-allan diagnose)')
