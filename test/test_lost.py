@@ -79,3 +79,14 @@ def test_a_session_on_host_stamps_names_the_loss():
     assert 'N reads high' in line
     share = float(line.split('about ')[1].split(' %')[0]) / 100
     assert 0.05 <= share <= 0.2 and math.isfinite(share)
+
+
+def test_the_counts_survive_a_checkpoint():
+    t = _host_stamps(300.0, seed=8)
+    whole = _watch(t)
+    half = _watch(t[:14_000])
+    again = LostWatch(HygieneStats(irregular_stamps=True), WarningLog())
+    again.restore({k: v.copy() for k, v in half.state().items()})
+    again.take(t[14_000:])
+    assert_allclose(again.fano, whole.fano, rtol=1e-12)
+    assert again.sums[0] == whole.sums[0] > 20

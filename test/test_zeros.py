@@ -99,3 +99,41 @@ def test_rows_become_fills_between_their_neighbours_and_long_runs_split():
     assert one.filled_axes()[:3].all()
     again = [r for k in range(150, 300) for r in one.take(t[k:k + 1], y[k:k + 1])]
     assert sum(int(filled(r[1]) is not None) for r in again) == 10
+
+
+def test_zeroed_vectors_of_axes_that_read_zero_now_and_then_are_found():
+    # ADIS16405-like gyros: 0 within the bulk, read on about 4 % of the samples each;
+    # all three at once as often as the product of their shares (the six real runs:
+    # 31-41 rows against 28-37 by chance in 1 M).
+    t, y = _still(60_000, seed=8)
+    lsb = 0.4 * SD[0]
+    y[:, :3] = np.round((y[:, :3] - BIAS[:3]) / lsb) * lsb
+    assert 0.02 < (y[:, :3] == 0).mean() < 0.2
+    clean = _run(t, y)
+    assert not clean.gate.zeros.filled_axes().any()
+    assert not clean.gate.zeros.filled_sensors().any() and clean.stats.n_zero_rows == 0
+    bad = y.copy()
+    rows = np.flatnonzero(np.random.default_rng(9).random(y.shape[0]) < 0.02)
+    bad[rows, :3] = 0.0
+    s = _run(t, bad)
+    assert not s.gate.zeros.filled_axes()[:3].any()      # no axis alone shows them
+    assert s.gate.zeros.filled_sensors().tolist() == [True, False]
+    # Until ten all-zero rows are in (about 500 rows here) they pass as data.
+    assert rows.size - 40 <= s.stats.n_zero_rows <= rows.size + 5
+    assert_allclose(_adev(s)[:3], _adev(clean)[:3], rtol=0.03)
+
+
+def test_a_checkpoint_keeps_the_verdict_and_the_left_neighbour(tmp_path):
+    t, y = _still(20_000, seed=10)
+    bad = _zero_rows(y, 0.05, seed=11)
+    whole = _run(t, bad, block=500)
+    first = Session()
+    for k in range(0, 10_000, 500):
+        first.add(t[k:k + 500], bad[k:k + 500])
+    first.save_state(tmp_path / 'state.npz')
+    resumed = Session.load_state(tmp_path / 'state.npz')
+    for k in range(10_000, 20_000, 500):
+        resumed.add(t[k:k + 500], bad[k:k + 500])
+    resumed.flush()
+    assert resumed.stats == whole.stats and whole.stats.n_zero_rows > 900
+    assert_allclose(resumed.curve().avar, whole.curve().avar, rtol=1e-12)

@@ -19,7 +19,10 @@ either a value next to 0 (within :data:`~imu_allan.core.rules.ZERO_STEP_MAX` sds
 the distribution: a quantised axis reads 0 about as often as the levels next to it),
 or no value is near 0 and 0 lies :data:`~imu_allan.core.rules.ZERO_FAR` sds from the
 mean.  An axis quantised coarser than its noise, which may read 0 most of the time,
-is left alone.
+is left alone.  Rows whose three gyro (or accel) values are all 0 are fills when they
+are :data:`~imu_allan.core.rules.ZERO_RATIO` times as many as the three axes' shares
+of zeros make by chance: a packet's vector zeroed on axes that each read 0 now and
+then (the ADIS16405's gyros read 0 on 3-4 % of their samples).
 
 A row with a zero-filled field is a lost message: all six values are replaced by the
 linear interpolation between the nearest rows without one and marked as fills
@@ -45,6 +48,8 @@ from imu_allan.pipeline.steps import split_runs
 
 #: What the warning says the rows are (the bench matches 'zero').
 ZERO_FILLED = 'zero-filled fields'
+#: The axes of each sensor, whose fields an incomplete packet zeroes together.
+SENSORS = (slice(0, 3), slice(3, 6))
 
 
 # Long because its counters survive a checkpoint, validated one by one, and the rows
@@ -77,6 +82,9 @@ class ZeroWatch:
         self.sums = np.zeros((3, N_AXES))
         # Per axis with zeros, the least step between two distinct values (the LSB).
         self.quantum = np.full(N_AXES, np.inf)
+        # Per sensor (gyro, accel): rows, and rows whose three values are all 0.
+        self.n_rows = 0
+        self.n_all_zero = np.zeros(len(SENSORS), dtype=np.int64)
         # The last row passed on without a zero-filled field (the left neighbour of the
         # next block's first rows; none at the start or after a segment break).
         self.last_row = np.empty((0, N_AXES))
@@ -100,8 +108,11 @@ class ZeroWatch:
 
         """
         self._count(samples)
-        axes = self.filled_axes()
+        axes, sensors = self.filled_axes(), self.filled_sensors()
         zero = (samples[:, axes] == 0).any(axis=1) if axes.any() else None
+        for k in np.flatnonzero(sensors):
+            whole = (samples[:, SENSORS[k]] == 0).all(axis=1)
+            zero = whole if zero is None else zero | whole
         if zero is None or not zero.any():
             self.last_row = samples[-1:].copy()
             cut, self.cut = self.cut, False
@@ -141,9 +152,26 @@ class ZeroWatch:
             far = ~close.any(axis=1) & (np.abs(centre) > ZERO_FAR * sd)
         return (self.n_zero >= ZERO_MIN) & (self.n >= ZERO_MIN) & (pile | far)
 
+    def filled_sensors(self) -> np.ndarray:
+        """
+        Return which sensors' all-zero rows are fills so far, shape (2,) bool.
+
+        Rows whose three axes read 0 together are fills when they are
+        :data:`~imu_allan.core.rules.ZERO_RATIO` times as many as the axes' own shares
+        of zeros make by chance (each axis of a quantised sensor may read 0 often, all
+        three at once as often as their product): a packet's vector zeroed.
+        """
+        total = np.maximum(self.n + self.n_zero, 1)
+        share = self.n_zero / total
+        chance = np.array([self.n_rows * np.prod(share[sl]) for sl in SENSORS])
+        return (self.n_all_zero >= ZERO_MIN) & (self.n_all_zero >= ZERO_RATIO * chance)
+
     def _count(self, samples: np.ndarray) -> None:
         zero = samples == 0
         self.n_zero = self.n_zero + zero.sum(axis=0)
+        self.n_rows += samples.shape[0]
+        self.n_all_zero = self.n_all_zero + np.array(
+            [int(zero[:, sl].all(axis=1).sum()) for sl in SENSORS], dtype=np.int64)
         for j in [int(k) for k in np.flatnonzero(self.n_zero)]:    # no zeros, no sort
             levels = np.unique(samples[:, j])
             if levels.size > 1:
@@ -191,14 +219,15 @@ class ZeroWatch:
                 'zero_near_count': self.near_count.copy(), 'zero_n': self.n.copy(),
                 'zero_sums': self.sums.copy(), 'zero_quantum': self.quantum.copy(),
                 'zero_last_row': self.last_row.copy(),
-                'zero_cut': np.array([self.cut])}
+                'zero_cut': np.array([self.cut]),
+                'zero_rows': np.array([self.n_rows, *self.n_all_zero], dtype=np.int64)}
 
     def restore(self, arrays: dict) -> None:
         """Take the arrays of :meth:`state` (none saved: a checkpoint from before)."""
         shapes = {'zero_n_zero': self.n_zero.shape, 'zero_near': self.near.shape,
                   'zero_near_count': self.near_count.shape, 'zero_n': self.n.shape,
                   'zero_sums': self.sums.shape, 'zero_quantum': self.quantum.shape,
-                  'zero_last_row': None, 'zero_cut': (1,)}
+                  'zero_last_row': None, 'zero_cut': (1,), 'zero_rows': (1 + len(SENSORS),)}
         if all(arrays.get(k) is None for k in shapes):
             return
         got: dict = {k: arrays.get(k) for k in shapes}
@@ -208,13 +237,15 @@ class ZeroWatch:
         last = got['zero_last_row']
         if (last.ndim != 2 or last.shape[0] > 1 or last.shape[1] != N_AXES
                 or (got['zero_quantum'] <= 0).any() or (got['zero_n_zero'] < 0).any()
-                or (got['zero_near_count'] < 0).any() or (got['zero_n'] < 0).any()):
+                or (got['zero_near_count'] < 0).any() or (got['zero_n'] < 0).any()
+                or (got['zero_rows'] < 0).any()):
             raise InputError('the zero-field counters are invalid')
         self.n_zero, self.n = got['zero_n_zero'].astype(np.int64), got['zero_n'].astype(np.int64)
         self.near = got['zero_near'].astype(np.float64)
         self.near_count = got['zero_near_count'].astype(np.int64)
         self.sums, self.last_row = got['zero_sums'].astype(np.float64), last.astype(np.float64)
         self.cut, self.quantum = bool(got['zero_cut'][0]), got['zero_quantum'].astype(np.float64)
+        self.n_rows, self.n_all_zero = int(got['zero_rows'][0]), got['zero_rows'][1:].copy()
 
 
 def _filled(samples: np.ndarray, lost: np.ndarray) -> np.ndarray:
