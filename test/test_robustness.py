@@ -31,7 +31,7 @@ OVER_TOL = 2.0
 
 #: (degradation, size) run here; the full sweep is bench/metamorphic.py.
 CASES = [('drop_random', 2.0), ('duplicate', 2.0), ('hold', 3.0), ('warmup_exp', 5.0),
-         ('thermal_no_temp', 2.0), ('gyro_deg', 0.0), ('restart', 5.0)]
+         ('thermal_no_temp', 2.0), ('gyro_deg', 0.0), ('restart', 5.0), ('zero_rows', 10.0)]
 #: Cases the rule does not hold for yet, and the work that is to fix them.
 PENDING = {('restart', 5.0): 'issue 35 item 4 (settling after a restart): accel K and B '
                              'bounds 2.0-3.6x over the curve'}

@@ -137,3 +137,26 @@ def test_a_checkpoint_keeps_the_verdict_and_the_left_neighbour(tmp_path):
     resumed.flush()
     assert resumed.stats == whole.stats and whole.stats.n_zero_rows > 900
     assert_allclose(resumed.curve().avar, whole.curve().avar, rtol=1e-12)
+
+
+def test_fills_and_block_means_of_a_quantised_axis_are_not_zero_fills():
+    # An ADIS16405-like accel_x: 0 is a level of a grid of 1.6 sd, read on a quarter of
+    # the samples.  Messages lost (gaps the clock fills half way between two levels),
+    # and block means (each level spread over float values, 0 too), are no pile at 0.
+    t, y = _still(60_000, seed=12)
+    lsb = 1.6 * SD[3]
+    y[:, 3] = np.round((y[:, 3] - BIAS[3] - 0.5 * lsb) / lsb) * lsb
+    assert (y[:, 3] == 0).mean() > 0.2
+    keep = np.random.default_rng(13).random(t.size) >= 0.02
+    s = _run(t[keep], y[keep])
+    assert s.stats.n_short_gaps > 500 and s.stats.n_zero_rows == 0
+    means = y[:, 3].reshape(-1, 10).mean(axis=1)
+    # The zero level as the ADIS16405's block means gave it: 761 exact zeros, 20 values
+    # of about 1e-18 (sums of levels in another order).
+    level = np.flatnonzero(np.abs(means) < 1e-12)
+    means[level] = 0.0
+    means[level[::30]] = 1e-18 * np.sign(np.arange(level[::30].size) % 2 - 0.5)
+    watch = ZeroWatch(HygieneStats(), WarningLog(), 8)
+    tm, ym = t[::10], np.repeat(means[:, None], 6, axis=1) + BIAS * [1, 1, 1, 0, 1, 1]
+    list(watch.take(tm, ym))
+    assert not watch.filled_axes().any()

@@ -42,12 +42,17 @@ import numpy as np
 from imu_allan import AXES
 from imu_allan.core.rules import ZERO_FAR, ZERO_GRID, ZERO_MIN, ZERO_RATIO, ZERO_STEP_MAX
 from imu_allan.errors import InputError
-from imu_allan.pipeline.fills import as_fills
+from imu_allan.pipeline.fills import as_fills, filled
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, WarningLog
 from imu_allan.pipeline.steps import split_runs
 
 #: What the warning says the rows are (the bench matches 'zero').
 ZERO_FILLED = 'zero-filled fields'
+#: Values closer than this share of an axis' largest value are one level: a mean or a
+#: scaled count computed in another order differs in its last bits (block means of a
+#: quantised ADIS16405 spread each level, 0 too, over many float values, so that the
+#: value next to 0, 1e-18, seemed 40 times rarer than 0 itself).
+LEVEL_TOL = 1e-9
 #: The axes of each sensor, whose fields an incomplete packet zeroes together.
 SENSORS = (slice(0, 3), slice(3, 6))
 
@@ -107,12 +112,16 @@ class ZeroWatch:
             zero-filled rows was dropped just before (the segment ends there).
 
         """
-        self._count(samples)
+        # Rows that fill a gap of the stamps are no readings: neither counted nor judged.
+        fill = filled(samples)
+        self._count(samples if fill is None else samples[~fill])
         axes, sensors = self.filled_axes(), self.filled_sensors()
         zero = (samples[:, axes] == 0).any(axis=1) if axes.any() else None
         for k in np.flatnonzero(sensors):
             whole = (samples[:, SENSORS[k]] == 0).all(axis=1)
             zero = whole if zero is None else zero | whole
+        if zero is not None and fill is not None:
+            zero &= ~fill
         if zero is None or not zero.any():
             self.last_row = samples[-1:].copy()
             cut, self.cut = self.cut, False
@@ -174,8 +183,10 @@ class ZeroWatch:
             [int(zero[:, sl].all(axis=1).sum()) for sl in SENSORS], dtype=np.int64)
         for j in [int(k) for k in np.flatnonzero(self.n_zero)]:    # no zeros, no sort
             levels = np.unique(samples[:, j])
-            if levels.size > 1:
-                self.quantum[j] = min(self.quantum[j], float(np.diff(levels).min()))
+            steps = np.diff(levels)
+            steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
+            if steps.size:
+                self.quantum[j] = min(self.quantum[j], float(steps.min()))
         for j in range(N_AXES):
             col = samples[~zero[:, j], j]
             if not col.size:
@@ -187,14 +198,20 @@ class ZeroWatch:
                 self.sums[1, j] += d.sum()
                 self.sums[2, j] += (d * d).sum()
             self.n[j] += col.size
-            for side, vals in ((0, col[col < 0]), (1, col[col > 0])):
+            # Values within tol of 0 are the zero level computed in another order.
+            tol = LEVEL_TOL * float(np.abs(col).max())
+            for side, vals in ((0, col[col < -tol]), (1, col[col > tol])):
                 if not vals.size:
                     continue
-                v = vals.max() if side == 0 else vals.min()
-                c = int(np.count_nonzero(vals == v))
+                v = float(vals.max() if side == 0 else vals.min())
+                if abs(v - self.near[j, side]) <= tol:      # the level seen before
+                    v = float(self.near[j, side])
+                elif abs(v) > abs(self.near[j, side]):
+                    continue
+                c = int(np.count_nonzero(np.abs(vals - v) <= tol))
                 if v == self.near[j, side]:
                     self.near_count[j, side] += c
-                elif abs(v) < abs(self.near[j, side]):
+                else:
                     self.near[j, side], self.near_count[j, side] = v, c
 
     def _note(self, rows: np.ndarray, n_rows: int) -> None:
