@@ -106,3 +106,37 @@ SETTLE_PASSES = 3
 #: surfaces at longer taus (B flattening, K rising) adds width, so the true time is longer
 #: (the ADIS16405's 2-min plan said K in 22 min, its 2.78 h record 17 h).
 LOWER_LIMIT_RATIO = 3.0
+
+# --------------------------------------------------------- zero-filled fields (input)
+
+#: Exact zeros on an axis before they can be fills of incomplete packets (a few exact
+#: zeros of a fine-grained axis are chance; pipeline/zeros.py).
+ZERO_MIN = 10
+#: Exact zeros this many times as frequent as the axis' nearest non-zero value are a
+#: pile, not a level of the distribution: a quantised axis reads 0 about as often as
+#: the levels next to it (MPU-6050 gyro_y: 1,877 zeros, about as many at +-1 LSB).
+ZERO_RATIO = 4.0
+#: Those nearest values count only within this many sds of the axis' non-zero values
+#: from 0; beyond, the axis is quantised coarser than its noise (0 may hold most
+#: samples) or 0 lies outside its values.
+ZERO_STEP_MAX = 0.5
+#: ... or within this many LSBs (the least step between distinct values): 0 is then a
+#: level of a grid coarser than the noise (a gyro of 4 sds per LSB reads 0 a sixth of
+#: the time at a bias of 3 sds), not a value off the axis' others.
+ZERO_GRID = 1.5
+#: With no value near 0, zeros are fills when 0 lies this many sds from the mean of the
+#: axis' other values: a Gaussian axis reads 0 there once in about 1e9 samples.
+ZERO_FAR = 6.0
+
+# ------------------------------------------------- messages lost on irregular stamps
+
+#: Messages are counted in windows of this length [s] on irregular (host) stamps: long
+#: against a host's read bursts (tens of ms), short enough for 60 windows in 10 min.
+LOST_WINDOW_S = 10.0
+#: Windows counted before the spread of the counts is judged.
+LOST_MIN_WINDOWS = 20
+#: The counts' variance over their mean (Fano factor) beyond which messages were lost:
+#: a sensor read at its own rate gives counts that differ by a read burst at most (the
+#: MPU-6050 record: 0.028), messages lost one by one at random with probability p add
+#: p (10 %: 0.142), in runs many times p (2 % in runs of 20: 0.79).
+LOST_FANO = 0.06

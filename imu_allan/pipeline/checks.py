@@ -4,9 +4,11 @@ The sample gate of a session: saturation, frozen axes, spikes, then motion.
 :class:`SampleGate` takes the gap-free runs of the stamp clock and passes the rows it
 keeps to the accumulator feed: clipped axes are found (values piled at the ends of the
 range, :mod:`imu_allan.pipeline.clipping`), saturated rows split the run, frozen axes
-are reported,
-spikes are interpolated (:mod:`imu_allan.pipeline.spikes`) and windows that moved are
-dropped (:mod:`imu_allan.pipeline.motion`).
+are reported, rows with zero-filled fields become fills
+(:mod:`imu_allan.pipeline.zeros`), messages lost on irregular stamps are counted
+(:mod:`imu_allan.pipeline.lost`), spikes are interpolated
+(:mod:`imu_allan.pipeline.spikes`) and windows that moved are dropped
+(:mod:`imu_allan.pipeline.motion`).
 """
 
 import numpy as np
@@ -15,9 +17,11 @@ from imu_allan import AXES
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clipping import ClipWatch
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig, WarningLog
+from imu_allan.pipeline.lost import LostWatch
 from imu_allan.pipeline.motion import MotionGate
 from imu_allan.pipeline.spikes import HOLD_MIN, SpikeFilter
 from imu_allan.pipeline.steps import split_runs
+from imu_allan.pipeline.zeros import ZeroWatch
 
 
 #: What held values mean for the analysis (the end of the held-values warning).
@@ -28,6 +32,8 @@ HELD_MEANING = ('spikes are judged between distinct updates, and the Allan varia
                 'high (by up to 20 %, docs/input_gate.md): log at the rate of the sensor')
 
 
+# Long because it wires five checks (clipping, zero fields, lost messages, spikes,
+# motion) into one pass over a run and saves their state in one checkpoint.
 class SampleGate:
     """
     Saturation and frozen-axis checks, the spike filter, then the motion gate.
@@ -53,6 +59,8 @@ class SampleGate:
         self.spikes = SpikeFilter(config, stats, warn)
         self.motion = MotionGate(config, stats, warn, feed)
         self.clips = ClipWatch(stats, warn, ('rad/s',) * 3 + ('m/s^2',) * 3)
+        self.zeros = ZeroWatch(stats, warn, config.max_fill_samples)
+        self.lost = LostWatch(stats, warn)
         self._limits = np.array([config.gyro_range_rad_s] * 3 + [config.accel_range_m_s2] * 3)
         self._last_value = np.full(N_AXES, np.nan)
         self._repeat = np.zeros(N_AXES, dtype=np.int64)
@@ -61,6 +69,7 @@ class SampleGate:
     def take(self, stamp_ns: np.ndarray, samples: np.ndarray, rate_hz: float) -> None:
         """Check a gap-free run; pass the rows kept on towards the accumulator."""
         self._rate_hz = rate_hz
+        self.lost.take(stamp_ns)
         self.clips.take(samples)
         rows = None
         if (self._limits > 0).any():      # no range given (the default): nothing saturates
@@ -72,9 +81,12 @@ class SampleGate:
             if broken:
                 self.end_segment()
             self._check_frozen(y_part)
-            judged = self.spikes.take(t_part, y_part)
-            self._note_held(rate_hz)
-            self.motion.take(*judged, rate_hz)
+            for t_run, y_run, cut in self.zeros.take(t_part, y_part):
+                if cut:
+                    self._cut()
+                judged = self.spikes.take(t_run, y_run)
+                self._note_held(rate_hz)
+                self.motion.take(*judged, rate_hz)
 
     def release(self) -> None:
         """Pass the rows the spike filter holds on now (live: no wait for a chunk)."""
@@ -83,6 +95,12 @@ class SampleGate:
 
     def end_segment(self) -> None:
         """End the segment here (a gap, NaN, saturation, a restart): no term spans it."""
+        self.zeros.end_segment()
+        self.lost.end_segment()
+        self._cut()
+
+    def _cut(self) -> None:
+        """End the segment after the rows passed so far."""
         self.flush()
         self.feed.break_segment()
 
@@ -144,7 +162,8 @@ class SampleGate:
         meta = {'repeat': self._repeat.tolist(), 'rate_hz': self._rate_hz,
                 'spikes': spike_meta, 'motion': motion_meta, 'clips': clip_meta}
         return meta, {'last_value': self._last_value, **spike_arrays, **motion_arrays,
-                      **clip_arrays}
+                      **clip_arrays, **self.zeros.state(),
+                      **self.lost.state()}
 
     def restore(self, meta, arrays: dict) -> None:
         """Take the state of :meth:`state`; InputError when it is invalid."""
@@ -162,6 +181,8 @@ class SampleGate:
         self.spikes.restore(meta['spikes'], arrays)
         self.motion.restore(meta['motion'], arrays)
         self.clips.restore(meta.get('clips'), arrays)
+        self.zeros.restore(arrays)
+        self.lost.restore(arrays)
         self._repeat = np.array(repeat, dtype=np.int64)
         self._last_value = last.astype(np.float64)
         self._rate_hz = float(rate)

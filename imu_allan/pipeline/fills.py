@@ -52,7 +52,7 @@ def fill_rows(left: np.ndarray, right: np.ndarray, k: np.ndarray) -> np.ndarray:
     step = np.arange(gap.size) - np.repeat(np.cumsum(k) - k, k) + 1
     a, b = left[gap], right[gap]
     rows = np.ascontiguousarray(a + (b - a) * (step / (k[gap] + 1.0))[:, None])
-    tagged = ((rows.view(np.uint64) & ~_LOW) | np.uint64(TAG)).view(np.float64)
+    tagged = as_fills(rows)
     tag = a != b
     # A row that moved on one axis only takes its further tags on the held axes.
     few = np.flatnonzero(tag.any(axis=1) & (tag.sum(axis=1) < MIN_TAGS))
@@ -61,6 +61,25 @@ def fill_rows(left: np.ndarray, right: np.ndarray, k: np.ndarray) -> np.ndarray:
         order = np.argsort(tag[few], axis=1, kind='stable')
         tag[few[:, None], order[:, :MIN_TAGS - 1]] = True
     return np.where(tag, tagged, rows)
+
+
+def as_fills(rows: np.ndarray) -> np.ndarray:
+    """
+    Return rows with every value marked as a fill (the tag in its low mantissa bits).
+
+    Parameters
+    ----------
+    rows : numpy.ndarray
+        Shape (n, n_axes), float64 values that stand in for lost samples [unit].
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n, n_axes), the values changed by less than 4e-9 of each [unit].
+
+    """
+    y = np.ascontiguousarray(rows, dtype=np.float64)
+    return ((y.view(np.uint64) & ~_LOW) | np.uint64(TAG)).view(np.float64)
 
 
 def fill_run(stamp_ns: np.ndarray, samples: np.ndarray, last_row: np.ndarray,

@@ -196,6 +196,12 @@ class HygieneStats:
     clipped : dict
         Per axis whose values pile up at the ends of its range (a sensor range below
         the signal), the share of its samples at those ends (0-1).
+    n_zero_rows : int
+        Rows whose exact zeros are fills of an incomplete packet (a driver that sends 0
+        for the fields it did not receive), treated as lost samples
+        (:mod:`imu_allan.pipeline.zeros`).
+    zero_filled : dict
+        Per axis, the exact zeros in those rows.
 
     """
 
@@ -229,17 +235,19 @@ class HygieneStats:
     coarse_tick_s: float = 0.0
     n_lost_in_ticks: int = 0
     clipped: dict = field(default_factory=dict)
+    n_zero_rows: int = 0
+    zero_filled: dict = field(default_factory=dict)
 
     @classmethod
     def restore(cls, state) -> 'HygieneStats':
         """Counters from :func:`dataclasses.asdict`; InputError when any is invalid."""
         if isinstance(state, dict):
             # Counters written before short gaps were filled: none were.
-            # ... and before a settling transient was left out, coarse stamps and
-            # clipping were recognised: none were.
+            # ... and before a settling transient was left out, coarse stamps,
+            # clipping and zero-filled fields were recognised: none were.
             state = {'n_short_gaps': 0, 'n_filled': 0, 'n_warmup': 0, 'warmup_s': 0.0,
                      'warmup_axes': [], 'coarse_tick_s': 0.0, 'n_lost_in_ticks': 0,
-                     'clipped': {}, **state}
+                     'clipped': {}, 'n_zero_rows': 0, 'zero_filled': {}, **state}
         if not isinstance(state, dict) or set(state) != {f.name for f in fields(cls)}:
             raise InputError('the counters are incomplete or unknown')
         stats = cls(**state)
@@ -247,7 +255,7 @@ class HygieneStats:
             value = getattr(stats, f.name)
             if f.name in ('frozen_axes', 'saturated_axes', 'warmup_axes'):
                 ok = isinstance(value, list) and set(value) <= set(AXES)
-            elif f.name == 'spikes':
+            elif f.name in ('spikes', 'zero_filled'):
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, int) and v >= 0 for v in value.values()))
             elif f.name in ('held', 'clipped'):

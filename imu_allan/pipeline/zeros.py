@@ -1,0 +1,305 @@
+"""
+Zero-filled fields: exact zeros a driver sends for the fields of an incomplete packet.
+
+A serial or USB driver that loses part of a packet, or unites separate gyro and accel
+streams, may publish the fields it did not receive as 0.0 (ethzasl_xsens_driver#91,
+realsense-ros#2551).  Where the axis reads far from 0 the zeros are spikes, but where
+it reads near 0 they pass as data: 10 % of the MPU-6050 record's messages with their
+gyro or accel zeroed gave gyro_z N 2.7 times the clean record's, with no warning
+(docs/robustness.md).
+
+:class:`ZeroWatch` counts, per axis, the exact zeros, the values nearest to 0 on each
+side and how often each was seen, and the mean and sd of the non-zero values
+(:class:`~imu_allan.pipeline.clipping.ClipWatch` does the same at the ends of the
+range), and the least step between distinct values of its first rows (the LSB).  An axis' zeros are
+fills when there are at least :data:`~imu_allan.core.rules.ZERO_MIN` of them and
+either a value next to 0 (within :data:`~imu_allan.core.rules.ZERO_STEP_MAX` sds, or
+:data:`~imu_allan.core.rules.ZERO_GRID` LSBs) is seen
+:data:`~imu_allan.core.rules.ZERO_RATIO` times less often (a pile at 0, not a level of
+the distribution: a quantised axis reads 0 about as often as the levels next to it),
+or no value is near 0 and 0 lies :data:`~imu_allan.core.rules.ZERO_FAR` sds from the
+mean.  An axis quantised coarser than its noise, which may read 0 most of the time,
+is left alone.  Rows whose three gyro (or accel) values are all 0 are fills when they
+are :data:`~imu_allan.core.rules.ZERO_RATIO` times as many as the three axes' shares
+of zeros make by chance: a packet's vector zeroed on axes that each read 0 now and
+then (the ADIS16405's gyros read 0 on 3-4 % of their samples).
+
+A row with a zero-filled field is a lost message: all six values are replaced by the
+linear interpolation between the nearest rows without one and marked as fills
+(:func:`~imu_allan.pipeline.fills.as_fills`), so the accumulator leaves the terms over
+them out at short taus and takes the fills' excess off the others, as for a short gap
+in the stamps.  The row keeps its stamp, so irregular stamps keep their rate.  Rows at
+an end of a block take the value of their one neighbour (the rows are missing
+samples either way; the last row of the block before is the left one), and rows with
+no neighbour in their segment are dropped; a run of more than ``max_fill_samples``
+such rows is dropped and ends the segment, as a long gap does.  The verdict counts the
+rows so far: the first rows of a live stream (fewer than ``ZERO_MIN`` zeros) pass as
+data.
+"""
+
+import numpy as np
+
+from imu_allan import AXES
+from imu_allan.core.rules import ZERO_FAR, ZERO_GRID, ZERO_MIN, ZERO_RATIO, ZERO_STEP_MAX
+from imu_allan.errors import InputError
+from imu_allan.pipeline.fills import as_fills, filled
+from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, WarningLog
+from imu_allan.pipeline.steps import split_runs
+
+#: What the warning says the rows are (the bench matches 'zero').
+ZERO_FILLED = 'zero-filled fields'
+#: Values closer than this share of an axis' largest value are one level: a mean or a
+#: scaled count computed in another order differs in its last bits (block means of a
+#: quantised ADIS16405 spread each level, 0 too, over many float values, so that the
+#: value next to 0, 1e-18, seemed 40 times rarer than 0 itself).
+LEVEL_TOL = 1e-9
+#: Rows over which the least step between levels (the LSB) is looked for.
+LEVEL_ROWS = 1 << 17
+#: The axes of each sensor, whose fields an incomplete packet zeroes together.
+SENSORS = (slice(0, 3), slice(3, 6))
+
+
+# Long because its counters survive a checkpoint, validated one by one, and the rows
+# at a block's ends are filled from the block before.
+class ZeroWatch:
+    """
+    Find the axes whose exact zeros are fills, and make their rows lost samples.
+
+    Parameters
+    ----------
+    stats : HygieneStats
+        ``n_zero_rows`` and ``zero_filled`` count what was found.
+    warn : WarningLog
+        Where the warning goes.
+    max_fill : int
+        ``SessionConfig.max_fill_samples``: longer runs of such rows end the segment.
+
+    """
+
+    def __init__(self, stats: HygieneStats, warn: WarningLog, max_fill: int):
+        self.stats = stats
+        self._warn = warn
+        self._max_fill = max_fill
+        # Per axis: exact zeros; the nearest value below and above 0 and their counts.
+        self.n_zero = np.zeros(N_AXES, dtype=np.int64)
+        self.near = np.array([[-np.inf, np.inf]] * N_AXES)
+        self.near_count = np.zeros((N_AXES, 2), dtype=np.int64)
+        # Count of the non-zero values, their sums (less the first one) and squares.
+        self.n = np.zeros(N_AXES, dtype=np.int64)
+        self.sums = np.zeros((3, N_AXES))
+        # Per axis, the least step between two distinct values of its first rows (the LSB).
+        self.quantum = np.full(N_AXES, np.inf)
+        # Per sensor (gyro, accel): rows, and rows whose three values are all 0.
+        self.n_rows = 0
+        self.n_all_zero = np.zeros(len(SENSORS), dtype=np.int64)
+        # The last row passed on without a zero-filled field (the left neighbour of the
+        # next block's first rows; none at the start or after a segment break).
+        self.last_row = np.empty((0, N_AXES))
+        # Rows were dropped at the end of the last block: the next run is cut from it.
+        self.cut = False
+
+    def take(self, stamp_ns: np.ndarray, samples: np.ndarray):
+        """
+        Count a gap-free run and yield its runs with zero-filled rows made fills.
+
+        Parameters
+        ----------
+        stamp_ns, samples : numpy.ndarray
+            Shapes (n,) and (n, 6): the run's stamps [ns] and finite values [unit].
+
+        Yields
+        ------
+        tuple
+            ``(stamp_ns (m,), samples (m, 6), broken)``: broken means a long run of
+            zero-filled rows was dropped just before (the segment ends there).
+
+        """
+        # Rows that fill a gap of the stamps are no readings: neither counted nor judged.
+        fill = filled(samples)
+        self._count(samples if fill is None else samples[~fill])
+        axes, sensors = self.filled_axes(), self.filled_sensors()
+        zero = (samples[:, axes] == 0).any(axis=1) if axes.any() else None
+        for k in np.flatnonzero(sensors):
+            whole = (samples[:, SENSORS[k]] == 0).all(axis=1)
+            zero = whole if zero is None else zero | whole
+        if zero is not None and fill is not None:
+            zero &= ~fill
+        if zero is None or not zero.any():
+            self.last_row = samples[-1:].copy()
+            cut, self.cut = self.cut, False
+            yield stamp_ns, samples, cut
+            return
+        self._note(samples[zero], int(zero.sum()))
+        keep = ~_long_runs(zero, self._max_fill)
+        h = self.last_row.shape[0]
+        if not h and zero.all():
+            keep[:] = False     # nothing to fill them from
+        out = _filled(np.concatenate((self.last_row, samples)),
+                      np.concatenate((np.zeros(h, bool), zero)))[h:]
+        good = np.flatnonzero(~zero)
+        if good.size:
+            self.last_row = samples[good[-1]:good[-1] + 1].copy()
+        cut, self.cut = self.cut, not keep[-1]
+        runs = split_runs(stamp_ns, out, None if keep.all() else keep)
+        for i, (t, y, broken) in enumerate(runs):
+            yield t, y, broken or (cut and i == 0)
+
+    def end_segment(self) -> None:
+        """Forget the left neighbour: the next rows do not continue these."""
+        self.last_row = self.last_row[:0]
+        self.cut = False
+
+    def filled_axes(self) -> np.ndarray:
+        """Return which axes' exact zeros are fills so far, shape (6,) bool."""
+        with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
+            n = np.maximum(self.n, 1)
+            mean = self.sums[1] / n
+            sd = np.sqrt(np.maximum(self.sums[2] / n - mean * mean, 0.0))
+            centre = self.sums[0] + mean
+            step = np.maximum(ZERO_STEP_MAX * sd, ZERO_GRID * self.quantum)
+            close = np.abs(self.near) <= step[:, None]
+            nearest = np.where(close, self.near_count, 0).max(axis=1)
+            pile = close.any(axis=1) & (self.n_zero >= ZERO_RATIO * nearest)
+            far = ~close.any(axis=1) & (np.abs(centre) > ZERO_FAR * sd)
+        return (self.n_zero >= ZERO_MIN) & (self.n >= ZERO_MIN) & (pile | far)
+
+    def filled_sensors(self) -> np.ndarray:
+        """
+        Return which sensors' all-zero rows are fills so far, shape (2,) bool.
+
+        Rows whose three axes read 0 together are fills when they are
+        :data:`~imu_allan.core.rules.ZERO_RATIO` times as many as the axes' own shares
+        of zeros make by chance (each axis of a quantised sensor may read 0 often, all
+        three at once as often as their product): a packet's vector zeroed.
+        """
+        total = np.maximum(self.n + self.n_zero, 1)
+        share = self.n_zero / total
+        chance = np.array([self.n_rows * np.prod(share[sl]) for sl in SENSORS])
+        return (self.n_all_zero >= ZERO_MIN) & (self.n_all_zero >= ZERO_RATIO * chance)
+
+    def _count(self, samples: np.ndarray) -> None:
+        zero = samples == 0
+        self.n_zero = self.n_zero + zero.sum(axis=0)
+        self.n_rows += samples.shape[0]
+        self.n_all_zero = self.n_all_zero + np.array(
+            [int(zero[:, sl].all(axis=1).sum()) for sl in SENSORS], dtype=np.int64)
+        # The LSB shows in the first rows, on every axis (zeros may come later); a sort
+        # per block all along would double this count's time.
+        for j in range(N_AXES if self.n_rows - samples.shape[0] < LEVEL_ROWS else 0):
+            levels = np.unique(samples[:, j])
+            steps = np.diff(levels)
+            steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
+            if steps.size:
+                self.quantum[j] = min(self.quantum[j], float(steps.min()))
+        n_zero = zero.sum(axis=0)
+        # Values within tol of 0 are the zero level computed in another order.
+        tols = LEVEL_TOL * np.abs(samples).max(axis=0, initial=0.0)
+        for j in range(N_AXES):
+            col = samples[~zero[:, j], j] if n_zero[j] else samples[:, j]
+            if not col.size:
+                continue
+            if not self.n[j]:
+                self.sums[0, j] = col[0]
+            d = col - self.sums[0, j]
+            with np.errstate(over='ignore', invalid='ignore'):
+                self.sums[1, j] += d.sum()
+                self.sums[2, j] += (d * d).sum()
+            self.n[j] += col.size
+            tol = float(tols[j])
+            # Only values as near to 0 as the nearest seen so far can change it.
+            bound = float(np.abs(self.near[j]).max()) + tol
+            if np.isfinite(bound):
+                col = col[np.abs(col) <= bound]
+            for side, vals in ((0, col[col < -tol]), (1, col[col > tol])):
+                if not vals.size:
+                    continue
+                v = float(vals.max() if side == 0 else vals.min())
+                if abs(v - self.near[j, side]) <= tol:      # the level seen before
+                    v = float(self.near[j, side])
+                elif abs(v) > abs(self.near[j, side]):
+                    continue
+                c = int(np.count_nonzero(np.abs(vals - v) <= tol))
+                if v == self.near[j, side]:
+                    self.near_count[j, side] += c
+                else:
+                    self.near[j, side], self.near_count[j, side] = v, c
+
+    def _note(self, rows: np.ndarray, n_rows: int) -> None:
+        """Count the zero-filled rows (m, 6); say so, with the totals so far."""
+        self.stats.n_zero_rows += n_rows
+        per_axis = (rows == 0).sum(axis=0)
+        for j in np.flatnonzero(per_axis):
+            self.stats.zero_filled[AXES[j]] = (self.stats.zero_filled.get(AXES[j], 0)
+                                               + int(per_axis[j]))
+        where = ', '.join(f'{a} {n:,}' for a, n in self.stats.zero_filled.items())
+        self._warn.tally('zeros', f'{ZERO_FILLED}: {self.stats.n_zero_rows:,} messages read '
+                         f'exactly 0 on axes that otherwise rarely do ({where} zeros): a '
+                         'driver that sends 0 for the fields of an incomplete packet; they '
+                         'are treated as lost samples (filled between their neighbours, no '
+                         'Allan term at short taus uses them). Have the driver drop '
+                         'incomplete packets', n_rows)
+
+    # ------------------------------------------------------------- checkpoint
+    def state(self) -> dict:
+        """Return the arrays of the counters and the left neighbour."""
+        return {'zero_n_zero': self.n_zero.copy(), 'zero_near': self.near.copy(),
+                'zero_near_count': self.near_count.copy(), 'zero_n': self.n.copy(),
+                'zero_sums': self.sums.copy(), 'zero_quantum': self.quantum.copy(),
+                'zero_last_row': self.last_row.copy(),
+                'zero_cut': np.array([self.cut]),
+                'zero_rows': np.array([self.n_rows, *self.n_all_zero], dtype=np.int64)}
+
+    def restore(self, arrays: dict) -> None:
+        """Take the arrays of :meth:`state` (none saved: a checkpoint from before)."""
+        shapes = {'zero_n_zero': self.n_zero.shape, 'zero_near': self.near.shape,
+                  'zero_near_count': self.near_count.shape, 'zero_n': self.n.shape,
+                  'zero_sums': self.sums.shape, 'zero_quantum': self.quantum.shape,
+                  'zero_last_row': None, 'zero_cut': (1,), 'zero_rows': (1 + len(SENSORS),)}
+        if all(arrays.get(k) is None for k in shapes):
+            return
+        got: dict = {k: arrays.get(k) for k in shapes}
+        if any(a is None for a in got.values()) or any(
+                shape is not None and got[k].shape != shape for k, shape in shapes.items()):
+            raise InputError('the zero-field counters are incomplete')
+        last = got['zero_last_row']
+        if (last.ndim != 2 or last.shape[0] > 1 or last.shape[1] != N_AXES
+                or (got['zero_quantum'] <= 0).any() or (got['zero_n_zero'] < 0).any()
+                or (got['zero_near_count'] < 0).any() or (got['zero_n'] < 0).any()
+                or (got['zero_rows'] < 0).any()):
+            raise InputError('the zero-field counters are invalid')
+        self.n_zero, self.n = got['zero_n_zero'].astype(np.int64), got['zero_n'].astype(np.int64)
+        self.near = got['zero_near'].astype(np.float64)
+        self.near_count = got['zero_near_count'].astype(np.int64)
+        self.sums, self.last_row = got['zero_sums'].astype(np.float64), last.astype(np.float64)
+        self.cut, self.quantum = bool(got['zero_cut'][0]), got['zero_quantum'].astype(np.float64)
+        self.n_rows, self.n_all_zero = int(got['zero_rows'][0]), got['zero_rows'][1:].copy()
+
+
+def _filled(samples: np.ndarray, lost: np.ndarray) -> np.ndarray:
+    """
+    Return the rows (n, 6) with the ``lost`` ones (n,) bool interpolated, marked as fills.
+
+    Each axis is interpolated between the nearest rows not lost; rows before the first
+    or after the last of them take its value.  All lost: returned as they are (the
+    caller drops them, with nothing to fill from).
+    """
+    idx = np.flatnonzero(~lost)
+    if not idx.size:
+        return samples
+    out = samples.copy()
+    where = np.flatnonzero(lost)
+    for j in range(samples.shape[1]):
+        out[where, j] = np.interp(where, idx, samples[idx, j])
+    out[where] = as_fills(out[where])
+    return out
+
+
+def _long_runs(lost: np.ndarray, max_fill: int) -> np.ndarray:
+    """Return the rows (n,) bool in runs of more than ``max_fill`` lost rows."""
+    edges = np.diff(np.concatenate(([0], lost.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    out = np.zeros(lost.size, dtype=bool)
+    for s, e in zip(starts, ends):
+        if e - s > max_fill:
+            out[s:e] = True
+    return out
