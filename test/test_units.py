@@ -260,6 +260,9 @@ def test_the_limits_sit_between_si_and_the_wrong_units():
     assert 'the rate would be 1000 Hz; declare --units time=us)' in unit_warnings(
         0.001, None, None)[0]
     assert unit_warnings(1.0, None, None) == unit_warnings(1e4, None, None) == []
+    # A 1 Hz IMU whose jittered stamps give a rate a little below 1 Hz is one.
+    assert unit_warnings(0.99999, None, None) == unit_warnings(1.00001e4, None, None) == []
+    assert 'the rate would be 980 Hz' in unit_warnings(0.98, None, None)[0]
 
 
 def test_a_short_record_names_what_it_cannot_determine_in_every_output(tmp_path, still,

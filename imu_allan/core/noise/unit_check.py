@@ -58,6 +58,10 @@ GYRO_WHITE_REFUSE = 2e-2
 GYRO_BIAS_MAX = 0.5
 #: Plausible IMU sample rates [Hz].
 RATE_HZ = (1.0, 10_000.0)
+#: Share by which a measured rate may pass a bound of RATE_HZ: stamps with jitter give a
+#: 1 Hz IMU 0.99999 Hz (the unusual-input campaign, bench/unusual_campaign.py), while a
+#: unit mistake is a factor of 1000.
+RATE_SLACK = 0.01
 
 GYRO_UNITS = {'rad/s': 1.0, 'deg/s': math.pi / 180.0}
 ACCEL_UNITS = {'m/s^2': 1.0, 'm/s2': 1.0, 'g': G0_M_S2, 'mg': G0_M_S2 * 1e-3}
@@ -334,7 +338,8 @@ def unit_error(findings: list) -> str | None:
 def _rate_warning(rate_hz: float) -> tuple | None:
     """Return (text, fix) for an implausible rate, or None."""
     lo, hi = RATE_HZ
-    if not (math.isfinite(rate_hz) and rate_hz > 0) or lo <= rate_hz <= hi:
+    if not (math.isfinite(rate_hz) and rate_hz > 0) or \
+            lo * (1 - RATE_SLACK) <= rate_hz <= hi * (1 + RATE_SLACK):
         return None
     head = f'sample rate {rate_hz:.4g} Hz is outside {lo:g} Hz-{hi / 1e3:g} kHz'
     if rate_hz < lo:
