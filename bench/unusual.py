@@ -19,7 +19,7 @@ chosen source (``n_truth``) and the messages the reference library reads
 its cause contains.  bench/campaign.py runs and judges them.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 import shutil
 import sqlite3
@@ -133,8 +133,9 @@ def truth_n(scale: float = 1.0) -> list:
 def grid(rate_hz: float, n: int, rng: np.random.Generator, jitter: float = 0.01) -> np.ndarray:
     """Return (n,) int64 stamps [ns] at a rate with a little jitter (a share of a period)."""
     period_ns = 1e9 / rate_hz
-    return (T0_NS + np.round(np.arange(n) * period_ns
-                             + rng.uniform(0, jitter * period_ns, n))).astype(np.int64)
+    # Integer addition: T0_NS + a float would round the stamps to 256 ns.
+    return T0_NS + np.round(np.arange(n) * period_ns
+                            + rng.uniform(0, jitter * period_ns, n)).astype(np.int64)
 
 
 # -- writers (the reference libraries) -------------------------------------------------
@@ -295,9 +296,9 @@ def reference_count(path: Path, topic: str = '/imu', frame: str | None = None) -
 
 # -- the cases -------------------------------------------------------------------------
 
-def _n_for(rate_hz: float, seconds: float = 120.0) -> int:
-    """Return the samples of a record at a rate: ``seconds`` long, 3600 to 80000."""
-    return int(np.clip(rate_hz * seconds, 3600, 80_000))
+def _n_for(length: float, rate_hz: float, seconds: float = 120.0) -> int:
+    """Return the samples of a record at a rate: ``length * seconds`` long, 3600-80000."""
+    return int(np.clip(rate_hz * seconds * length, 3600, 80_000))
 
 
 def _plain(rate_hz: float, n: int, seed: int, scale: float = 1.0, **kw) -> Stream:
@@ -313,11 +314,15 @@ def _case(name, klass, build, rate_hz, n, **kw) -> Case:
                 duration_s=n / rate_hz, n_truth=n, **kw)
 
 
-def _sources(rng: np.random.Generator, seed: int) -> list:
+#: frame_ids of several IMUs on one topic: lengths that change the payload's padding.
+FRAMES = ['imu_a', 'imu_b1', 'imu_c123']
+
+
+def _sources(rng: np.random.Generator, seed: int, length: float) -> list:
     storage = str(rng.choice(['mcap', 'sqlite3', 'ros1']))
-    rate, n = 100.0, _n_for(100.0)
+    rate, n = 100.0, _n_for(length, 100.0)
     k = int(rng.integers(2, 4))
-    names = [f'imu_{c}' for c in 'abc'[:k]]
+    names = FRAMES[:k]
     pick = int(rng.integers(0, k))
 
     def several(folder: Path) -> Path:
@@ -356,9 +361,9 @@ def _sources(rng: np.random.Generator, seed: int) -> list:
     ]
 
 
-def _channels(rng: np.random.Generator, seed: int) -> list:
+def _channels(rng: np.random.Generator, seed: int, length: float) -> list:
     storage = str(rng.choice(['mcap', 'sqlite3', 'db3']))
-    rate, n = 100.0, _n_for(100.0)
+    rate, n = 100.0, _n_for(length, 100.0)
 
     def other_type(folder: Path) -> Path:
         s = _plain(rate, n, seed)
@@ -386,11 +391,11 @@ def _channels(rng: np.random.Generator, seed: int) -> list:
     ]
 
 
-def _split(rng: np.random.Generator, seed: int) -> list:
+def _split(rng: np.random.Generator, seed: int, length: float) -> list:
     storage = str(rng.choice(['mcap', 'sqlite3']))
     ext = 'mcap' if storage == 'mcap' else 'db3'
     rate = float(rng.choice([100.0, 400.0]))
-    n = _n_for(rate, 90.0)
+    n = _n_for(length, rate, 90.0)
     cuts = np.sort(rng.choice(np.arange(n // 10, n - n // 10), 2, replace=False))
     bounds = list(zip([0, *cuts.tolist()], [*cuts.tolist(), n]))
     order = [int(x) for x in rng.permutation(3)]
@@ -441,12 +446,12 @@ TICKS = [(4000.0, 1_000_000), (2000.0, 1_000_000), (800.0, 1_000_000), (300.0, 1
          (1000.0, 1_000_000), (150.0, 10_000_000), (400.0, 10_000_000), (250.0, 4_000_000)]
 
 
-def _clocks(rng: np.random.Generator, seed: int) -> list:
+def _clocks(rng: np.random.Generator, seed: int, length: float) -> list:
     storage = str(rng.choice(['mcap', 'sqlite3', 'ros1', 'csv']))
     bag = str(rng.choice(['mcap', 'sqlite3', 'ros1']))
     rate_t, tick = TICKS[int(rng.integers(0, len(TICKS)))]
-    n_t = _n_for(rate_t, 30.0)
-    rate, n = 100.0, _n_for(100.0)
+    n_t = _n_for(length, rate_t, 30.0)
+    rate, n = 100.0, _n_for(length, 100.0)
     at = int(rng.integers(n // 4, 3 * n // 4))
     back_ns = int(float(rng.choice([0.05, 0.5, 3.0])) * 1e9)
 
@@ -466,9 +471,26 @@ def _clocks(rng: np.random.Generator, seed: int) -> list:
         return np.where(np.arange(stamps.size) < at, stamps,
                         stamps - stamps[at] + 3_000_000_000)
 
-    def csv_ms(folder: Path) -> Path:
+    unit, per_s = [('ms', 1e3), ('us', 1e6)][int(rng.integers(0, 2))]
+    rate_e = float(rng.choice([100.0, 1000.0, 4000.0]))
+    n_e = _n_for(length, rate_e, 30.0)
+
+    def csv_unit(folder: Path) -> Path:
         s = _plain(rate, n, seed)
-        return write_csv(folder / 'rec_ms.csv', (s.stamps_ns - T0_NS) / 1e6, s.samples)
+        return write_csv(folder / f'rec_{unit}.csv', (s.stamps_ns - T0_NS) / 1e9 * per_s,
+                         s.samples)
+
+    def csv_epoch(folder: Path) -> Path:
+        # Seconds since 1970 in %.17g: float64 keeps 0.24 us at 1.7e9 s.
+        s = _plain(rate_e, n_e, seed)
+        return write_csv(folder / 'rec_epoch.csv', s.stamps_ns / 1e9, s.samples)
+
+    def rate_change(folder: Path) -> Path:
+        a, b = _plain(100.0, n // 2, seed), _plain(200.0, n, seed + 1)
+        shift = a.stamps_ns[-1] + 10_000_000 - b.stamps_ns[0]
+        return write(storage, folder, [Stream(np.r_[a.stamps_ns, b.stamps_ns + shift],
+                                              np.r_[a.log_ns, b.log_ns + shift],
+                                              np.r_[a.samples, b.samples])])
 
     stamp = ('stamp', 'clock', 'time')
     return [
@@ -482,19 +504,22 @@ def _clocks(rng: np.random.Generator, seed: int) -> list:
               rate, n, cause=stamp + ('back', 'order', 'restart', 'jump')),
         _case(f'clock_restart_{storage}', 'clocks', with_stamps(restart), rate, n,
               cause=stamp + ('restart',)),
-        _case('csv_time_in_ms', 'clocks', csv_ms, rate, n,
-              cause=('ms', 'milli', 'unit', 'time'), allow=('ok', 'warned', 'refused')),
+        _case(f'csv_time_in_{unit}', 'clocks', csv_unit, rate, n,
+              cause=(unit, 'unit', 'time'), allow=('ok', 'warned', 'refused')),
+        _case(f'csv_epoch_time_{rate_e:g}hz', 'clocks', csv_epoch, rate_e, n_e),
+        Case(f'rate_change_100_to_200hz_{storage}', 'clocks', rate_change, truth_n(), 200.0,
+             n / 200.0 + (n // 2) / 100.0, n // 2 + n, cause=('rate',)),
     ]
 
 
-RATES = [1.0, 5.0, 10.0, 50.0, 100.0, 200.0, 400.0, 1000.0, 2000.0, 4000.0]
+RATES = [1.0, 5.0, 10.0, 50.0, 100.0, 200.0, 333.0, 400.0, 1000.0, 2000.0, 4000.0]
 
 
-def _rates(rng: np.random.Generator, seed: int) -> list:
+def _rates(rng: np.random.Generator, seed: int, length: float) -> list:
     out = []
     for rate in rng.choice(RATES, 3, replace=False).tolist():
         storage = str(rng.choice(['mcap', 'sqlite3', 'db3', 'ros1', 'csv']))
-        n = _n_for(rate, 60.0)
+        n = _n_for(length, rate, 60.0)
 
         def build(folder: Path, rate=rate, n=n, storage=storage) -> Path:
             return write(storage, folder, [_plain(rate, n, seed)])
@@ -507,9 +532,9 @@ def _rates(rng: np.random.Generator, seed: int) -> list:
 GYRO_LSB, ACCEL_LSB = np.pi / 180.0 / 131.0, 9.80665 / 16384.0
 
 
-def _values(rng: np.random.Generator, seed: int) -> list:
+def _values(rng: np.random.Generator, seed: int, length: float) -> list:
     storage = str(rng.choice(['mcap', 'sqlite3', 'ros1', 'csv']))
-    rate, n = 100.0, _n_for(100.0)
+    rate, n = 100.0, _n_for(length, 100.0)
     row, axis = int(rng.integers(0, n)), int(rng.integers(0, 6))
     share = float(rng.choice([0.005, 0.05, 0.3]))
     huge = float(rng.choice([1e154, -1e154, 1e300]))
@@ -545,8 +570,10 @@ def _values(rng: np.random.Generator, seed: int) -> list:
         _case(f'value_{huge:g}_{storage}', 'values', changed(one(huge)), rate, n,
               cause=('finite', 'large', 'spike', 'outlier', 'value'),
               allow=('ok', 'warned', 'refused')),
+        # A CSV row with a NaN is refused by the CSV contract (docs/limits.md).
         _case(f'value_nan_{storage}', 'values', changed(one(np.nan)), rate, n,
-              cause=('nan', 'finite')),
+              cause=('nan', 'finite'),
+              allow=('ok', 'warned') + (('refused',) if storage == 'csv' else ())),
         _case(f'clipped_{share:g}_axis{axis}_{storage}', 'values', changed(clip), rate, n,
               cause=('clip', 'saturat', 'pinned')),
         _case(f'integer_counts_{storage}', 'values', changed(counts), rate, n,
@@ -561,7 +588,7 @@ BUILDERS = {'sources': _sources, 'channels': _channels, 'split': _split, 'clocks
             'rates': _rates, 'values': _values}
 
 
-def cases(seed: int, rounds: int = 1, classes=CLASSES) -> list:
+def cases(seed: int, rounds: int = 1, classes=CLASSES, length: float = 1.0) -> list:
     """
     Return the cases of ``rounds`` draws of every class, from a seed.
 
@@ -573,17 +600,20 @@ def cases(seed: int, rounds: int = 1, classes=CLASSES) -> list:
         Draws per class; each round draws new parameters.
     classes : sequence of str
         Which of :data:`CLASSES`.
+    length : float
+        Record lengths as a share of the bench's (2 min at 100 Hz; at least 3600 samples).
 
     Returns
     -------
     list of Case
-        Unique names (a repeated draw is kept once).
+        Unique names (a name drawn again has its round appended).
 
     """
     out: dict = {}
     for r in range(rounds):
         for k, klass in enumerate(classes):
             rng = np.random.default_rng([seed, r, CLASSES.index(klass)])
-            for case in BUILDERS[klass](rng, seed * 1000 + r * 10 + k):
-                out.setdefault(case.name, case)
+            for case in BUILDERS[klass](rng, seed * 1000 + r * 10 + k, length):
+                name = case.name if case.name not in out else f'{case.name}_r{r}'
+                out[name] = replace(case, name=name)
     return list(out.values())
