@@ -6,8 +6,9 @@ are intact and legal but unusual: several IMUs (``header.frame_id``) on one topi
 another message type or a second Imu topic in the bag, split bags listed out of order
 or with a file repeated, missing or empty, stamp clocks that tick coarser than the
 samples, zero, constant, stepping back or restarting, time in milliseconds, rates from
-1 Hz to 4 kHz, and values (one 1e154, a NaN, clipping, integer counts, an axis of
-zeros).  Bags are written with the reference libraries (MCAP by the mcap package,
+1 Hz to 4 kHz, values (one 1e154, a NaN, clipping, integer counts, an axis of zeros),
+and CSV layouts (columns reordered or extra, CRLF, a BOM, quotes, spaces, gzip,
+semicolons).  Bags are written with the reference libraries (MCAP by the mcap package,
 sqlite3 and ROS 1 by rosbags, CSV by numpy; payloads by
 :func:`imu_allan.io.bag_writer.serialize_imu`, checked against rosbags in
 test/test_bag_reader.py); samples are seeded simulations of a known noise model.
@@ -20,6 +21,7 @@ its cause contains.  bench/campaign.py runs and judges them.
 """
 
 from dataclasses import dataclass, field, replace
+import gzip
 from pathlib import Path
 import shutil
 import sqlite3
@@ -43,7 +45,7 @@ T0_NS = 1_700_000_000_000_000_000
 N_GYRO, N_ACCEL = 1.5e-4, 1e-3
 #: Receive (log) time after the header stamp [ns].
 LATENCY_NS = 1_000_000
-CLASSES = ('sources', 'channels', 'split', 'clocks', 'rates', 'values')
+CLASSES = ('sources', 'channels', 'split', 'clocks', 'rates', 'values', 'formats')
 
 
 @dataclass
@@ -268,8 +270,11 @@ def reference_count(path: Path, topic: str = '/imu', frame: str | None = None) -
     every listed storage file of a split bag that exists is counted (a repeated file
     twice).
     """
-    if path.suffix == '.csv':
-        return int(np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2).shape[0])
+    if path.name.endswith(('.csv', '.csv.gz')):
+        # The rows: lines with text after the header (the layouts vary too much for
+        # one numpy call; the values themselves are the bench's own).
+        with (gzip.open(path, 'rt') if path.suffix == '.gz' else open(path)) as f:
+            return sum(1 for line in f if line.strip()) - 1
     n = 0
     for file in _storage_files(path):
         if file.suffix == '.mcap':
@@ -455,10 +460,12 @@ def _clocks(rng: np.random.Generator, seed: int, length: float) -> list:
     at = int(rng.integers(n // 4, 3 * n // 4))
     back_ns = int(float(rng.choice([0.05, 0.5, 3.0])) * 1e9)
 
-    def with_stamps(stamps_ns, store=storage, r=rate, m=n):
+    def with_stamps(stamps_ns, store=storage, r=rate, m=n, log=False):
         def build(folder: Path) -> Path:
             s = _plain(r, m, seed)
-            return write(store, folder, [Stream(stamps_ns(s.stamps_ns), s.log_ns, s.samples)])
+            stamps = stamps_ns(s.stamps_ns)
+            return write(store, folder, [Stream(stamps, stamps if log else s.log_ns,
+                                                s.samples)])
         return build
 
     def coarse(stamps):
@@ -471,7 +478,7 @@ def _clocks(rng: np.random.Generator, seed: int, length: float) -> list:
         return np.where(np.arange(stamps.size) < at, stamps,
                         stamps - stamps[at] + 3_000_000_000)
 
-    unit, per_s = [('ms', 1e3), ('us', 1e6)][int(rng.integers(0, 2))]
+    unit, per_s = [('ms', 1e3), ('us', 1e6), ('ns', 1e9)][int(rng.integers(0, 3))]
     rate_e = float(rng.choice([100.0, 1000.0, 4000.0]))
     n_e = _n_for(length, rate_e, 30.0)
 
@@ -492,6 +499,12 @@ def _clocks(rng: np.random.Generator, seed: int, length: float) -> list:
                                               np.r_[a.log_ns, b.log_ns + shift],
                                               np.r_[a.samples, b.samples])])
 
+    def csv_epoch_int(folder: Path) -> Path:
+        # Integer ms, us or ns since 1970 in t (a logger's clock), read as seconds.
+        s = _plain(rate, n, seed)
+        ticks = s.stamps_ns // int(1e9 / per_s) if unit != 'ns' else s.stamps_ns
+        return write_csv(folder / f'rec_epoch_{unit}.csv', ticks, s.samples)
+
     stamp = ('stamp', 'clock', 'time')
     return [
         _case(f'ticks_{rate_t:g}hz_{tick / 1e6:g}ms_{storage}', 'clocks',
@@ -507,6 +520,11 @@ def _clocks(rng: np.random.Generator, seed: int, length: float) -> list:
         _case(f'csv_time_in_{unit}', 'clocks', csv_unit, rate, n,
               cause=(unit, 'unit', 'time'), allow=('ok', 'warned', 'refused')),
         _case(f'csv_epoch_time_{rate_e:g}hz', 'clocks', csv_epoch, rate_e, n_e),
+        _case(f'csv_integer_{unit}_since_1970', 'clocks', csv_epoch_int, rate, n,
+              cause=(unit, 'unit', 'time'), allow=('ok', 'warned', 'refused')),
+        _case(f'one_time_stamps_and_log_times_{bag}', 'clocks',
+              with_stamps(lambda x: np.full_like(x, T0_NS), bag, log=True), rate, n,
+              cause=stamp + ('repeated',), allow=('refused',), n_axes=[None] * 6),
         Case(f'rate_change_100_to_200hz_{storage}', 'clocks', rate_change, truth_n(), 200.0,
              n / 200.0 + (n // 2) / 100.0, n // 2 + n, cause=('rate',)),
     ]
@@ -584,8 +602,50 @@ def _values(rng: np.random.Generator, seed: int, length: float) -> list:
     ]
 
 
+#: CSV layouts the readers of other tools write or accept.
+LAYOUTS = ['reversed_columns', 'crlf', 'bom', 'extra_columns', 'spaces', 'quoted_header',
+           'gzip', 'trailing_blank_lines', 'semicolons']
+
+
+def _formats(rng: np.random.Generator, seed: int, length: float) -> list:
+    rate, n = 100.0, _n_for(length, 100.0)
+    out = []
+    for layout in rng.choice(LAYOUTS, 3, replace=False).tolist():
+        def build(folder: Path, layout=layout) -> Path:
+            s = _plain(rate, n, seed)
+            names = ['t', 'gyro_x', 'gyro_y', 'gyro_z', 'accel_x', 'accel_y', 'accel_z']
+            table = np.column_stack([(s.stamps_ns - T0_NS) / 1e9, s.samples])
+            sep, end, head = ',', '\n', ''
+            if layout == 'reversed_columns':
+                names, table = names[::-1], table[:, ::-1]
+            elif layout == 'extra_columns':
+                names = names + ['mag_x', 'status']
+                table = np.column_stack([table, np.full((n, 1), 0.3), np.ones((n, 1))])
+            sep = {'spaces': ', ', 'semicolons': ';'}.get(layout, sep)
+            end = '\r\n' if layout == 'crlf' else end
+            head = '\ufeff' if layout == 'bom' else head
+            header = [f'"{x}"' if layout == 'quoted_header' else x for x in names]
+            text = head + sep.join(header) + end + end.join(
+                sep.join(f'{v:.17g}' for v in row) for row in table.tolist()) + end
+            text += end * 3 if layout == 'trailing_blank_lines' else ''
+            if layout == 'gzip':
+                path = folder / 'rec.csv.gz'
+                with gzip.open(path, 'wt', newline='') as f:
+                    f.write(text)
+                return path
+            path = folder / 'rec.csv'
+            path.write_bytes(text.encode())
+            return path
+
+        allow = ('refused',) if layout == 'semicolons' else ('ok', 'warned')
+        out.append(_case(f'csv_{layout}', 'formats', build, rate, n, allow=allow,
+                         cause=('column', 'header'),
+                         n_axes=[None] * 6 if layout == 'semicolons' else truth_n()))
+    return out
+
+
 BUILDERS = {'sources': _sources, 'channels': _channels, 'split': _split, 'clocks': _clocks,
-            'rates': _rates, 'values': _values}
+            'rates': _rates, 'values': _values, 'formats': _formats}
 
 
 def cases(seed: int, rounds: int = 1, classes=CLASSES, length: float = 1.0) -> list:

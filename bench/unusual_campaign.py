@@ -3,7 +3,7 @@ The campaign of valid-but-unusual inputs: run ``imu-allan analyze`` on each, jud
 
 Usage (from the repository)::
 
-    nice -n 5 .venv/bin/python bench/unusual_campaign.py --seed 1 --rounds 4
+    nice -n 5 .venv/bin/python bench/unusual_campaign.py --seed 1 --rounds 4 --node 2
 
 Every case of :func:`unusual.cases` (``--rounds`` draws of each class, ``--classes``)
 is written to a temporary folder and analysed by ``imu-allan analyze INPUT [--frame-id
@@ -32,6 +32,9 @@ and the failures
 * ``UNEXPECTED``: an outcome the case does not allow (a usable input refused; two
   sources or two topics analysed without being chosen; an axis of zeros or integer
   counts analysed without a word about them).
+
+``--node`` rounds of the node situations of bench/unusual_node.py (SIGTERM during a
+fit, sim time without a clock) add a row ``node``.
 
 Printed: the Markdown table of docs/limits.md (counts per class and outcome), then
 every failure with its figures.  Exits 1 when there is one.
@@ -85,6 +88,16 @@ def analyze(path: Path, args: list, out: Path) -> tuple:
 def _names(text: str, words: tuple) -> bool:
     text = text.lower()
     return any(w in text for w in words)
+
+
+def _about(warning: str, axis: str) -> bool:
+    """Tell whether a warning is about an axis: names it, its sensor alone, or no sensor."""
+    w = warning.lower()
+    if axis in w:
+        return True
+    if 'gyro' not in w and 'accel' not in w:
+        return True
+    return axis.split('_')[0] in w and not any(a in w for a in AXES)
 
 
 def _n_misses(entry: dict, truth: float) -> str:
@@ -143,9 +156,7 @@ def judge(case: 'unusual.Case', path: Path, ran: tuple, n_ref: int) -> tuple:
         notes.append(f'span {span:.6g} s vs {case.duration_s:.6g}')
     for axis, truth in zip(AXES, case.n_axes):
         miss = '' if truth is None else _n_misses(doc['axes'].get(axis, {}), truth)
-        if miss and not any(axis in w or 'gyro' not in w and 'accel' not in w
-                            or axis.split('_')[0] in w and not any(a in w for a in AXES)
-                            for w in named):
+        if miss and not any(_about(w, axis) for w in named):
             notes.append(f'{axis} {miss}')
     if notes:
         return 'WRONG RESULT', '; '.join(notes) + f' (warnings: {new})'
@@ -187,6 +198,26 @@ def campaign(seed: int, rounds: int, classes, folder: Path, log=None) -> dict:
     return {'table': table, 'failures': failures, 'cases': len(all_cases)}
 
 
+def node_campaign(rounds: int, seed: int, folder: Path, result: dict, log=None) -> None:
+    """Run the node situations of bench/unusual_node.py; add a 'node' row to a result."""
+    import unusual_node
+    counts: Counter = Counter()
+    for k, (kind, case_seed) in enumerate(unusual_node.node_cases(rounds, seed)):
+        start = time.monotonic()
+        try:
+            outcome, note = unusual_node.node_case(kind, case_seed, folder / f'node_{k}')
+        except Exception as err:  # noqa: B902 - the bench's own failure, said as one
+            outcome, note = 'TRACEBACK', f'the bench: {type(err).__name__}: {err}'
+        counts[outcome] += 1
+        if outcome in FAILURES:
+            result['failures'].append(('node', f'{kind}_{case_seed}', outcome, note))
+        if log is not None:
+            print(f'{"node":9s} {kind + "_" + str(case_seed):45s} {outcome:12s} '
+                  f'{time.monotonic() - start:5.1f} s  {note[:160]}', file=log, flush=True)
+    result['table']['node'] = counts
+    result['cases'] += sum(counts.values())
+
+
 def markdown(table: dict) -> str:
     """Return the table of counts per class and outcome as Markdown."""
     total: Counter = Counter()
@@ -207,14 +238,19 @@ def main() -> int:
     parser.add_argument('--rounds', type=int, default=4, help='draws of each class')
     parser.add_argument('--classes', nargs='+', default=list(unusual.CLASSES),
                         choices=unusual.CLASSES)
+    parser.add_argument('--node', type=int, default=2, metavar='ROUNDS',
+                        help='draws of each node situation (bench/unusual_node.py; 0: none)')
     parser.add_argument('--quiet', action='store_true', help='no line per case on stderr')
     args = parser.parse_args()
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix='imu_allan_unusual_') as tmp:
-        result = campaign(args.seed, args.rounds, args.classes, Path(tmp),
-                          log=None if args.quiet else sys.stderr)
+        log = None if args.quiet else sys.stderr
+        result = campaign(args.seed, args.rounds, args.classes, Path(tmp), log=log)
+        if args.node:
+            node_campaign(args.node, args.seed, Path(tmp), result, log=log)
     print(markdown(result['table']))
-    print(f'{result["cases"]} cases (seed {args.seed}, {args.rounds} rounds) in '
+    print(f'{result["cases"]} cases (seed {args.seed}, {args.rounds} rounds, {args.node} of the '
+          f'node) in '
           f'{time.monotonic() - start:.0f} s')
     for failure in result['failures']:
         print('FAILURE', *failure)

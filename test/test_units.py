@@ -20,7 +20,7 @@ from imu_allan.cli import main
 from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.noise.unit_check import (G0_M_S2, GYRO_BIAS_MAX, GYRO_WHITE_MAX,
-                                             parse_units, unit_warnings)
+                                             parse_units, stamps_ns, unit_warnings)
 from imu_allan.core.outputs.short_record import SHORT_RECORD
 from imu_allan.errors import InputError
 from imu_allan.io.bag_writer import write_imu_bag
@@ -157,6 +157,20 @@ def test_raw_counts_are_named_and_their_scale_declared(tmp_path, still, capsys):
     si, _ = _analyze(tmp_path, _csv(tmp_path, 'si.csv', t_s, scaled), capsys)
     for axis in AXES:
         assert_allclose(doc['axes'][axis]['adev'], si['axes'][axis]['adev'], rtol=1e-9)
+
+
+def test_integer_times_since_1970_read_as_seconds_are_named(tmp_path, still, capsys):
+    # ms, us or ns since 1970 in t, read as seconds, overflowed int64 nanoseconds (a
+    # ValueError traceback); one line names the unit, and declaring it is the fix.
+    t_s, y = still
+    for unit, per_s in (('ms', 1e3), ('us', 1e6), ('ns', 1e9)):
+        path = _csv(tmp_path, f'epoch_{unit}.csv', (1.7e9 + t_s) * per_s, y)
+        err = _refused(tmp_path, path, capsys)
+        assert (f'the times look like {unit} read as seconds; rerun with --units '
+                f'time={unit}') in err, err
+    doc, _ = _analyze(tmp_path, path, capsys, '--units', 'time=ns')
+    assert_allclose(doc['sample_rate_hz'], RATE_HZ, rtol=1e-4)
+    assert_allclose(stamps_ns(np.array([1.5, -2.0]), 1e-3), [1_500_000, -2_000_000])
 
 
 def test_a_deg_s_gyro_is_refused_before_the_motion_check_on_real_data(shared_dir, tmp_path,

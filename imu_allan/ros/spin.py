@@ -1,6 +1,5 @@
 """
-Spinning the node: the executor it runs on, a loop that Ctrl-C and shutdown stop, and
-work on another thread that a shutdown may cut short.
+Spinning the node: its executor, a loop Ctrl-C and shutdown stop, work they cut short.
 
 rclpy's EventsExecutor is several times cheaper per message (bench/bench_node.py), but
 its spin() never returns to Python; short spin_once calls let Ctrl-C and shutdown in.
