@@ -54,6 +54,7 @@ bench: venv
 	$(PY) bench/reproduce_paper.py
 	$(PY) bench/search_power.py --seeds 4
 	$(PY) bench/validate_adis.py
+	$(PY) bench/unusual_campaign.py --seed 1 --rounds 4 --node 2 --quiet
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache

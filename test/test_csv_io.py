@@ -98,6 +98,20 @@ def test_bad_input_names_file_and_row(tmp_path, content, pattern):
     assert msg.startswith(str(path)) and '\n' not in msg
 
 
+def test_coarse_time_steps_give_the_rate_of_the_count(tmp_path):
+    # A 400 Hz IMU whose t is in 10 ms ticks: four rows per step, median step 0.  It
+    # was refused ('does not increase'); the count over the span is the rate (analyze's
+    # tick clock rebuilds the stamps); a t that stands or runs back is refused.
+    t, y = _record(n=4000, rate=400.0)
+    path = tmp_path / 'ticks.csv'
+    write_csv(path, np.floor(t * 100.0) / 100.0, y, AXES)
+    data = read_csv(path)
+    assert_allclose(data.rate_hz, 400.0, rtol=1e-3)
+    write_csv(path, np.floor(t[::-1] * 100.0) / 100.0, y, AXES)
+    with pytest.raises(InputError, match='does not increase'):
+        read_csv(path)
+
+
 def test_missing_file_and_columns(tmp_path):
     with pytest.raises(InputError, match='no such file'):
         read_csv(tmp_path / 'nope.csv')

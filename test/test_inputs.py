@@ -52,9 +52,10 @@ def test_header_stamps_that_move_are_used_as_they_are(tmp_path):
     assert np.isfinite(session.curve().avar).all()
 
 
-def test_a_csv_whose_t_does_not_step_is_read_at_a_set_rate(tmp_path):
-    # 100 Hz stamped in 0.1 s ticks: the median step is 0, so the rate cannot come from
-    # t; refused with the way out, read at --rate (the tick clock rebuilds the stamps).
+def test_a_csv_whose_t_does_not_step_is_read_at_its_count_or_a_set_rate(tmp_path):
+    # 100 Hz stamped in 0.1 s ticks: the median step is 0.  It was refused ('give the
+    # rate'); the rate is the count's over the span, or --rate's, and the tick clock
+    # rebuilds the stamps either way (bench/unusual_campaign.py found the refusal).
     from imu_allan import AXES
     from imu_allan.errors import InputError
     from imu_allan.io.csv_io import write_csv
@@ -64,10 +65,29 @@ def test_a_csv_whose_t_does_not_step_is_read_at_a_set_rate(tmp_path):
     t_s = np.floor((stamps - stamps[0]) / 1e8) * 0.1
     path = tmp_path / 'ticks.csv'
     write_csv(path, t_s, y, AXES)
+    for rate_hz in (0.0, 100.0):
+        result, _ = analyze_input(path, None, SessionConfig(rate_hz=rate_hz), quiet=True,
+                                  progress=False)
+        # Without --rate: the count over the span, within a tick over 300 s.
+        assert result.n_samples == 30_000
+        assert result.rate_hz == pytest.approx(100.0, rel=1e-9 if rate_hz else 0.1 / 300)
+        assert any(w.startswith('coarse stamps') for w in result.warnings)
+        # White noise of sd 1e-3 per sample at 100 Hz: N = 1e-4 (within 3 %).
+        assert_allclose(result.fits['gyro_x'].optimised['N'].value, 1e-4, rtol=0.03)
+    # A t that stands still is refused with the way out.
+    write_csv(path, np.zeros_like(t_s), y, AXES)
     with pytest.raises(InputError, match=r'give the rate \(--rate HZ\)'):
         open_input(path)
-    result, _ = analyze_input(path, None, SessionConfig(rate_hz=100.0), quiet=True,
-                              progress=False)
-    assert result.n_samples == 30_000 and result.rate_hz == pytest.approx(100.0)
-    # White noise of sd 1e-3 per sample at 100 Hz: N = 1e-4 (within 3 %).
-    assert_allclose(result.fits['gyro_x'].optimised['N'].value, 1e-4, rtol=0.03)
+
+
+def test_a_bag_whose_stamps_and_log_times_are_one_value_is_one_line(tmp_path):
+    # Header stamps and log times all one value: no row passes the clock, and the unit
+    # check had no first rows to judge (a ValueError traceback before; found by the
+    # unusual-input campaign's probes).
+    from imu_allan.errors import NotEnoughStillData
+    from imu_allan.io.inputs import analyze_input
+    stamps, y = still_imu(3000, seed=5)
+    path = tmp_path / 'one_time.mcap'
+    write_imu_bag(path, np.full_like(stamps, stamps[0]), y)
+    with pytest.raises(NotEnoughStillData, match='not enough still data: only 0.0 s'):
+        analyze_input(path, None, SessionConfig(), quiet=True, progress=False)

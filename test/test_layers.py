@@ -416,6 +416,7 @@ TEST_TOPICS = {
     'realdata': 'the real recordings end to end', 'registry': 'a toy term through the package',
     'robustness': 'degraded records against the clean one (bench/metamorphic.py)',
     'speed_paths': 'no compiled code, no timing in comments, one BLAS thread',
+    'unusual': 'valid-but-unusual inputs against their truth (bench/unusual_campaign.py)',
 }
 
 

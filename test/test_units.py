@@ -20,7 +20,7 @@ from imu_allan.cli import main
 from imu_allan.core.noise.params import load_params
 from imu_allan.core.noise.simulate import simulate_imu
 from imu_allan.core.noise.unit_check import (G0_M_S2, GYRO_BIAS_MAX, GYRO_WHITE_MAX,
-                                             parse_units, unit_warnings)
+                                             parse_units, stamps_ns, unit_warnings)
 from imu_allan.core.outputs.short_record import SHORT_RECORD
 from imu_allan.errors import InputError
 from imu_allan.io.bag_writer import write_imu_bag
@@ -159,6 +159,20 @@ def test_raw_counts_are_named_and_their_scale_declared(tmp_path, still, capsys):
         assert_allclose(doc['axes'][axis]['adev'], si['axes'][axis]['adev'], rtol=1e-9)
 
 
+def test_integer_times_since_1970_read_as_seconds_are_named(tmp_path, still, capsys):
+    # ms, us or ns since 1970 in t, read as seconds, overflowed int64 nanoseconds (a
+    # ValueError traceback); one line names the unit, and declaring it is the fix.
+    t_s, y = still
+    for unit, per_s in (('ms', 1e3), ('us', 1e6), ('ns', 1e9)):
+        path = _csv(tmp_path, f'epoch_{unit}.csv', (1.7e9 + t_s) * per_s, y)
+        err = _refused(tmp_path, path, capsys)
+        assert (f'the times look like {unit} read as seconds; rerun with --units '
+                f'time={unit}') in err, err
+    doc, _ = _analyze(tmp_path, path, capsys, '--units', 'time=ns')
+    assert_allclose(doc['sample_rate_hz'], RATE_HZ, rtol=1e-4)
+    assert_allclose(stamps_ns(np.array([1.5, -2.0]), 1e-3), [1_500_000, -2_000_000])
+
+
 def test_a_deg_s_gyro_is_refused_before_the_motion_check_on_real_data(shared_dir, tmp_path,
                                                                       capsys):
     # The ADIS16405 run 1 (rad/s), first 20 min, its gyro converted to deg/s: before,
@@ -260,6 +274,9 @@ def test_the_limits_sit_between_si_and_the_wrong_units():
     assert 'the rate would be 1000 Hz; declare --units time=us)' in unit_warnings(
         0.001, None, None)[0]
     assert unit_warnings(1.0, None, None) == unit_warnings(1e4, None, None) == []
+    # A 1 Hz IMU whose jittered stamps give a rate a little below 1 Hz is one.
+    assert unit_warnings(0.99999, None, None) == unit_warnings(1.00001e4, None, None) == []
+    assert 'the rate would be 980 Hz' in unit_warnings(0.98, None, None)[0]
 
 
 def test_a_short_record_names_what_it_cannot_determine_in_every_output(tmp_path, still,

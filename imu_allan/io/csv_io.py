@@ -269,7 +269,10 @@ def _rate(t_s: np.ndarray | None, rate_hz: float | None, path: Path) -> float:
         raise InputError(f'{path}: no time column (t): give the sample rate (--rate HZ)')
     if t_s.size < 2:
         raise InputError(f'{path}: one row is too few to derive a sample rate from t')
-    step = float(np.median(np.diff(t_s)))
+    step = float(np.median(steps := np.diff(t_s)))
+    if step == 0 and (steps >= 0).all() and t_s[-1] > t_s[0]:
+        # Rows share stamps, never running back: a stamp clock coarser than the samples.
+        return (t_s.size - 1) / float(t_s[-1] - t_s[0])
     if not step > 0:
         raise InputError(f'{path}: the time column t does not increase (median step '
                          f'{step:g} s); fix the stamps or give the rate (--rate HZ)')

@@ -21,7 +21,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from imu_allan import AXES
-from imu_allan.core.noise.unit_check import DeclaredUnits
+from imu_allan.core.noise.unit_check import DeclaredUnits, stamps_ns
 from imu_allan.errors import InputError, UnitMistake
 from imu_allan.io.progress import Progress
 from imu_allan.pipeline.hygiene import SessionConfig
@@ -217,9 +217,9 @@ def open_input(path, topic: str | None = None, units: DeclaredUnits | None = Non
                     raise InputError(f'{path}: a t column (seconds) is needed for analyze')
                 n_read[0] += data.t_s.size
                 # The declared time unit applies before nanoseconds (ms since the epoch
-                # in ns would overflow int64).
-                t_s = data.t_s * units.time_scale(1.0) if units is not None else data.t_s
-                held.append((np.round(t_s * 1e9).astype(np.int64),
+                # in ns would overflow int64; undeclared, that is one line).
+                scale = units.time_scale(1.0) if units is not None else 1.0
+                held.append((stamps_ns(data.t_s, scale),
                              _to_si(data.samples[:, :len(AXES)], units),
                              data.samples[:, len(AXES)] if with_temp else None))
                 yield from _whole_blocks(held, final=False)

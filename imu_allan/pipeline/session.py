@@ -155,7 +155,8 @@ class Session:
     def _judge_units(self, rows: int) -> None:
         """Judge the units once ``rows`` finite rows are in; refuse a unit mistake."""
         assert self._first_rows is not None
-        y = np.concatenate(self._first_rows)
+        # No row passed the clock (stamps that never step): nothing to judge.
+        y = np.concatenate(self._first_rows) if self._first_rows else np.zeros((0, 6))
         if y.shape[0] < rows:
             self._first_rows = [y]
             return

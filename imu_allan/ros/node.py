@@ -56,7 +56,7 @@ from imu_allan.ros.plan_report import node_targets, plan_due, targets_label, tar
 from imu_allan.ros.relay import CovarianceRelay, load_covariance_file
 from imu_allan.ros.reports import matrix_msg, NodeReports
 from imu_allan.ros.services import NodeServices
-from imu_allan.ros.spin import create_executor, spin_until_shutdown
+from imu_allan.ros.spin import create_executor, spin_until_shutdown, until_shutdown
 
 #: Period of the /diagnostics statuses (the aggregator marks a status stale after 5 s).
 DIAGNOSTICS_PERIOD_S = 1.0
@@ -335,8 +335,8 @@ class ImuAllanNode(Node):
         view, raw = self.live.snapshot()
         # Before min_duration_s only the plan: "how long?" is answered from the start.
         work = self._plan_early if early else self._fit_and_publish
-        self._fit_thread = threading.Thread(target=work, args=(view, raw),
-                                            name='imu_allan_fit', daemon=True)
+        self._fit_thread = threading.Thread(target=until_shutdown, name='imu_allan_fit',
+                                            args=(self.context, work, view, raw), daemon=True)
         self._fit_thread.start()
 
     def publish_now(self):

@@ -1,5 +1,5 @@
 """
-Spinning the node: the executor it runs on, and a loop that Ctrl-C and shutdown stop.
+Spinning the node: its executor, a loop Ctrl-C and shutdown stop, work they cut short.
 
 rclpy's EventsExecutor is several times cheaper per message (bench/bench_node.py), but
 its spin() never returns to Python; short spin_once calls let Ctrl-C and shutdown in.
@@ -62,3 +62,26 @@ def spin_until_shutdown(executor, context=None) -> None:
             executor.spin_once(timeout_sec=0.25)
     except ExternalShutdownException:
         pass
+
+
+def until_shutdown(context, work, *args) -> None:
+    """
+    Run work (a fit on its own thread); a shutdown while it runs ends it without a traceback.
+
+    SIGTERM or Ctrl-C shuts the context down while a fit runs; its publishers are gone
+    then (rcl raises "publisher's context is invalid"), and the node's save() writes the
+    files from the result the fit kept.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+        The node's context.
+    work : callable
+        Called with ``args``; its errors are raised while the context is up.
+
+    """
+    try:
+        work(*args)
+    except Exception:  # noqa: B902 - rcl's error types are private to rclpy
+        if context.ok():
+            raise

@@ -46,7 +46,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from imu_allan.errors import InputError
+from imu_allan.errors import InputError, UnitMistake
 
 #: Standard gravity [m/s^2] (the g of accelerometers in g or mg).
 G0_M_S2 = 9.80665
@@ -58,6 +58,13 @@ GYRO_WHITE_REFUSE = 2e-2
 GYRO_BIAS_MAX = 0.5
 #: Plausible IMU sample rates [Hz].
 RATE_HZ = (1.0, 10_000.0)
+#: Share by which a measured rate may pass a bound of RATE_HZ: stamps with jitter give a
+#: 1 Hz IMU 0.99999 Hz (the unusual-input campaign, bench/unusual_campaign.py), while a
+#: unit mistake is a factor of 1000.
+RATE_SLACK = 0.01
+
+#: Largest time [s] int64 nanoseconds hold (the year 2262).
+MAX_TIME_S = (2**63 - 1) / 1e9
 
 GYRO_UNITS = {'rad/s': 1.0, 'deg/s': math.pi / 180.0}
 ACCEL_UNITS = {'m/s^2': 1.0, 'm/s2': 1.0, 'g': G0_M_S2, 'mg': G0_M_S2 * 1e-3}
@@ -334,7 +341,8 @@ def unit_error(findings: list) -> str | None:
 def _rate_warning(rate_hz: float) -> tuple | None:
     """Return (text, fix) for an implausible rate, or None."""
     lo, hi = RATE_HZ
-    if not (math.isfinite(rate_hz) and rate_hz > 0) or lo <= rate_hz <= hi:
+    if not (math.isfinite(rate_hz) and rate_hz > 0) or \
+            lo * (1 - RATE_SLACK) <= rate_hz <= hi * (1 + RATE_SLACK):
         return None
     head = f'sample rate {rate_hz:.4g} Hz is outside {lo:g} Hz-{hi / 1e3:g} kHz'
     if rate_hz < lo:
@@ -417,3 +425,38 @@ def _gyro_warning(bias: np.ndarray | None, white: np.ndarray | None,
     return ('the gyro does not look like rad/s: ' + '; '.join(reasons)
             + ': deg/s? (declare --units gyro=deg/s), or the IMU moved',
             'gyro=deg/s' if sure else '')
+
+
+def stamps_ns(times: np.ndarray, scale_s: float) -> np.ndarray:
+    """
+    Return times as int64 nanoseconds; a time beyond what they hold is one line.
+
+    Parameters
+    ----------
+    times : numpy.ndarray
+        (n,) float64 times in a unit of ``scale_s`` seconds (a CSV's t column).
+    scale_s : float
+        Seconds per unit of ``times`` (1 unless ``--units time=...`` was declared).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) int64 [ns].
+
+    Raises
+    ------
+    UnitMistake
+        When a time lies beyond MAX_TIME_S: integer ms, us or ns since 1970 read as
+        seconds (the unit that brings it within range is named) would overflow.
+
+    """
+    t_s = times * scale_s
+    worst = float(np.abs(t_s).max()) if t_s.size else 0.0
+    if worst > MAX_TIME_S:
+        unit = next((u for u, k in (('ms', 1e-3), ('us', 1e-6), ('ns', 1e-9))
+                     if worst * k <= MAX_TIME_S), '')
+        hint = (f': the times look like {unit} read as seconds; rerun with --units '
+                f'time={unit}') if unit else ''
+        raise UnitMistake(f'unit mistake: time {worst:.4g} s is beyond what '
+                          f'nanosecond stamps hold (the year 2262){hint}')
+    return np.round(t_s * 1e9).astype(np.int64)
