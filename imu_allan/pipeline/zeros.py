@@ -156,10 +156,20 @@ class ZeroWatch:
             mean = self.sums[1] / n
             sd = np.sqrt(np.maximum(self.sums[2] / n - mean * mean, 0.0))
             centre = self.sums[0] + mean
+            # Mean and sd of every value, the zeros too: a level next to 0 is as rare
+            # against 0 as a normal of these makes it (an axis quantised coarser than
+            # its noise reads 0 most of the time, its next levels 20 times less often).
+            n_all = np.maximum(self.n + self.n_zero, 1)
+            mean_all = (self.sums[1] - self.n_zero * self.sums[0]) / n_all
+            sd_all = np.sqrt(np.maximum((self.sums[2] + self.n_zero * self.sums[0] ** 2)
+                                        / n_all - mean_all * mean_all, 0.0))
+            mu = (self.sums[0] + mean_all)[:, None]
+            odds = np.exp(np.minimum(((self.near - mu) ** 2 - mu ** 2)
+                                     / (2.0 * sd_all[:, None] ** 2), 700.0))
             step = np.maximum(ZERO_STEP_MAX * sd, ZERO_GRID * self.quantum)
             close = np.abs(self.near) <= step[:, None]
-            nearest = np.where(close, self.near_count, 0).max(axis=1)
-            pile = close.any(axis=1) & (self.n_zero >= ZERO_RATIO * nearest)
+            expected = np.where(close, self.near_count * np.maximum(odds, 1.0), 0.0)
+            pile = close.any(axis=1) & (self.n_zero >= ZERO_RATIO * expected.max(axis=1))
             far = ~close.any(axis=1) & (np.abs(centre) > ZERO_FAR * sd)
         return (self.n_zero >= ZERO_MIN) & (self.n >= ZERO_MIN) & (pile | far)
 
