@@ -73,6 +73,22 @@ THERMAL_MIN_SPAN_C = 0.01
 #: 2.8 h record is 20 blocks per cycle), and the covariance is blocks^2.
 THERMAL_BLOCKS = 512
 
+# ------------------------------------------------- a slow drift, without a temperature
+
+#: Blocks the record is cut into for the drift test (core/search/drift.py), as for the
+#: thermal regression: a 40-minute cycle in a 2.8 h record is 20 blocks per cycle.
+DRIFT_BLOCKS = 512
+#: Cosines of the block means' differences taken as the smooth part (a drift), one test
+#: each: 4 (up to 1.5 cycles over the record: a warming, a ramp to a level) and 12 (up
+#: to 5.5: a 40-minute cycle in a 2.8 h record is 4.2); fewer cosines leave more of a
+#: random walk outside them, so a warming is found sooner with 4.
+DRIFT_SMOOTH = (4, 12)
+#: Simulated random walks that draw the statistic's null distribution.
+DRIFT_SIMS = 400
+#: A random walk is named a drift when what is left of it outside the smooth part lies
+#: below this quantile of what a random walk of its level leaves there.
+DRIFT_ALPHA = 0.01
+
 # ------------------------------------------------------------------ what is reported
 
 #: The lowest ADEV (a datasheet's in-run bias stability) is reported only where the
