@@ -96,8 +96,8 @@ def main() -> None:
     print('| drift | length h | amplitude rad/s | named a drift |')
     print('| --- | --- | --- | --- |')
     for kind in ('cycle', 'warming', 'exponential'):
-        for hours in (2.0,):
-            for amp in (1e-4, 3e-4):
+        for hours in (2.0, 8.0):
+            for amp in (3e-4, 1e-3, 3e-3):
                 rng = np.random.default_rng(int(hours * 10 + amp * 1e5))
                 got = share(rng, 10.0, hours, POWER_WALK, kind, amp, args.power_reps)
                 print(f'| {kind} | {hours:g} | {amp:g} | {got:.2f} |', flush=True)
