@@ -13,7 +13,12 @@ named a drift: with a true random walk and no drift it is the false-alarm rate (
 size), with a drift the power.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python bench/drift_power.py [--reps 100]``
-(docs/thermal.md holds its table).
+(docs/thermal.md holds its table).  ``--real adis1,adis6+issue,...`` instead analyses
+real records as ``imu-allan analyze --no-plan`` does (``../shared/realdata`` beside the
+repository; ``+issue``: issue 35's 40-minute cycle, ``+deg2``: ``degrade.thermal_no_temp``
+at 2 degC, ``+ramp5`` / ``+exp5``: a linear / exponential warming of 11 degC at 5 times
+issue 35's coefficients; any temperature column left out) and prints, per axis, K as
+reported and the drift test's p-value on the axis' samples with its fitted terms.
 """
 
 import argparse
@@ -76,12 +81,70 @@ def share(rng, rate_hz: float, hours: float, walk: float, kind: str, amp: float,
     return named / reps
 
 
+def real_record(name: str):
+    """Return the Record of a --real name (module docstring), without temperature."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import degrade
+    import metamorphic
+
+    base, _, kind = name.partition('+')
+    rec = metamorphic.load(base)._replace(temp_c=None)
+    if kind.startswith('deg'):
+        return degrade.thermal_no_temp(rec, float(kind[3:]), np.random.default_rng(0))
+    age = rec.t_s - rec.t_s[0]
+    coef = np.r_[[1e-4] * 3, [2e-3] * 3]       # issue 35: rad/s/degC, m/s^2/degC
+    if kind == 'issue':
+        temp = 5.0 * np.sin(2 * math.pi * age / 2400.0)
+    elif kind.startswith('ramp'):
+        temp = float(kind[4:]) * 11.0 * age / age[-1]
+    elif kind.startswith('exp'):
+        temp = float(kind[3:]) * 11.0 * (1.0 - np.exp(-4.0 * age / age[-1]))
+    else:
+        return rec
+    return rec._replace(samples=rec.samples + coef * temp[:, None])
+
+
+def real(names: list) -> None:
+    """Print K as reported and the drift test's p-value per axis of real records."""
+    import tempfile
+
+    from imu_allan import AXES
+    from imu_allan.io.inputs import analyze_input
+    from imu_allan.pipeline.hygiene import SessionConfig
+    import metamorphic
+
+    print('| record | axis | K as reported | drift p-value |')
+    print('| --- | --- | --- | --- |')
+    for name in names:
+        rec = real_record(name)
+        with tempfile.TemporaryDirectory(prefix='imu_drift_') as tmp:
+            path = Path(tmp) / 'record.csv'
+            metamorphic.write(rec, path)
+            result, _ = analyze_input(path, None, SessionConfig(), quiet=True,
+                                      progress=False, workers=1, prefetch=False, units=None)
+        for j, axis in enumerate(AXES):
+            fit = result.fits.get(axis)
+            if fit is None:
+                continue
+            k = result.reports[axis].params['K']
+            check = drift_test(rec.samples[:, j], result.rate_hz, model_terms(fit.model))
+            p = 'n/a' if check is None else f'{check.p_value:.3g}'
+            print(f'| {name} | {axis} | {k.value:.3g} {k.kind} | {p} |', flush=True)
+        for w in result.warnings:
+            if w.startswith('slow drift'):
+                print(f'|  | {w.split(":")[0]} |  |  |')
+
+
 def main() -> None:
-    """Print the two tables."""
+    """Print the two tables (or, with --real, the real records' one)."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--reps', type=int, default=100)
     ap.add_argument('--power-reps', type=int, default=30)
+    ap.add_argument('--real', default='', help='comma-separated real records')
     args = ap.parse_args()
+    if args.real:
+        real(args.real.split(','))
+        return
     start = time.time()
     print('False alarms (a true random walk, no drift):\n')
     print('| rate Hz | length h | K rad/s/sqrt(s) | named a drift |')
