@@ -2,6 +2,7 @@
 
 from dataclasses import dataclass, field
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.rules import DRIFT_ALPHA
 from imu_allan.core.search.drift import drift_test, smooth_basis
 from imu_allan.core.search.thermal import model_terms
+from imu_allan.pipeline.analysis import AnalysisResult
 from imu_allan.pipeline.drift_report import drift_axes, SLOW_DRIFT
 
 RATE_HZ = 10.0
@@ -105,3 +107,18 @@ def test_a_named_drift_bounds_k_and_warns():
     # The fits passed in are not changed; without a raw copy nothing is tested.
     assert fits['gyro_x'].optimised['K'].kind == 'estimate'
     assert drift_axes(fits, None, None, {}) == (fits, ())
+
+
+def test_an_axis_the_temperature_explains_is_left_to_the_thermal_part():
+    rng = np.random.default_rng(5)
+    t_s, y = _record(rng, 2.0, 1e-7)
+    samples = np.zeros((y.size, 6))
+    samples[:, 0] = y + 1e-3 * (1.0 - np.exp(-4.0 * t_s / t_s[-1]))
+    fits = {'gyro_x': _fit()}
+    hot = SimpleNamespace(coefficient=SimpleNamespace(significant=True))
+    assert drift_axes(fits, samples, RATE_HZ, {'gyro_x': hot}) == (fits, ())
+    # Its warning reaches every consumer file's header (as the thermal one does).
+    line = f'{SLOW_DRIFT} on gyro_x: ...'
+    text = AnalysisResult.with_trust_comments(SimpleNamespace(fits={}, warnings=(line,)),
+                                              'x: 1\n')
+    assert text == f'# WARNING {line}\nx: 1\n'
