@@ -70,6 +70,10 @@ def test_the_test_is_deterministic_and_needs_blocks():
     a = drift_test(y, RATE_HZ, _terms(1.5e-5))
     assert a == drift_test(y, RATE_HZ, _terms(1.5e-5))
     assert drift_test(y[:150], RATE_HZ, _terms(1.5e-5)) is None
+    bad = y.copy()
+    bad[10] = np.nan
+    assert drift_test(bad, RATE_HZ, _terms(1.5e-5)) is None
+    assert drift_test(np.ones(y.size), RATE_HZ, _terms(1.5e-5)) is None
 
 
 @dataclass(frozen=True)

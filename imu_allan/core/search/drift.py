@@ -146,7 +146,8 @@ def drift_test(y, rate_hz: float, terms: list, n_blocks: int = DRIFT_BLOCKS,
     Returns
     -------
     DriftCheck or None
-        None when the record is too short (fewer than 8 blocks per smooth cosine).
+        None when the record is too short (fewer than 8 blocks per smooth cosine), or
+        its block means are not finite or all equal.
 
     """
     y = np.asarray(y, dtype=np.float64)
@@ -155,6 +156,8 @@ def drift_test(y, rate_hz: float, terms: list, n_blocks: int = DRIFT_BLOCKS,
         return None
     per = y.size // n_blocks
     means = y[:per * n_blocks].reshape(n_blocks, per).mean(axis=1)
+    if not np.all(np.isfinite(means)) or np.ptp(means) == 0:
+        return None
     model = _BlockModel(np.diff(means), terms, per / float(rate_hz))
     lam, z = model.lam, model.z[:, None]
     full = _profile(z, lam, None)[:, 0]
