@@ -43,8 +43,8 @@ POWER_WALK = 2e-6
 
 #: (rate [Hz], record lengths [h]) of the false-alarm rows.
 SIZES = ((10.0, (0.5, 2.0, 8.0)), (100.0, (0.5, 1.0, 2.0)), (400.0, (0.25, 0.5, 1.0)))
-#: Random-walk levels [rad/s/sqrt(s)] of the false-alarm rows (an estimate from 0.5 h).
-WALKS = (1.5e-5,)
+#: Random-walk levels [rad/s/sqrt(s)] of the false-alarm rows: weak and strong.
+WALKS = (2e-6, 1.5e-5)
 
 
 def added_drift(kind: str, amp: float, t_s: np.ndarray) -> np.ndarray:
