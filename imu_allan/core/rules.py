@@ -73,6 +73,26 @@ THERMAL_MIN_SPAN_C = 0.01
 #: 2.8 h record is 20 blocks per cycle), and the covariance is blocks^2.
 THERMAL_BLOCKS = 512
 
+# ------------------------------------------------- a slow drift, without a temperature
+
+#: Blocks the record is cut into for the drift test (core/search/drift.py), as for the
+#: thermal regression: a 40-minute cycle in a 2.8 h record is 20 blocks per cycle.
+DRIFT_BLOCKS = 512
+#: Cosines of the block means' differences taken as the smooth part (a drift), one test
+#: each: 4 (up to 1.5 cycles over the record: a warming, a ramp to a level) and 12 (up
+#: to 5.5: a 40-minute cycle in a 2.8 h record is 4.2); fewer cosines leave more of a
+#: random walk outside them, so a warming is found sooner with 4.
+DRIFT_SMOOTH = (4, 12)
+#: Bootstrap draws of the statistic's null distribution: p-values to 1/400, four draws
+#: at least below DRIFT_ALPHA.
+DRIFT_SIMS = 400
+#: A random walk is named a drift when its combined p-value (the smooth part holds more
+#: random walk than the rest allows) is below this: the analysis asks it of every axis
+#: whose K is an estimate, and a false alarm turns a true K into a bound
+#: (bench/drift_power.py: false alarms 4 of 900 simulated random walks at 10-400 Hz; the
+#: clean ADIS16405 and MPU-6050 axes' p-values are 0.05 or more).
+DRIFT_ALPHA = 0.01
+
 # ------------------------------------------------------------------ what is reported
 
 #: The lowest ADEV (a datasheet's in-run bias stability) is reported only where the

@@ -32,6 +32,7 @@ from imu_allan.core.outputs.short_record import SHORT_RECORD, short_record_warni
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clipping import CLIPPED, KEEP_SHARE, left_out
+from imu_allan.pipeline.drift_report import drift_axes, SLOW_DRIFT
 from imu_allan.pipeline.session import Session
 from imu_allan.pipeline.thermal_report import thermal_axes, THERMAL_DRIFT
 from imu_allan.pipeline.workers import worker_pool
@@ -277,7 +278,7 @@ class AnalysisResult:
         lines = [f'# WARNING {c}' for a in AXES
                  for c in [self.fits[a].trust_comment(a) if self.fits.get(a) else ''] if c]
         lines += [f'# WARNING {w}' for w in self.warnings
-                  if w.startswith((SHORT_RECORD, THERMAL_DRIFT)) or CLIPPED in w]
+                  if w.startswith((SHORT_RECORD, THERMAL_DRIFT, SLOW_DRIFT)) or CLIPPED in w]
         if not lines:
             return text
         head, sep, rest = text.partition('\n')
@@ -427,6 +428,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
         curve.avar, curve.edf, CONFIDENCE))
     fits.update(zip(jobs, found))
     thermal, hot = thermal_axes(session, curve, fits, (samples, raw_rate), _map_axes, workers)
+    fits, drifts = drift_axes(fits, samples, raw_rate, thermal)     # K that is a slow drift
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
     plans = _plans(fits, float(session.rate_hz), float(session.duration_s), plan_targets,
                    workers) if plan else {}
@@ -443,7 +445,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
     # No confident wrong number: an axis whose fit is not trusted is a top-level warning,
     # and so is a consumer value the record cannot determine.
     return replace(result, warnings=result.warnings + tuple(result.trust_warnings())
-                   + tuple(short_record_warnings(fits, plans, float(session.duration_s))) + hot)
+                   + tuple(short_record_warnings(fits, plans, float(session.duration_s)))
+                   + hot + drifts)
 
 
 def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:
