@@ -134,3 +134,18 @@ def test_adis_slice_with_dropped_messages(shared_dir):
     verdict = meta.compare(clean, meta.analyse(degrade(rec, 'drop_random', 2.0, seed=1)),
                            'drop_random')
     assert not _broken(verdict, clean)
+
+
+@pytest.mark.slow
+def test_a_search_that_drops_a_step_at_the_end_keeps_its_solution(shared_dir):
+    # Run 6 with a 5 C temperature cycle and no temperature: the final fit held a step
+    # at zero, the labels lost it but the solution kept its values, and the rival checks
+    # read past the slots (an IndexError traceback, exit 1).
+    from imu_allan import AXES
+    from imu_allan.io.csv_io import read_csv
+    data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run6.csv.gz',
+                    columns=list(AXES))
+    summary = meta.analyse(degrade(Record(data.t_s, data.samples), 'thermal_no_temp', 5.0,
+                                   seed=0))
+    assert summary['ok'], summary.get('message')
+    assert all('params' in summary['axes'][a] for a in AXES)

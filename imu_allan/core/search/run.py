@@ -306,7 +306,14 @@ class _Run:
         """Remove steps (and their terms) from the model's record."""
         gone = {st.label for st in dropped}
         self.steps = [st for st in self.steps if st.label not in gone]
-        self.labels = [lb for lb in self.labels if lb not in gone]
+        kept = [k for k, lb in enumerate(self.labels) if lb not in gone]
+        if len(kept) < len(self.labels) and self.sol is not None:
+            # The solution follows its labels (the rival checks read both): the rest
+            # re-solved at the same weights from their values.
+            self.sol = fit_fixed_weights(
+                self.fitter.data, self.slots_of([self.labels[k] for k in kept]),
+                [self.sol.phi[k] for k in kept], local=True)
+        self.labels = [self.labels[k] for k in kept]
         self.notes += [f'{st.effect}: {why} (left out)' for st in dropped]
 
     def backward(self) -> None:
