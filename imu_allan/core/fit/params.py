@@ -257,9 +257,10 @@ def bound_by_curve(optimised: dict, tau: np.ndarray, avar: np.ndarray, edf: np.n
                                out['T_B'].unit, 'fitted', 'B is only an upper bound')
     if not np.size(tau):
         return out
-    caps = {'K': (curve_k_bound(tau, avar, edf), "the curve's own bound min "
-                  'sqrt(3 AVAR_hi / tau)'),
-            'B': (floor_b_bound(avar, edf), 'the ADEV floor bound min sqrt(AVAR_hi) / 0.664')}
+    caps = {'K': (curve_k_bound(tau, avar, edf), 'what the curve itself allows (a random '
+                  'walk under its 95 % upper band at every tau)'),
+            'B': (floor_b_bound(avar, edf), "what the curve's floor allows (its 95 % upper "
+                  'band / 0.664)')}
     for sym, (cap, what) in caps.items():
         p = out.get(sym)
         if p is None or p.kind != 'upper_bound' or not (math.isfinite(cap) and cap > 0):
