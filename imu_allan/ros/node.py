@@ -327,11 +327,14 @@ class ImuAllanNode(Node):
         return self._fit_thread is not None and self._fit_thread.is_alive()
 
     def _publish(self) -> None:
-        early = self.session.duration_s < self.values['min_duration_s']
-        if (self.fitting or self.collection_stopped or self.session.unit_problem is not None
-                or (early and not self._plan_due())):
+        if self.fitting or self.collection_stopped:
             return
+        # The rows received so far count before "is it early?" (the processing timer may
+        # not have run since they came).
         self.live.process()
+        early = self.session.duration_s < self.values['min_duration_s']
+        if self.session.unit_problem is not None or (early and not self._plan_due()):
+            return
         view, raw = self.live.snapshot()
         # Before min_duration_s only the plan: "how long?" is answered from the start.
         work = self._plan_early if early else self._fit_and_publish
