@@ -325,9 +325,10 @@ class _Run:
                 [p for lb, p in zip(self.labels, self.sol.phi) if lb != st.label], local=True)
             n_par = 1 + len(term_slot(st.label, self.tau, self.rate_hz).bounds)
             if without.j - self.sol.j < n_par * self.penalty + DELTA_MIN:
+                # Re-fitted first: the record then drops a label the solution no longer has.
+                self.irls(rest, phi0=without.phi, local=True)
                 self.drop_steps([st], 'lowered the chi-square at first, but the re-weighted '
                                 'model does as well without it')
-                self.irls(rest, phi0=without.phi, local=True)
 
     def full_fit(self, labels, sigma0=None) -> AxisFit:
         """Return the fit with intervals and bounds of these terms, from the search's values."""
