@@ -1,13 +1,13 @@
 """The slow-drift test (core/search/drift.py) and its report (pipeline/drift_report.py)."""
 
-from dataclasses import dataclass, field
 import math
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from imu_allan.core.fit.result import Param
+from imu_allan.core.fit.result import AxisFit, CurveCaps, Param
+from imu_allan.core.noise.units import format_quoted
 from imu_allan.core.noise.values import AxisNoise
 from imu_allan.core.rules import DRIFT_ALPHA
 from imu_allan.core.search.drift import drift_test, smooth_basis
@@ -76,19 +76,18 @@ def test_the_test_is_deterministic_and_needs_blocks():
     assert drift_test(np.ones(y.size), RATE_HZ, _terms(1.5e-5)) is None
 
 
-@dataclass(frozen=True)
-class _Fit:
-    """The two fields of an AxisFit that drift_axes reads."""
+def _axis_fit(optimised: dict, model: AxisNoise | None = None,
+              caps: CurveCaps = CurveCaps()) -> AxisFit:
+    """Return an AxisFit with these parameters (what drift_axes reads of it)."""
+    return AxisFit(nominal={}, optimised=optimised, terms=(), notes=(), caps=caps,
+                   model=AxisNoise(N=N_WHITE, K=1e-5) if model is None else model)
 
-    optimised: dict
-    model: AxisNoise = field(default_factory=lambda: AxisNoise(N=N_WHITE, K=1e-5))
 
-
-def _fit(kind: str = 'estimate') -> _Fit:
+def _fit(kind: str = 'estimate', caps: CurveCaps = CurveCaps()) -> AxisFit:
     k = (Param(1.2e-5, (8e-6, 1.6e-5), 'estimate', 'rad/s*s^0.5') if kind == 'estimate'
          else Param(1.6e-5, (0.0, 1.6e-5), 'upper_bound', 'rad/s*s^0.5'))
-    return _Fit({'N': Param(N_WHITE, (6.9e-4, 7.1e-4), 'estimate', 'rad/s/sqrt(Hz)'),
-                 'K': k})
+    return _axis_fit({'N': Param(N_WHITE, (6.9e-4, 7.1e-4), 'estimate', 'rad/s/sqrt(Hz)'),
+                      'K': k}, caps=caps)
 
 
 def test_a_named_drift_bounds_k_and_warns():
@@ -97,8 +96,8 @@ def test_a_named_drift_bounds_k_and_warns():
     drifted = y + 1e-3 * (1.0 - np.exp(-4.0 * t_s / t_s[-1]))
     samples = np.zeros((y.size, 6))
     samples[:, 0], samples[:, 1] = drifted, _record(rng, 2.0, 1.5e-5)[1]
-    fits = {'gyro_x': _fit(), 'gyro_y': _Fit({'K': _fit().optimised['K']},
-                                             AxisNoise(N=N_WHITE, K=1.5e-5)),
+    fits = {'gyro_x': _fit(), 'gyro_y': _axis_fit({'K': _fit().optimised['K']},
+                                                  AxisNoise(N=N_WHITE, K=1.5e-5)),
             'gyro_z': _fit('bound')}
     out, warnings = drift_axes(fits, samples, RATE_HZ, {})
     k = out['gyro_x'].optimised['K']
@@ -111,6 +110,23 @@ def test_a_named_drift_bounds_k_and_warns():
     # The fits passed in are not changed; without a raw copy nothing is tested.
     assert fits['gyro_x'].optimised['K'].kind == 'estimate'
     assert drift_axes(fits, None, None, {}) == (fits, ())
+
+
+def test_a_drift_bound_above_the_curve_is_capped_there_and_the_warning_says_so():
+    # The drift's bound is the estimate's upper end, which can lie above what the
+    # record's own curve allows: it is capped there, and the warning quotes the cap.
+    rng = np.random.default_rng(5)
+    t_s, y = _record(rng, 2.0, 1e-7)
+    samples = np.zeros((y.size, 6))
+    samples[:, 0] = y + 1e-3 * (1.0 - np.exp(-4.0 * t_s / t_s[-1]))
+    out, warnings = drift_axes({'gyro_x': _fit(caps=CurveCaps(K=1.1e-5))}, samples,
+                               RATE_HZ, {})
+    k = out['gyro_x'].optimised['K']
+    assert k[:3] == (1.1e-5, (0.0, 1.1e-5), 'upper_bound') and k.source == 'curve'
+    assert 'capped' in k.reason and any('capped' in n for n in out['gyro_x'].notes)
+    quoted = {v: format_quoted('K', 'gyro', v, digits=3) for v in (1.1e-5, 1.6e-5)}
+    assert f'upper bound, {quoted[1.1e-5]}, not' in warnings[0]
+    assert quoted[1.6e-5] not in warnings[0]
 
 
 def test_an_axis_the_temperature_explains_is_left_to_the_thermal_part():

@@ -297,6 +297,7 @@ def test_a_record_too_short_gives_no_degenerate_bounds():
 
 
 def test_an_estimate_reaching_zero_is_a_bound_and_bounds_stay_under_the_curve():
+    from imu_allan.core.fit.caps import curve_caps
     from imu_allan.core.fit.params import bound_by_curve
     from imu_allan.core.fit.result import Param
     from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
@@ -309,7 +310,7 @@ def test_an_estimate_reaching_zero_is_a_bound_and_bounds_stay_under_the_curve():
            'T_B': Param(2.0, (1.0, 4.0), 'estimate', 's'),
            'K': Param(100 * k_cap, (0.0, 100 * k_cap), 'upper_bound', 'u')}
     notes: list = []
-    out = bound_by_curve(opt, tau, avar, edf, notes)
+    out = bound_by_curve(opt, curve_caps(tau, avar, edf), notes)
     assert out['N'] == opt['N']
     assert out['B'][:4] == (b_cap / 1.5, (0.0, b_cap / 1.5), 'upper_bound', 'u')
     assert out['B'].reason == 'its 95 % interval reaches 0: upper bound'

@@ -15,6 +15,7 @@ from dataclasses import replace
 import math
 
 from imu_allan import AXES
+from imu_allan.core.fit.caps import cap_fit
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.noise.units import format_quoted, sensor_of
 from imu_allan.core.rules import DRIFT_SIMS
@@ -66,8 +67,8 @@ def drift_axes(fits: dict, samples, raw_rate: float | None, thermal: dict) -> tu
                f'{k.value:.3g} [{k.ci95[0]:.3g}, {k.ci95[1]:.3g}] is its upper end')
         bound = Param(float(k.ci95[1]), (0.0, float(k.ci95[1])), 'upper_bound', k.unit,
                       k.source, why)
-        out[axis] = replace(fit, optimised={**fit.optimised, 'K': bound})
-        warnings.append(_warning(axis, k, check.p_value))
+        out[axis] = cap_fit(replace(fit, optimised={**fit.optimised, 'K': bound}))
+        warnings.append(_warning(axis, k, out[axis].optimised['K'].value, check.p_value))
     return out, tuple(warnings)
 
 
@@ -77,13 +78,13 @@ def _k_estimate(fit: AxisFit | None) -> bool:
     return p is not None and p.kind == 'estimate' and math.isfinite(p.ci95[1])
 
 
-def _warning(axis: str, k: Param, p_value: float) -> str:
+def _warning(axis: str, k: Param, bound: float, p_value: float) -> str:
     sensor = sensor_of(axis)
     return (f'{SLOW_DRIFT} on {axis}: its bias drifts slowly (a warming, a temperature '
             f'cycle) where the curve reads a random walk; the random walk of the record lies '
             f'in its slowest part only ({_p(p_value)}, core/search/drift.py), so K is '
             f'reported as a 95 % upper bound, '
-            f'{format_quoted("K", sensor, k.ci95[1], digits=3)}, not the estimate '
+            f'{format_quoted("K", sensor, bound, digits=3)}, not the estimate '
             f'{format_quoted("K", sensor, k.value, digits=3)}; record the temperature '
             'and pass it (a temperature CSV column or topic: docs/thermal.md) so the drift '
             'is regressed out, or record longer')

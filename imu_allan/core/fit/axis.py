@@ -15,6 +15,7 @@ from imu_allan.core.allan.curve import AllanCurve
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
 from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.nominal import nominal_fit
+from imu_allan.core.fit.caps import curve_caps
 from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported, bound_by_curve
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design, fit_fixed_weights, Fitter, Slot, Solution
@@ -297,7 +298,8 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
     past = whole[0] >= tau[0]
-    optimised = bound_by_curve(optimised, whole[0][past], whole[1][past], whole[2][past], notes)
+    caps = curve_caps(whole[0][past], whole[1][past], whole[2][past])
+    optimised = bound_by_curve(optimised, caps, notes)
     if dof > 0 and chi2_sf(chi2_value, dof) < P_CONSISTENT:
         notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
                      f'{dof} dof): a missing effect? (imu-allan diagnose)')
@@ -316,7 +318,8 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                    terms=tuple(s.label for s in slots if s.label in supported),
                    notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
                    avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
-                   avar_meas=avar, edf=edf, components=components, pinned=tuple(pinned))
+                   avar_meas=avar, edf=edf, components=components, pinned=tuple(pinned),
+                   caps=caps)
 
 
 def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple:

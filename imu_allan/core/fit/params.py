@@ -6,7 +6,8 @@ do not support get a one-sided 95 % upper bound from the chi-square profile of t
 level (or "not identified" where the record cannot constrain them).  Then
 :func:`bound_by_curve` makes the bounds honest on a short record: an estimate of N, B or
 K whose interval reaches 0 is only an upper bound (its interval's upper end), and no
-bound of B or K lies above the bound the measured curve itself sets.
+bound of N, B or K lies above the bound the measured curve itself sets
+(:mod:`imu_allan.core.fit.caps`, which keeps it so for the bounds later steps make).
 """
 
 import math
@@ -15,10 +16,10 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtr
 
-from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
 from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.fit.intervals import _profile_interval
-from imu_allan.core.fit.result import _unit, Param
+from imu_allan.core.fit.caps import cap_bounds
+from imu_allan.core.fit.result import _unit, CurveCaps, Param
 from imu_allan.core.fit.solver import _design, Fitter, Slot, Solution
 from imu_allan.core.noise.shapes import GM_PEAK_TAU
 from imu_allan.core.noise.terms import base_name, TERMS
@@ -205,30 +206,22 @@ def _one_sided_bound(c_obs: float, v0: float, v1: float, v2: float) -> float:
     return float(brentq(lambda c: prob(c) - 0.05, lo, hi, xtol=1e-6 * hi))
 
 
-def bound_by_curve(optimised: dict, tau: np.ndarray, avar: np.ndarray, edf: np.ndarray,
-                   notes: list) -> dict:
+def bound_by_curve(optimised: dict, caps: CurveCaps, notes: list) -> dict:
     """
-    Turn estimates that may be 0 into bounds, and cap B and K at the curve's own bounds.
+    Turn estimates that may be 0 into bounds, and cap the bounds at the curve's own.
 
     - An estimate of N, B or K whose 95 % interval reaches 0 does not show its term: it
       is reported as the upper bound at the interval's upper end (B's T_B is then not
       identified).
-    - No term exceeds the whole curve: K <= min sqrt(3 AVAR_hi / tau) (IEEE Std 952 C.1
-      slope +1/2) and B <= min sqrt(AVAR_hi) / 0.664 (annex C floor), AVAR_hi each
-      point's joint 95 % upper limit (:func:`imu_allan.core.fit.trust.avar_upper`).  A
-      profile bound above them (a short record, where the profile of a term the data
-      do not see runs up to hundreds of times the floor) is replaced by them.
+    - No bound exceeds what the whole curve allows
+      (:func:`imu_allan.core.fit.caps.cap_bounds`).
 
     Parameters
     ----------
     optimised : dict of str to Param
         The reported parameters, by symbol.
-    tau : numpy.ndarray
-        (k,) fitted averaging times [s].
-    avar : numpy.ndarray
-        (k,) measured AVAR at them [unit^2].
-    edf : numpy.ndarray
-        (k,) their equivalent degrees of freedom.
+    caps : CurveCaps
+        What the curve allows (:func:`imu_allan.core.fit.caps.curve_caps`).
     notes : list of str
         Appended with one line per change.
 
@@ -255,19 +248,4 @@ def bound_by_curve(optimised: dict, tau: np.ndarray, avar: np.ndarray, edf: np.n
         if sym == 'B' and out.get('T_B') is not None and out['T_B'].kind != 'not_identified':
             out['T_B'] = Param(math.nan, (math.nan, math.nan), 'not_identified',
                                out['T_B'].unit, 'fitted', 'B is only an upper bound')
-    if not np.size(tau):
-        return out
-    caps = {'K': (curve_k_bound(tau, avar, edf), 'what the curve itself allows (a random '
-                  'walk under its 95 % upper band at every tau)'),
-            'B': (floor_b_bound(avar, edf), "what the curve's floor allows (its 95 % upper "
-                  'band / 0.664)')}
-    for sym, (cap, what) in caps.items():
-        p = out.get(sym)
-        if p is None or p.kind != 'upper_bound' or not (math.isfinite(cap) and cap > 0):
-            continue
-        if not p.value <= cap:
-            out[sym] = Param(cap, (0.0, cap), 'upper_bound', p.unit, 'curve',
-                             f'the bound lay above {what}: capped there')
-            notes.append(f'{sym}: the bound {p.value:.3g} lay above {what}, {cap:.3g}: '
-                         'capped there')
-    return out
+    return cap_bounds(out, caps, notes)

@@ -66,6 +66,33 @@ def json_floats(a) -> list:
     return [json_num(v) for v in np.asarray(a, dtype=np.float64).ravel()]
 
 
+class CurveCaps(NamedTuple):
+    """
+    The largest N, B and K a measured curve allows, jointly at 95 % over its points.
+
+    Every term only adds to the Allan variance, so no term's line lies above the true
+    curve: white noise N^2 / tau, a random walk K^2 tau / 3 (IEEE Std 952 C.1 slopes)
+    and a bias instability's peak 0.664^2 B^2 (annex C) are each at most the true AVAR
+    at every tau; each point is taken at its joint upper limit
+    (:func:`imu_allan.core.allan.edf.avar_upper`).  Made by
+    :func:`imu_allan.core.fit.params.curve_caps` from the points past the sensor's filter.
+
+    Attributes
+    ----------
+    N : float
+        min sqrt(AVAR_hi tau) [unit s^0.5]; inf without a curve (no cap).
+    B : float
+        min sqrt(AVAR_hi) / 0.664 [unit].
+    K : float
+        min sqrt(3 AVAR_hi / tau) [unit / s^0.5].
+
+    """
+
+    N: float = math.inf
+    B: float = math.inf
+    K: float = math.inf
+
+
 def _no_curve() -> np.ndarray:
     """Return the curve arrays of a fit made without one: empty."""
     return np.empty(0)
@@ -136,6 +163,9 @@ class AxisFit:
         Rival models that fit about as well (:mod:`imu_allan.core.search.choice`):
         'model' (what differs), 'criterion_rise' (chi-square or -2 ln L + BIC above
         the chosen model) and their N, B, T_B, K [SI].
+    caps : CurveCaps
+        What the measured curve allows of N, B and K: no upper bound in ``optimised``
+        lies above them (:func:`imu_allan.core.fit.params.cap_fit`).
     p_value : float or None
         Chi-square p-value of ``chi2`` on ``dof`` (None without degrees of freedom);
         computed where the fit is made, so a process that only reports it needs no scipy.
@@ -162,6 +192,7 @@ class AxisFit:
     fit_values: dict = field(default_factory=dict)
     b_floor: Param | None = None
     rivals: tuple = ()
+    caps: CurveCaps = CurveCaps()
     p_value: float | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:

@@ -14,6 +14,7 @@ import numpy as np
 from imu_allan.core.allan.quantiles import chi2_sf
 from imu_allan.core.fit.axis import (check_curve, filter_identified, filtered_start, fit_axis,
                                      n_params, term_slot, thin)
+from imu_allan.core.fit.caps import cap_fit
 from imu_allan.core.fit.criterion import claim_penalty
 from imu_allan.core.fit.judge import shows_quantization
 from imu_allan.core.fit.result import AxisFit
@@ -398,7 +399,7 @@ def _level_above_zero(fit: AxisFit, label: str) -> bool:
 
 def _finish(fit: AxisFit, steps: list, notes: list, unit: str,
             problems: tuple = ()) -> AxisFit:
-    """Attach the effects, judge the fit, and fall back to the curve where it fails."""
+    """Attach the effects, judge the fit, fall back to the curve where it fails, cap bounds."""
     optimised = dict(fit.optimised)
     notes = list(dict.fromkeys(list(fit.notes) + notes))    # each once, in order
     flicker = optimised.get('flicker.B')
@@ -411,4 +412,4 @@ def _finish(fit: AxisFit, steps: list, notes: list, unit: str,
     effects = tuple({'effect': s.effect, 'term': s.label, 'chi2_drop': s.chi2_drop,
                      'rival': s.rival, 'evidence': s.evidence} for s in steps)
     fit = replace(fit, optimised=optimised, notes=tuple(notes), effects=effects)
-    return judge_fit(ambiguous_bias(fit), problems)
+    return cap_fit(judge_fit(ambiguous_bias(fit), problems))
