@@ -13,9 +13,9 @@ import numpy as np
 
 from imu_allan.core.allan.curve import AllanCurve
 from imu_allan.core.allan.quantiles import chi2_ppf, chi2_sf, f_ppf
+from imu_allan.core.fit.caps import curve_caps
 from imu_allan.core.fit.criterion import criterion
 from imu_allan.core.fit.nominal import nominal_fit
-from imu_allan.core.fit.caps import curve_caps
 from imu_allan.core.fit.params import _CORE_TERMS, _estimates, _unsupported, bound_by_curve
 from imu_allan.core.fit.result import AxisFit
 from imu_allan.core.fit.solver import _design, fit_fixed_weights, Fitter, Slot, Solution

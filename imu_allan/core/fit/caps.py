@@ -19,7 +19,7 @@ from imu_allan.core.fit.result import AxisFit, CurveCaps, Param
 
 def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> CurveCaps:
     """
-    What the measured curve allows of N, B and K (:class:`CurveCaps`).
+    Return what the measured curve allows of N, B and K (:class:`CurveCaps`).
 
     Parameters
     ----------

@@ -17,8 +17,8 @@ from scipy.optimize import brentq
 from scipy.special import ndtr
 
 from imu_allan.core.allan.quantiles import chi2_ppf
-from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.caps import cap_bounds
+from imu_allan.core.fit.intervals import _profile_interval
 from imu_allan.core.fit.result import _unit, CurveCaps, Param
 from imu_allan.core.fit.solver import _design, Fitter, Slot, Solution
 from imu_allan.core.noise.shapes import GM_PEAK_TAU
