@@ -320,6 +320,31 @@ def test_an_estimate_reaching_zero_is_a_bound_and_bounds_stay_under_the_curve():
     assert len(notes) == 2
 
 
+def test_bounds_made_after_the_fit_are_capped_at_its_curve():
+    # A later step (a rival model, a drift test) makes a bound from an interval's upper
+    # end; cap_fit brings it under the curve's own bound and leaves estimates alone.
+    from dataclasses import replace
+    from imu_allan.core.allan.edf import avar_upper
+    from imu_allan.core.fit.caps import cap_fit, curve_caps
+    from imu_allan.core.fit.result import Param
+    tau = np.geomspace(0.01, 1000.0, 30)
+    avar = 1e-6 / tau + 1e-9 * tau
+    edf = np.geomspace(5e4, 3.0, 30)
+    fit = fit_axis(tau, avar, edf, 100.0, 200_000)
+    assert fit.caps == curve_caps(tau, avar, edf)
+    assert cap_fit(fit) is fit
+    k = fit.optimised['K']
+    late = replace(fit, optimised={**fit.optimised, 'K': Param(
+        10 * fit.caps.K, (0.0, 10 * fit.caps.K), 'upper_bound', k.unit, 'fitted', 'rival')})
+    out = cap_fit(late)
+    assert out.optimised['K'][:3] == (fit.caps.K, (0.0, fit.caps.K), 'upper_bound')
+    assert out.optimised['N'] is fit.optimised['N'] and len(out.notes) == len(fit.notes) + 1
+    assert cap_fit(out) is out
+    # The cap is what a random walk under the joint upper band allows, at every tau.
+    np.testing.assert_allclose(fit.caps.K, np.sqrt(np.min(3 * avar_upper(avar, edf) / tau)),
+                               rtol=1e-12)
+
+
 def test_a_3_min_real_record_reports_no_bound_above_its_own_curve(shared_dir):
     # Issue 35: on 2-3 min of the ADIS16405 the profile bounds of B and K ran up to
     # hundreds of times the curve's own bounds (accel_z K 6.8 m/s^2.5 beside a curve

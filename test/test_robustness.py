@@ -149,3 +149,20 @@ def test_a_search_that_drops_a_step_at_the_end_keeps_its_solution(shared_dir):
                                    seed=0))
     assert summary['ok'], summary.get('message')
     assert all('params' in summary['axes'][a] for a in AXES)
+    # accel_z's N, an upper bound, had lain 2.3x above the curve's joint band at 0.01 s.
+    assert not [(a, o) for a in AXES for o in meta.over_curve(summary['axes'][a])]
+
+
+@pytest.mark.slow
+def test_bounds_made_after_the_fit_stay_under_the_curve(shared_dir):
+    # Clean run 6: accel_y's K, an upper bound because a slower Gauss-Markov process fits
+    # as well (core/search/choice.py), lay 1.12x above the joint band at 251 s; it is
+    # capped where the fit's own bounds are (core/fit/caps.py).
+    from imu_allan import AXES
+    from imu_allan.io.csv_io import read_csv
+    data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run6.csv.gz',
+                    columns=list(AXES))
+    summary = meta.analyse(Record(data.t_s, data.samples))
+    k = summary['axes']['accel_y']['params']['K']
+    assert k['kind'] == 'upper_bound'
+    assert not [(a, o) for a in AXES for o in meta.over_curve(summary['axes'][a])]
