@@ -250,6 +250,12 @@ def frozen(rec: Record, seconds: float, rng: np.random.Generator) -> Record:
     return rec._replace(samples=y)
 
 
+def coarse_grid(rec: Record, sds: float, rng: np.random.Generator) -> Record:
+    """Round every axis to a grid of ``sds`` sds of one sample (a logger's few digits)."""
+    step = sds * _sigma(rec)
+    return rec._replace(samples=np.round(rec.samples / step) * step)
+
+
 def knocks(rec: Record, count: float, rng: np.random.Generator) -> Record:
     """Add one-second knocks, ``count`` of them (a door, a footstep: 0.5 rad/s, 2 m/s^2)."""
     y = rec.samples.copy()
@@ -438,6 +444,7 @@ DEGRADATIONS = {d.name: d for d in (
     _d('spikes', spikes, (0.001, 0.01, 0.1), '%', ('spike', 'outlier')),
     _d('zero_rows', zero_rows, (0.1, 1.0, 10.0), '%', ('spike', 'outlier', 'zero')),
     _d('frozen', frozen, (3.0, 30.0, 300.0), 's', ('frozen', 'repeat', 'stuck', 'constant')),
+    _d('coarse_grid', coarse_grid, (0.5, 2.0, 8.0), 'sd', ('resolution', 'grid', 'round')),
     _d('knocks', knocks, (1.0, 5.0, 20.0), 'count', ('motion', 'still', 'stationary')),
     _d('warmup_exp', warmup_exp, (5.0, 10.0, 30.0), 'min', _SETTLE),
     _d('warmup_ramp', warmup_ramp, (5.0, 10.0, 30.0), 'min', _SETTLE),

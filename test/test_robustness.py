@@ -27,7 +27,8 @@ import metamorphic as meta  # noqa: E402, I100
 RATE_HZ, DURATION_S = 100.0, 900.0
 #: (degradation, size) run here; the full sweep is bench/metamorphic.py.
 CASES = [('drop_random', 2.0), ('duplicate', 2.0), ('hold', 3.0), ('warmup_exp', 5.0),
-         ('thermal_no_temp', 2.0), ('gyro_deg', 0.0), ('restart', 5.0), ('zero_rows', 10.0)]
+         ('thermal_no_temp', 2.0), ('gyro_deg', 0.0), ('restart', 5.0), ('zero_rows', 10.0),
+         ('coarse_grid', 2.0)]
 #: Cases the rule does not hold for yet, and the work that is to fix them.
 PENDING: dict = {}
 

@@ -160,3 +160,15 @@ LOST_MIN_WINDOWS = 20
 #: MPU-6050 record: 0.028), messages lost one by one at random with probability p add
 #: p (10 %: 0.142), in runs many times p (2 % in runs of 20: 0.79).
 LOST_FANO = 0.06
+
+# ------------------------------------------------- values on a coarse grid
+
+#: A grid (the least step between distinct values: an LSB, the digits of a CSV) is named
+#: where rounding to it raises N by this share or more: 1 %, beside the 1-3 % half-width
+#: of N's interval on an hour's record (an ADIS16405's 3.3 mg accelerometer LSB, about
+#: one sd of a sample, raises N 4-6 %).
+ROUNDING_N_RAISE = 0.01
+#: A grid step this many sds of one sample or more leaves the white noise unresolved:
+#: rounding is no additive noise once the sd is below half a step (Widrow and Kollar,
+#: Quantization Noise, 2008), and a simulated axis rounded to 8 sds read N at 0.49x.
+ROUNDING_RATIO_MAX = 2.0

@@ -33,6 +33,7 @@ from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clipping import CLIPPED, KEEP_SHARE, left_out
 from imu_allan.pipeline.drift_report import drift_axes, SLOW_DRIFT
+from imu_allan.pipeline.resolution import COARSE_GRID, resolution_warnings
 from imu_allan.pipeline.session import Session
 from imu_allan.pipeline.thermal_report import thermal_axes, THERMAL_DRIFT
 from imu_allan.pipeline.workers import worker_pool
@@ -277,8 +278,8 @@ class AnalysisResult:
         """Consumer-file text with a comment per untrusted axis and undetermined value."""
         lines = [f'# WARNING {c}' for a in AXES
                  for c in [self.fits[a].trust_comment(a) if self.fits.get(a) else ''] if c]
-        lines += [f'# WARNING {w}' for w in self.warnings
-                  if w.startswith((SHORT_RECORD, THERMAL_DRIFT, SLOW_DRIFT)) or CLIPPED in w]
+        lines += [f'# WARNING {w}' for w in self.warnings if CLIPPED in w
+                  or w.startswith((SHORT_RECORD, THERMAL_DRIFT, SLOW_DRIFT, COARSE_GRID))]
         if not lines:
             return text
         head, sep, rest = text.partition('\n')
@@ -446,7 +447,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
     # and so is a consumer value the record cannot determine.
     return replace(result, warnings=result.warnings + tuple(result.trust_warnings())
                    + tuple(short_record_warnings(fits, plans, float(session.duration_s)))
-                   + hot + drifts)
+                   + hot + drifts + resolution_warnings(session.stats.value_grid, fits,
+                                                        session.rate_hz))
 
 
 def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:

@@ -202,6 +202,11 @@ class HygieneStats:
         (:mod:`imu_allan.pipeline.zeros`).
     zero_filled : dict
         Per axis, the exact zeros in those rows.
+    value_grid : dict
+        Per axis, the least step between distinct values of its first rows [unit]: the
+        grid its values lie on (an LSB, the digits a logger writes), tiny for values on
+        none (:mod:`imu_allan.pipeline.zeros` measures it,
+        :mod:`imu_allan.pipeline.resolution` judges it).
 
     """
 
@@ -237,6 +242,7 @@ class HygieneStats:
     clipped: dict = field(default_factory=dict)
     n_zero_rows: int = 0
     zero_filled: dict = field(default_factory=dict)
+    value_grid: dict = field(default_factory=dict)
 
     @classmethod
     def restore(cls, state) -> 'HygieneStats':
@@ -247,7 +253,8 @@ class HygieneStats:
             # clipping and zero-filled fields were recognised: none were.
             state = {'n_short_gaps': 0, 'n_filled': 0, 'n_warmup': 0, 'warmup_s': 0.0,
                      'warmup_axes': [], 'coarse_tick_s': 0.0, 'n_lost_in_ticks': 0,
-                     'clipped': {}, 'n_zero_rows': 0, 'zero_filled': {}, **state}
+                     'clipped': {}, 'n_zero_rows': 0, 'zero_filled': {}, 'value_grid': {},
+                     **state}
         if not isinstance(state, dict) or set(state) != {f.name for f in fields(cls)}:
             raise InputError('the counters are incomplete or unknown')
         stats = cls(**state)
@@ -261,6 +268,10 @@ class HygieneStats:
             elif f.name in ('held', 'clipped'):
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, (int, float)) and 0 <= v <= 1
+                              for v in value.values()))
+            elif f.name == 'value_grid':
+                ok = (isinstance(value, dict) and set(value) <= set(AXES)
+                      and all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0
                               for v in value.values()))
             elif f.name == 'irregular_stamps':
                 ok = isinstance(value, bool)

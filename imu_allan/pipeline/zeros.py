@@ -201,6 +201,7 @@ class ZeroWatch:
             steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
             if steps.size:
                 self.quantum[j] = min(self.quantum[j], float(steps.min()))
+                self.stats.value_grid[AXES[j]] = float(self.quantum[j])
         n_zero = zero.sum(axis=0)
         # Values within tol of 0 are the zero level computed in another order.
         tols = LEVEL_TOL * np.abs(samples).max(axis=0, initial=0.0)
