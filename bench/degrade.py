@@ -419,6 +419,7 @@ _GAP = ('gap of', 'gaps of', 'missing', 'messages lost', 'samples lost', 'were l
 _STAMP = ('stamp', 'clock', 'irregular', 'jitter', 'order', 'backward', 'rate')
 _SETTLE = ('settl', 'warm', 'transient', 'drift', 'start')
 _THERMAL = ('temperature', 'thermal', 'drift')
+_SHORT = ('short', 'longer record')
 _UNIT = ('unit', '--units')
 
 
@@ -456,8 +457,7 @@ DEGRADATIONS = {d.name: d for d in (
     _d('accel_g', accel_g, (2.0, 20.0, 0.0), 'min (0: all)', _UNIT, declared=True),
     _d('accel_mg', accel_mg, (2.0, 20.0, 0.0), 'min (0: all)', _UNIT, declared=True),
     _d('stamps_ms', stamps_ms, (2.0, 20.0, 0.0), 'min (0: all)', _UNIT, declared=True),
-    _d('first_minutes', first_minutes, (2.0, 10.0, 30.0), 'min',
-       ('short', 'longer record')),
+    _d('first_minutes', first_minutes, (2.0, 10.0, 30.0), 'min', _SHORT),
     _d('low_rate', low_rate, (10.0, 4.0, 1.0), 'Hz', ('rate', 'short', 'longer record')),
     _d('drop_and_gap', drop_and_gap, (0.5, 2.0, 10.0), '%', _GAP),
     _d('hold_and_drop', hold_and_drop, (2.0, 3.0, 5.0), 'x', _GAP + ('held', 'repeat')),

@@ -30,9 +30,10 @@ section of result.json) the degraded analysis is one of:
 and per case ``REFUSED`` (an InputError on a usable record; a unit mistake refused with
 its ``--units`` fix is ``warned``), ``over``: a reported bound (an upper bound of N, B or
 K, or a consumer's white-noise / random-walk value taken at a bound) whose Allan
-deviation lies above the record's own upper 95 % ADEV band (times 1.1) at some tau
-(estimates above it are counted apart: one point's band may miss a line fitted to many
-by chance), and ``detected``: a top-level warning with a cause word that the clean
+deviation lies above the record's own joint upper 95 % ADEV band at some tau the fit
+reads (from its first fitted tau on: the shorter ones, flattened by the sensor's filter
+or by held values, lie below the white line by construction; estimates above the band
+are counted apart), and ``detected``: a top-level warning with a cause word that the clean
 record does not have (the power).
 
 Printed: a markdown table per degradation and size (counts over the inputs), then
@@ -155,6 +156,7 @@ def summarise(result) -> dict:
             entry['white'] = [_num(rep.white.value), rep.white.kind]
             entry['random_walk'] = [_num(rep.random_walk.value), rep.random_walk.kind]
             entry['trusted'] = bool(fit.trusted)
+            entry['fit_tau0_s'] = float(fit.tau_s[0]) if fit.tau_s.size else 0.0
         axes[axis] = entry
     return {'ok': True, 'warnings': list(result.warnings), 'n_samples': int(result.n_samples),
             'duration_s': float(result.duration_s), 'rate_hz': float(result.rate_hz),
@@ -256,14 +258,18 @@ def over_curve(entry: dict, kinds: tuple = ('upper_bound', 'curve_bound'),
     if 'params' not in entry or 'tau_s' not in entry:
         return []
     tau = np.asarray(entry['tau_s'], dtype=np.float64)
+    # The taus the fit reads: the shorter ones, flattened by the sensor's filter or by
+    # held values, lie below the white line by construction.
+    read = tau >= entry.get('fit_tau0_s', 0.0) * (1.0 - 1e-9)
     if joint:
         adev = np.array([np.nan if v is None else v for v in entry['adev']])
         edf = np.array([np.nan if v is None else v for v in entry['edf']])
-        ok = np.isfinite(adev) & np.isfinite(edf) & (edf > 0)
+        ok = np.isfinite(adev) & np.isfinite(edf) & (edf > 0) & read
         tau = tau[ok]
         hi = np.sqrt(avar_upper(adev[ok] ** 2, edf[ok]))
     else:
         hi = np.array([np.nan if v is None else v for v in entry['adev_hi']])
+        hi = np.where(read, hi, np.nan)
     ok = np.isfinite(hi) & (hi > 0)
     if not ok.any():
         return []
@@ -289,6 +295,9 @@ def compare(clean: dict, degraded: dict, deg_name: str) -> dict:
     """Classify one degraded analysis against the clean one (the module docstring)."""
     deg_key = deg_name.split('+')[0]
     cause = DEGRADATIONS[deg_key].cause
+    if deg_name.endswith('+declared'):
+        # The units declared, what is left is the record's first minutes (the size).
+        cause = DEGRADATIONS['first_minutes'].cause
     if not degraded['ok']:
         unit_refusal = (degraded['error'] == 'UnitMistake'
                         and DEGRADATIONS[deg_key].declared and not deg_name.endswith('+declared'))

@@ -1,8 +1,8 @@
 """
-What the measured curve allows: no reported bound lies above the record's own curve.
+What the measured curve allows: no bound of B or K lies above the record's own curve.
 
-Every noise term only adds to the Allan variance, so each is bounded by the whole curve
-(:class:`imu_allan.core.fit.result.CurveCaps`).  :func:`curve_caps` reads the bounds off
+Every noise term but a sensor's filter only adds to the Allan variance, so B and K are
+bounded by the whole curve (:class:`imu_allan.core.fit.result.CurveCaps`).  :func:`curve_caps` reads the bounds off
 every point past the sensor's filter once, where the fit is made; :func:`cap_fit` caps
 the upper bounds each later step makes (a rival model, the trust fallback, a drift
 test) at them.  numpy only: the pipeline imports it where scipy is not loaded.
@@ -13,13 +13,13 @@ import math
 
 import numpy as np
 
-from imu_allan.core.allan.edf import avar_upper, curve_k_bound, floor_b_bound
+from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
 from imu_allan.core.fit.result import AxisFit, CurveCaps, Param
 
 
 def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> CurveCaps:
     """
-    Return what the measured curve allows of N, B and K (:class:`CurveCaps`).
+    Return what the measured curve allows of B and K (:class:`CurveCaps`).
 
     Parameters
     ----------
@@ -38,21 +38,18 @@ def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> CurveCaps:
     """
     if not np.size(tau):
         return CurveCaps()
-    n_cap = float(np.sqrt(np.min(avar_upper(avar, edf) * tau)))
-    return CurveCaps(n_cap, floor_b_bound(avar, edf), curve_k_bound(tau, avar, edf))
+    return CurveCaps(floor_b_bound(avar, edf), curve_k_bound(tau, avar, edf))
 
 
 #: What each cap of :class:`CurveCaps` is, for the note of a capped bound.
-_CAP_WHAT = {'N': 'what the curve itself allows (white noise under its 95 % upper band '
-                  'at every tau)',
-             'K': 'what the curve itself allows (a random walk under its 95 % upper band '
+_CAP_WHAT = {'K': 'what the curve itself allows (a random walk under its 95 % upper band '
                   'at every tau)',
              'B': "what the curve's floor allows (its 95 % upper band / 0.664)"}
 
 
 def cap_bounds(optimised: dict, caps: CurveCaps, notes: list) -> dict:
     """
-    Cap every upper bound of N, B and K at what the measured curve allows.
+    Cap every upper bound of B and K at what the measured curve allows.
 
     A bound from a profile, from a rival model or from a drift test is an interval's
     upper end; on a short record it can lie far above the curve (the profile of a term
@@ -75,7 +72,7 @@ def cap_bounds(optimised: dict, caps: CurveCaps, notes: list) -> dict:
 
     """
     out = dict(optimised)
-    for sym in ('N', 'B', 'K'):
+    for sym in ('B', 'K'):
         p, cap = out.get(sym), getattr(caps, sym)
         if (p is None or p.kind != 'upper_bound' or not (math.isfinite(cap) and cap > 0)
                 or p.value <= cap):

@@ -68,27 +68,25 @@ def json_floats(a) -> list:
 
 class CurveCaps(NamedTuple):
     """
-    The largest N, B and K a measured curve allows, jointly at 95 % over its points.
+    The largest B and K a measured curve allows, jointly at 95 % over its points.
 
-    Every term only adds to the Allan variance, so no term's line lies above the true
-    curve: white noise N^2 / tau, a random walk K^2 tau / 3 (IEEE Std 952 C.1 slopes)
-    and a bias instability's peak 0.664^2 B^2 (annex C) are each at most the true AVAR
-    at every tau; each point is taken at its joint upper limit
-    (:func:`imu_allan.core.allan.edf.avar_upper`).  Made by
-    :func:`imu_allan.core.fit.params.curve_caps` from the points past the sensor's filter.
+    Every term of the model but a sensor's filter only adds to the Allan variance, so a
+    random walk's line K^2 tau / 3 (IEEE Std 952 C.1 slope +1/2) and a bias
+    instability's peak 0.664^2 B^2 (annex C) each lie under the true AVAR at every tau;
+    each point is taken at its joint upper limit
+    (:func:`imu_allan.core.allan.edf.avar_upper`).  (N has no such cap: a filter, which
+    may act far past the taus it visibly flattens, lowers the curve below N's line.)
+    Made by :func:`imu_allan.core.fit.caps.curve_caps` from the points past the filter.
 
     Attributes
     ----------
-    N : float
-        min sqrt(AVAR_hi tau) [unit s^0.5]; inf without a curve (no cap).
     B : float
-        min sqrt(AVAR_hi) / 0.664 [unit].
+        min sqrt(AVAR_hi) / 0.664 [unit]; inf without a curve (no cap).
     K : float
         min sqrt(3 AVAR_hi / tau) [unit / s^0.5].
 
     """
 
-    N: float = math.inf
     B: float = math.inf
     K: float = math.inf
 
@@ -164,7 +162,7 @@ class AxisFit:
         'model' (what differs), 'criterion_rise' (chi-square or -2 ln L + BIC above
         the chosen model) and their N, B, T_B, K [SI].
     caps : CurveCaps
-        What the measured curve allows of N, B and K: no upper bound in ``optimised``
+        What the measured curve allows of B and K: no upper bound in ``optimised``
         lies above them (:func:`imu_allan.core.fit.params.cap_fit`).
     p_value : float or None
         Chi-square p-value of ``chi2`` on ``dof`` (None without degrees of freedom);

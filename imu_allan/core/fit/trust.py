@@ -175,10 +175,11 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
         bound = float(np.sqrt(np.max(avar[i:j + 1] * tau[i:j + 1])))
         n_new = Param(bound, (0.0, bound), 'upper_bound', unit_n, 'curve',
                       f"{why}: the curve's own bound")
-    b_value = _floor_bound(fit)
+    # Within what the whole curve allows (AxisFit.caps), so the model file agrees.
+    b_value = min(_floor_bound(fit), fit.caps.B)
     b_new = Param(b_value, (0.0, b_value), 'upper_bound', unit_b, 'curve',
                   f'{why}: the ADEV floor')
-    k_bound = curve_k_bound(tau, avar, fit.edf)
+    k_bound = min(curve_k_bound(tau, avar, fit.edf), fit.caps.K)
     k_new = Param(k_bound, (0.0, k_bound), 'upper_bound', unit_k, 'curve',
                   f"{why}: the curve's own bound")
     new = {'N': n_new, 'B': b_new, 'K': k_new}

@@ -35,7 +35,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from imu_allan.core.fit.caps import curve_caps
+from imu_allan.core.allan.edf import curve_k_bound
 from imu_allan.core.noise.model import avar_model
 from imu_allan.core.noise.terms import TERMS, terms_of
 from imu_allan.core.noise.values import AxisNoise
@@ -279,21 +279,27 @@ def _curve_bound(source, symbol: str) -> float:
     """
     Bound of N or K that the measured curve itself sets, 0.0 without a curve.
 
-    No term can exceed the whole AVAR at any tau: N^2 / tau <= AVAR(tau) and
-    K^2 tau / 3 <= AVAR(tau) (IEEE Std 952 C.1 slopes), each point taken at its joint
-    95 % upper limit: the fit's :attr:`~imu_allan.core.fit.result.AxisFit.caps`, read
-    once off every point past the sensor's filter; from the points a fit keeps
-    where it has none (:func:`imu_allan.core.fit.caps.curve_caps`).
+    No term can exceed the whole AVAR at any tau: N^2 / tau <= AVAR(tau) past the
+    sensor's filter, and K^2 tau / 3 <= AVAR(tau) (IEEE Std 952 C.1 slopes), so
+    N <= min sqrt(AVAR tau) over the fitted points; K's bound, with each point at its
+    joint 95 % upper limit, is the fit's
+    :attr:`~imu_allan.core.fit.result.AxisFit.caps` (read once off every point past the
+    filter), or from the points a fit keeps where it has none
+    (:func:`imu_allan.core.allan.edf.curve_k_bound`).
     """
+    tau, avar = getattr(source, 'tau_s', None), getattr(source, 'avar_meas', None)
+    if tau is None or avar is None or not np.size(tau):
+        return 0.0
+    tau, avar = np.asarray(tau, dtype=np.float64), np.asarray(avar, dtype=np.float64)
+    if symbol == 'N':
+        return float(np.sqrt(np.min(avar * tau)))
     caps = getattr(source, 'caps', None)
-    if caps is None or not math.isfinite(getattr(caps, symbol)):
-        tau, avar = getattr(source, 'tau_s', None), getattr(source, 'avar_meas', None)
-        edf = getattr(source, 'edf', None)
-        if tau is None or avar is None or edf is None or not np.size(tau):
-            return 0.0
-        caps = curve_caps(*(np.asarray(a, dtype=np.float64) for a in (tau, avar, edf)))
-    value = float(getattr(caps, symbol))
-    return value if math.isfinite(value) else 0.0
+    if caps is not None and math.isfinite(caps.K):
+        return float(caps.K)
+    edf = getattr(source, 'edf', None)
+    if edf is not None and np.size(edf) == tau.size:
+        return curve_k_bound(tau, avar, np.asarray(edf, dtype=np.float64))
+    return float(np.sqrt(np.min(3.0 * avar / tau)))
 
 
 def _gauss_markov(params: dict) -> GaussMarkovState | None:
