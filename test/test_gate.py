@@ -83,6 +83,19 @@ def test_a_record_of_mostly_spikes_is_refused():
         s.check_usable()
 
 
+def test_a_quantised_axis_shifted_off_its_grid_keeps_its_noise_scale():
+    # An axis quantised at twice its noise (most steps 0), plus a slow correction a
+    # driver adds (a warm-up or bias compensation): its 0 steps become tiny, and the
+    # median step, the noise scale, fell to them; every real step was then a spike
+    # (ADIS16405 run 2 with a warm-up ramp: 11 % of accel_y "spikes", refused).
+    t, y = _still(60_000, seed=21)
+    lsb = 2.0 * SIGMA
+    shift = np.linspace(0.0, 0.3, t.size)[:, None] * lsb
+    s = _feed(Session(), t, np.round(y / lsb) * lsb + shift)
+    assert s.stats.n_spikes <= 6, s.stats.spikes
+    s.check_usable()
+
+
 # -- held values ----------------------------------------------------------------------
 
 #: Quanta of an ADIS16405 (0.05 deg/s, 3.33 mg) [rad/s, m/s^2].

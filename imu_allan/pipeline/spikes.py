@@ -47,6 +47,11 @@ _SCREEN = 0.6
 _THIN = 4
 #: Median |x| of a standard normal (MAD to sigma).
 _MAD = 0.6744897501960817
+#: Upper quartile of |x| of a standard normal.
+_Q75 = 1.1503493803760079
+#: Steps below this share of the upper quartile are the pile at 0 of a quantised axis
+#: (Gaussian steps: 0.05 % of them).
+PILE_SHARE = 1e-3
 #: Share of a chunk's steps that must be 0 before held values are looked for, and the
 #: share of the changing steps held (0 at lag 1, a change at a lag past the holds)
 #: that makes an axis held.
@@ -310,8 +315,17 @@ class SpikeFilter:
 
 def _noise_sigma(d: np.ndarray) -> np.ndarray:
     """Noise sigma (n_axes, n_chunks) from absolute first differences (n_axes, n_chunks, m)."""
-    half = d.shape[-1] // 2     # np.partition: a median without np.median's overhead
-    sigma = np.partition(d, half, axis=-1)[..., half] / (_MAD * np.sqrt(2.0))
+    half, upper = d.shape[-1] // 2, (3 * d.shape[-1]) // 4
+    part = np.partition(d, (half, upper), axis=-1)  # without np.median's overhead
+    median, quartile = part[..., half], part[..., upper]
+    # Half the steps or more (nearly) 0: a sensor quantised at about its noise; its
+    # scale is the upper quartile.  A driver that shifts such values off the grid (a
+    # warm-up or bias correction, a mounting rotation) turns the 0 steps into tiny
+    # ones, and the median fell to them (a warm-up on the ADIS16405's accel_y: 11 % of
+    # the samples "spikes", refused).  Spikes, at most a quarter of the steps where
+    # the record is usable, leave the median alone.
+    pile = (d < PILE_SHARE * quartile[..., None]).mean(axis=-1) >= 0.5
+    sigma = np.where(pile, quartile / _Q75, median / _MAD) / np.sqrt(2.0)
     # Quantised sensors: most steps may be 0; one quantum is the least noise there is.
     quantum = np.where(d > 0, d, np.inf).min(axis=-1) / np.sqrt(2.0)
     return np.maximum(sigma, np.where(np.isfinite(quantum), quantum, np.nan))

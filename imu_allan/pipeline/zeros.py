@@ -55,6 +55,10 @@ ZERO_FILLED = 'zero-filled fields'
 LEVEL_TOL = 1e-9
 #: Rows over which the least step between levels (the LSB) is looked for.
 LEVEL_ROWS = 1 << 17
+#: A least step of this share of the axis' sd or more is a grid (``value_grid``): values
+#: on none have steps of about sd / rows (1e-5 sd after a few thousand rows), a grid
+#: that matters (:mod:`imu_allan.pipeline.resolution`) a tenth of the sd or more.
+GRID_MIN = 1e-3
 #: The axes of each sensor, whose fields an incomplete packet zeroes together.
 SENSORS = (slice(0, 3), slice(3, 6))
 
@@ -201,7 +205,6 @@ class ZeroWatch:
             steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
             if steps.size:
                 self.quantum[j] = min(self.quantum[j], float(steps.min()))
-                self.stats.value_grid[AXES[j]] = float(self.quantum[j])
         n_zero = zero.sum(axis=0)
         # Values within tol of 0 are the zero level computed in another order.
         tols = LEVEL_TOL * np.abs(samples).max(axis=0, initial=0.0)
@@ -234,6 +237,19 @@ class ZeroWatch:
                     self.near_count[j, side] += c
                 else:
                     self.near[j, side], self.near_count[j, side] = v, c
+
+        self._note_grid()
+
+    def _note_grid(self) -> None:
+        """Keep ``stats.value_grid`` to the axes whose least step is a grid."""
+        with np.errstate(invalid='ignore', divide='ignore'):
+            n = np.maximum(self.n, 1)
+            sd = np.sqrt(np.maximum(self.sums[2] / n - (self.sums[1] / n) ** 2, 0.0))
+        for j, axis in enumerate(AXES):
+            if np.isfinite(self.quantum[j]) and self.quantum[j] >= GRID_MIN * sd[j]:
+                self.stats.value_grid[axis] = float(self.quantum[j])
+            else:
+                self.stats.value_grid.pop(axis, None)
 
     def _note(self, rows: np.ndarray, n_rows: int) -> None:
         """Count the zero-filled rows (m, 6); say so, with the totals so far."""

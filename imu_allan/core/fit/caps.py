@@ -2,10 +2,11 @@
 What the measured curve allows: no bound of B or K lies above the record's own curve.
 
 Every noise term but a sensor's filter only adds to the Allan variance, so B and K are
-bounded by the whole curve (:class:`imu_allan.core.fit.result.CurveCaps`).  :func:`curve_caps` reads the bounds off
-every point past the sensor's filter once, where the fit is made; :func:`cap_fit` caps
-the upper bounds each later step makes (a rival model, the trust fallback, a drift
-test) at them.  numpy only: the pipeline imports it where scipy is not loaded.
+bounded by the whole curve (:class:`imu_allan.core.fit.result.CurveCaps`).
+:func:`curve_caps` reads the bounds off every point past the sensor's filter once, where
+the fit is made; :func:`cap_fit` caps the upper bounds each later step makes (a rival
+model, the trust fallback, a drift test) at them.  numpy only: the pipeline imports it
+where scipy is not loaded.
 """
 
 from dataclasses import replace
