@@ -55,10 +55,11 @@ ZERO_FILLED = 'zero-filled fields'
 LEVEL_TOL = 1e-9
 #: Rows over which the least step between levels (the LSB) is looked for.
 LEVEL_ROWS = 1 << 17
-#: A least step of this share of the axis' sd or more is a grid (``value_grid``): values
-#: on none have steps of about sd / rows (1e-5 sd after a few thousand rows), a grid
-#: that matters (:mod:`imu_allan.pipeline.resolution`) a tenth of the sd or more.
-GRID_MIN = 1e-3
+#: An axis whose first rows take at most this many distinct values lies on a grid; its
+#: step (``value_grid``) is the median step between them, which holds where a grid was
+#: rounded again onto an incommensurate one (uneven steps: the least step then
+#: understates it).  Values on no grid pass this count within the first thousand rows.
+GRID_LEVELS = 1024
 #: The axes of each sensor, whose fields an incomplete packet zeroes together.
 SENSORS = (slice(0, 3), slice(3, 6))
 
@@ -93,6 +94,9 @@ class ZeroWatch:
         self.sums = np.zeros((3, N_AXES))
         # Per axis, the least step between two distinct values of its first rows (the LSB).
         self.quantum = np.full(N_AXES, np.inf)
+        # Per axis, the distinct values of its first rows (sorted), while they are few.
+        self.levels: list = [np.empty(0)] * N_AXES
+        self.many_levels = np.zeros(N_AXES, dtype=bool)
         # Per sensor (gyro, accel): rows, and rows whose three values are all 0.
         self.n_rows = 0
         self.n_all_zero = np.zeros(len(SENSORS), dtype=np.int64)
@@ -205,6 +209,10 @@ class ZeroWatch:
             steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
             if steps.size:
                 self.quantum[j] = min(self.quantum[j], float(steps.min()))
+            if not self.many_levels[j]:
+                self.levels[j] = np.union1d(self.levels[j], levels)
+                if self.levels[j].size > GRID_LEVELS:       # no grid: nothing to keep
+                    self.levels[j], self.many_levels[j] = np.empty(0), True
         n_zero = zero.sum(axis=0)
         # Values within tol of 0 are the zero level computed in another order.
         tols = LEVEL_TOL * np.abs(samples).max(axis=0, initial=0.0)
@@ -241,15 +249,15 @@ class ZeroWatch:
         self._note_grid()
 
     def _note_grid(self) -> None:
-        """Keep ``stats.value_grid`` to the axes whose least step is a grid."""
-        with np.errstate(invalid='ignore', divide='ignore'):
-            n = np.maximum(self.n, 1)
-            sd = np.sqrt(np.maximum(self.sums[2] / n - (self.sums[1] / n) ** 2, 0.0))
+        """Keep ``stats.value_grid``: the median step of the axes with few levels."""
         for j, axis in enumerate(AXES):
-            if np.isfinite(self.quantum[j]) and self.quantum[j] >= GRID_MIN * sd[j]:
-                self.stats.value_grid[axis] = float(self.quantum[j])
-            else:
+            levels = self.levels[j]
+            steps = np.diff(levels)
+            steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
+            if self.many_levels[j] or steps.size < 2:
                 self.stats.value_grid.pop(axis, None)
+            else:
+                self.stats.value_grid[axis] = float(np.median(steps))
 
     def _note(self, rows: np.ndarray, n_rows: int) -> None:
         """Count the zero-filled rows (m, 6); say so, with the totals so far."""
@@ -274,7 +282,10 @@ class ZeroWatch:
                 'zero_sums': self.sums.copy(), 'zero_quantum': self.quantum.copy(),
                 'zero_last_row': self.last_row.copy(),
                 'zero_cut': np.array([self.cut]),
-                'zero_rows': np.array([self.n_rows, *self.n_all_zero], dtype=np.int64)}
+                'zero_rows': np.array([self.n_rows, *self.n_all_zero], dtype=np.int64),
+                'zero_levels': np.array([np.pad(v, (0, GRID_LEVELS + 1 - v.size),
+                                                constant_values=np.nan) for v in self.levels]),
+                'zero_many_levels': self.many_levels.copy()}
 
     def restore(self, arrays: dict) -> None:
         """Take the arrays of :meth:`state` (none saved: a checkpoint from before)."""
@@ -295,11 +306,24 @@ class ZeroWatch:
                 or (got['zero_rows'] < 0).any()):
             raise InputError('the zero-field counters are invalid')
         self.n_zero, self.n = got['zero_n_zero'].astype(np.int64), got['zero_n'].astype(np.int64)
+        self._restore_levels(arrays.get('zero_levels'), arrays.get('zero_many_levels'))
         self.near = got['zero_near'].astype(np.float64)
         self.near_count = got['zero_near_count'].astype(np.int64)
         self.sums, self.last_row = got['zero_sums'].astype(np.float64), last.astype(np.float64)
         self.cut, self.quantum = bool(got['zero_cut'][0]), got['zero_quantum'].astype(np.float64)
         self.n_rows, self.n_all_zero = int(got['zero_rows'][0]), got['zero_rows'][1:].copy()
+
+    def _restore_levels(self, levels, many) -> None:
+        """Take the distinct values of :meth:`state` (none saved: counted again)."""
+        if levels is None and many is None:
+            return
+        if (levels is None or many is None or levels.shape != (N_AXES, GRID_LEVELS + 1)
+                or many.shape != (N_AXES,)):
+            raise InputError('the value levels of the zero-field counters are invalid')
+        kept = [row[np.isfinite(row)] for row in levels.astype(np.float64)]
+        if any(np.any(np.diff(v) <= 0) for v in kept):
+            raise InputError('the value levels of the zero-field counters are not sorted')
+        self.levels, self.many_levels = kept, many.astype(bool)
 
 
 def _filled(samples: np.ndarray, lost: np.ndarray) -> np.ndarray:
