@@ -203,9 +203,9 @@ class HygieneStats:
     zero_filled : dict
         Per axis, the exact zeros in those rows.
     value_grid : dict
-        Per axis, the least step between distinct values of its first rows [unit]: the
-        grid its values lie on (an LSB, the digits a logger writes), tiny for values on
-        none (:mod:`imu_allan.pipeline.zeros` measures it,
+        Per axis whose first rows take few distinct values, the median step between
+        them [unit]: the grid its values lie on (an LSB, the digits a logger writes);
+        axes on no grid are absent (:mod:`imu_allan.pipeline.zeros` measures it,
         :mod:`imu_allan.pipeline.resolution` judges it).
 
     """
