@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
+from imu_allan.core.allan.edf import avar_upper, curve_k_bound, floor_b_bound
 from imu_allan.core.allan.quantiles import chi2_ppf
 from imu_allan.core.fit.axis import filtered_start
 from imu_allan.core.fit.judge import follows_curve, white_region, white_share
@@ -173,6 +173,11 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
         i = _unfiltered(fit)
         j = i + int(np.argmin(avar[i:]))
         bound = float(np.sqrt(np.max(avar[i:j + 1] * tau[i:j + 1])))
+        # No tighter than white noise alone allows at each tau past the filter, each
+        # point at its joint upper limit: the largest of the descent alone ran up to 8x
+        # above the curve where a bias instability lifts its end (AVAR tau grows).
+        upper = avar_upper(avar[i:], fit.edf[i:]) * tau[i:]
+        bound = min(bound, float(np.sqrt(np.min(upper))))
         n_new = Param(bound, (0.0, bound), 'upper_bound', unit_n, 'curve',
                       f"{why}: the curve's own bound")
     # Within what the whole curve allows (AxisFit.caps), so the model file agrees.
