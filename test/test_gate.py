@@ -96,6 +96,21 @@ def test_a_quantised_axis_shifted_off_its_grid_keeps_its_noise_scale():
     s.check_usable()
 
 
+def test_a_segment_of_a_whole_number_of_chunks_ends_without_a_traceback():
+    # The rows a segment ends with are judged without a next row: 2048 of them (one
+    # chunk of the spike filter) left 2047 steps, and the reshape failed (ValueError:
+    # ADIS16405 run 5's first hour with five knocks, a traceback).
+    from imu_allan.pipeline.hygiene import HygieneStats, WarningLog
+    from imu_allan.pipeline.spikes import CHUNK, SpikeFilter
+    t, y = _still(CHUNK, seed=22)
+    y[1000, 2] += 30 * SIGMA[2]
+    spikes = SpikeFilter(SessionConfig(), HygieneStats(), WarningLog())
+    assert spikes.take(t, y)[0].size == 0
+    t_out, y_out = spikes.flush()
+    assert t_out.size == CHUNK and spikes.stats.n_spikes == 1
+    assert_allclose(y_out[999:1002, 2], y[999:1002, 2] - [0, 30 * SIGMA[2], 0], atol=0.05)
+
+
 # -- held values ----------------------------------------------------------------------
 
 #: Quanta of an ADIS16405 (0.05 deg/s, 3.33 mg) [rad/s, m/s^2].

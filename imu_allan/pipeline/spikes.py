@@ -159,7 +159,9 @@ class SpikeFilter:
         k = rows.shape[0]
         n_chunks = -(-k // CHUNK)
         limits = np.empty((n_chunks, N_AXES))
-        full = k // CHUNK
+        # Whole chunks of steps: the last judged row may have no step (the end of the
+        # rows, a multiple of CHUNK long, made the reshape fail: a traceback).
+        full = min(k, d.shape[0]) // CHUNK
         if full:
             steps = d[:full * CHUNK].reshape(full, CHUNK, N_AXES)[:, ::_THIN]
             limits[:full] = _noise_sigma(steps.transpose(2, 0, 1)).T
