@@ -151,8 +151,8 @@ def test_a_search_that_drops_a_step_at_the_end_keeps_its_solution(shared_dir):
     assert summary['ok'], summary.get('message')
     assert all('params' in summary['axes'][a] for a in AXES)
     # No bound of B or K above the curve's joint band.  (accel_z, not trusted, bounds N
-    # by the largest sqrt(AVAR tau) of the curve's descending part, a bound a filter
-    # cannot undercut, which lies 2.3x above the filtered first point at 0.01 s.)
+    # by what white noise alone allows past the sensor's filter, above the filtered
+    # first point at 0.01 s: a curve caps no N.)
     over = [(a, o) for a in AXES for o in meta.over_curve(summary['axes'][a])]
     assert not [o for o in over if o[1][0].split()[-1] in ('B', 'K')]
 
