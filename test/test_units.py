@@ -25,6 +25,7 @@ from imu_allan.core.outputs.short_record import SHORT_RECORD
 from imu_allan.errors import InputError
 from imu_allan.io.bag_writer import write_imu_bag
 from imu_allan.io.csv_io import write_csv
+from imu_allan.pipeline.resolution import COARSE_GRID
 
 REPO = Path(__file__).resolve().parents[1]
 RATE_HZ = 100.0
@@ -49,8 +50,8 @@ def _analyze(tmp_path, path: Path, capsys, *extra) -> tuple:
 
 
 def _unit_warnings(doc: dict) -> list:
-    """Return the warnings of a result JSON but those of a short record (60 s here)."""
-    return [w for w in doc['warnings'] if not w.startswith(SHORT_RECORD)]
+    """Return the warnings of a result JSON but a short record's (60 s) and a grid's."""
+    return [w for w in doc['warnings'] if not w.startswith((SHORT_RECORD, COARSE_GRID))]
 
 
 def _csv(tmp_path, name: str, t_s, samples) -> Path:
@@ -152,6 +153,9 @@ def test_raw_counts_are_named_and_their_scale_declared(tmp_path, still, capsys):
     assert 'rerun with --units accel=<value of one count>,gyro=<value of one count>' in err
     doc, _ = _analyze(tmp_path, path, capsys, '--units', 'gyro=0.05deg/s,accel=3.33mg')
     assert _unit_warnings(doc) == []
+    # Counts at about one sd per LSB: the grid is named, in SI (pipeline/resolution.py).
+    assert any(w.startswith(f'{COARSE_GRID} on gyro_x, gyro_y, gyro_z: the values lie on a '
+                            'grid of 0.000873 rad/s') for w in doc['warnings']), doc['warnings']
     # The same curve as the counts converted to SI beforehand.
     scaled = counts * np.repeat([gyro_lsb, accel_lsb], 3)
     si, _ = _analyze(tmp_path, _csv(tmp_path, 'si.csv', t_s, scaled), capsys)
