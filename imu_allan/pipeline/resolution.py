@@ -3,8 +3,9 @@ Values on a coarse grid: name the axes whose rounding changes N.
 
 A sensor's LSB, or a logger that writes few digits (``%.3f`` in a CSV, a scaled integer),
 puts the values on a grid; rounding to it adds white noise of q^2 / 12 per sample
-(:mod:`imu_allan.core.noise.rounding`).  The sample gate measures each axis' least step
-between distinct values (``HygieneStats.value_grid``, :mod:`imu_allan.pipeline.zeros`);
+(:mod:`imu_allan.core.noise.rounding`).  The sample gate measures each axis' grid, the
+median step between its few distinct values (``HygieneStats.value_grid``,
+:mod:`imu_allan.pipeline.zeros`);
 here it is set against the fitted white noise.  Where rounding raises N by
 :data:`~imu_allan.core.rules.ROUNDING_N_RAISE` or more a top-level warning names the
 axes, the step and the share; the reported N includes it, as a filter fed this stream
@@ -28,7 +29,7 @@ def resolution_warnings(value_grid: dict, fits: dict, rate_hz: float) -> tuple:
     Parameters
     ----------
     value_grid : dict of str to float
-        Per axis, the least step between distinct values [unit].
+        Per axis, the grid step of its values [unit].
     fits : dict of str to AxisFit or None
         The fits by axis (N's value is the recorded white noise).
     rate_hz : float

@@ -203,7 +203,8 @@ class ZeroWatch:
             [int(zero[:, sl].all(axis=1).sum()) for sl in SENSORS], dtype=np.int64)
         # The LSB shows in the first rows, on every axis (zeros may come later); a sort
         # per block all along would double this count's time.
-        for j in range(N_AXES if self.n_rows - samples.shape[0] < LEVEL_ROWS else 0):
+        first_rows = self.n_rows - samples.shape[0] < LEVEL_ROWS
+        for j in range(N_AXES if first_rows else 0):
             levels = np.unique(samples[:, j])
             steps = np.diff(levels)
             steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
@@ -245,8 +246,8 @@ class ZeroWatch:
                     self.near_count[j, side] += c
                 else:
                     self.near[j, side], self.near_count[j, side] = v, c
-
-        self._note_grid()
+        if first_rows:          # the levels change only there
+            self._note_grid()
 
     def _note_grid(self) -> None:
         """Keep ``stats.value_grid``: the median step of the axes with few levels."""

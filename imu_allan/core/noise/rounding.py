@@ -43,7 +43,7 @@ def rounding_effect(quantum: float, n_white: float, rate_hz: float) -> Rounding:
     Parameters
     ----------
     quantum : float
-        The grid step [unit] (the least step between distinct values).
+        The grid step [unit].
     n_white : float
         The white noise of the recorded values [unit s^0.5].
     rate_hz : float
