@@ -90,11 +90,9 @@ class ClipWatch:
             self.sums[2] += (d * d).sum(axis=0)
         self.n += y.shape[0]
         for end, vals in ((0, y), (1, -y)):
-            for j in range(N_AXES):
-                col = vals[:, j]
-                keep = col >= self.value[end, j, 1]
-                if keep.any():
-                    self._merge(end, j, col[keep])
+            keep = vals >= self.value[end, :, 1]
+            for j in np.flatnonzero(keep.any(axis=0)):
+                self._merge(end, j, vals[keep[:, j], j])
         self._judge()
 
     def _merge(self, end: int, j: int, values: np.ndarray) -> None:
@@ -110,6 +108,8 @@ class ClipWatch:
 
     def _judge(self) -> None:
         n1, n2 = self.count[..., 0], self.count[..., 1]
+        if not (n1 >= PILE_MIN).any():      # no pile anywhere: nothing to judge
+            return
         # A value no sensor reads (1e154, a spike for the filter after) overflows the
         # sums: that axis' sd is NaN and it is not judged clipped.
         with np.errstate(over='ignore', invalid='ignore'):

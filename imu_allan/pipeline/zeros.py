@@ -159,6 +159,9 @@ class ZeroWatch:
 
     def filled_axes(self) -> np.ndarray:
         """Return which axes' exact zeros are fills so far, shape (6,) bool."""
+        counted = (self.n_zero >= ZERO_MIN) & (self.n >= ZERO_MIN)
+        if not counted.any():
+            return counted
         with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
             n = np.maximum(self.n, 1)
             mean = self.sums[1] / n
@@ -179,7 +182,7 @@ class ZeroWatch:
             expected = np.where(close, self.near_count * np.maximum(odds, 1.0), 0.0)
             pile = close.any(axis=1) & (self.n_zero >= ZERO_RATIO * expected.max(axis=1))
             far = ~close.any(axis=1) & (np.abs(centre) > ZERO_FAR * sd)
-        return (self.n_zero >= ZERO_MIN) & (self.n >= ZERO_MIN) & (pile | far)
+        return counted & (pile | far)
 
     def filled_sensors(self) -> np.ndarray:
         """
@@ -190,10 +193,13 @@ class ZeroWatch:
         of zeros make by chance (each axis of a quantised sensor may read 0 often, all
         three at once as often as their product): a packet's vector zeroed.
         """
+        counted = self.n_all_zero >= ZERO_MIN
+        if not counted.any():
+            return counted
         total = np.maximum(self.n + self.n_zero, 1)
         share = self.n_zero / total
         chance = np.array([self.n_rows * np.prod(share[sl]) for sl in SENSORS])
-        return (self.n_all_zero >= ZERO_MIN) & (self.n_all_zero >= ZERO_RATIO * chance)
+        return counted & (self.n_all_zero >= ZERO_RATIO * chance)
 
     def _count(self, samples: np.ndarray) -> None:
         zero = samples == 0
@@ -203,36 +209,27 @@ class ZeroWatch:
             [int(zero[:, sl].all(axis=1).sum()) for sl in SENSORS], dtype=np.int64)
         # The LSB shows in the first rows, on every axis (zeros may come later); a sort
         # per block all along would double this count's time.
-        first_rows = self.n_rows - samples.shape[0] < LEVEL_ROWS
-        for j in range(N_AXES if first_rows else 0):
-            levels = np.unique(samples[:, j])
-            steps = np.diff(levels)
-            steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
-            if steps.size:
-                self.quantum[j] = min(self.quantum[j], float(steps.min()))
-            if not self.many_levels[j]:
-                self.levels[j] = np.union1d(self.levels[j], levels)
-                if self.levels[j].size > GRID_LEVELS:       # no grid: nothing to keep
-                    self.levels[j], self.many_levels[j] = np.empty(0), True
-        n_zero = zero.sum(axis=0)
+        if self.n_rows - samples.shape[0] < LEVEL_ROWS:
+            self._note_levels(samples)
+        # Sums of the non-zero values, over all axes at once (a loop over the axes
+        # costs more than the sums on the blocks of a few rows a node passes on).
+        nonzero = ~zero
+        count = nonzero.sum(axis=0)
+        new = (self.n == 0) & (count > 0)
+        if new.any():
+            self.sums[0, new] = samples[nonzero.argmax(axis=0)[new], np.flatnonzero(new)]
+        with np.errstate(over='ignore', invalid='ignore'):
+            d = np.where(nonzero, samples - self.sums[0], 0.0)
+            self.sums[1] += d.sum(axis=0)
+            self.sums[2] += (d * d).sum(axis=0)
+        self.n += count
         # Values within tol of 0 are the zero level computed in another order.
         tols = LEVEL_TOL * np.abs(samples).max(axis=0, initial=0.0)
-        for j in range(N_AXES):
-            col = samples[~zero[:, j], j] if n_zero[j] else samples[:, j]
-            if not col.size:
-                continue
-            if not self.n[j]:
-                self.sums[0, j] = col[0]
-            d = col - self.sums[0, j]
-            with np.errstate(over='ignore', invalid='ignore'):
-                self.sums[1, j] += d.sum()
-                self.sums[2, j] += (d * d).sum()
-            self.n[j] += col.size
-            tol = float(tols[j])
-            # Only values as near to 0 as the nearest seen so far can change it.
-            bound = float(np.abs(self.near[j]).max()) + tol
-            if np.isfinite(bound):
-                col = col[np.abs(col) <= bound]
+        # Only values as near to 0 as the nearest seen so far can change it.
+        bounds = np.abs(self.near).max(axis=1) + tols
+        near = nonzero & (np.abs(samples) <= bounds)
+        for j in np.flatnonzero(near.any(axis=0)):
+            col, tol = samples[near[:, j], j], float(tols[j])
             for side, vals in ((0, col[col < -tol]), (1, col[col > tol])):
                 if not vals.size:
                     continue
@@ -246,7 +243,22 @@ class ZeroWatch:
                     self.near_count[j, side] += c
                 else:
                     self.near[j, side], self.near_count[j, side] = v, c
-        if first_rows:          # the levels change only there
+
+    def _note_levels(self, samples: np.ndarray) -> None:
+        """Keep each axis' least step (the LSB) and, while they are few, its levels."""
+        ordered = np.sort(samples, axis=0)
+        steps = np.diff(ordered, axis=0)
+        tols = LEVEL_TOL * np.abs(ordered).max(axis=0, initial=0.0)
+        steps = np.where(steps > tols, steps, np.inf)
+        self.quantum = np.minimum(self.quantum, steps.min(axis=0, initial=np.inf))
+        changed = False
+        for j in np.flatnonzero(~self.many_levels):
+            levels = np.union1d(self.levels[j], ordered[:, j])
+            if levels.size > GRID_LEVELS:       # no grid: nothing to keep
+                levels, self.many_levels[j] = np.empty(0), True
+            changed = changed or levels.size != self.levels[j].size or self.many_levels[j]
+            self.levels[j] = levels
+        if changed:
             self._note_grid()
 
     def _note_grid(self) -> None:
