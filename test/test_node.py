@@ -134,6 +134,17 @@ class Rig:
             wait(lambda: self.node.n_received - start >= len(payloads), 30,
                  'every message received')
 
+    def deliver(self, stamps, samples) -> None:
+        """
+        Hand one serialized Imu message per row to the node's subscription callback.
+
+        The bytes DDS would deliver, without the transport (which :meth:`feed` tests):
+        hours of messages in seconds, for the tests of what the node does with them.
+        """
+        for row in serialize_imu(np.asarray(stamps, np.int64), samples):
+            self.node._on_imu(row.tobytes())
+        self.sent += len(stamps)
+
     def last(self, topic: str):
         """Return the last message recorded on a result topic (None if none)."""
         with self._lock:

@@ -1,7 +1,9 @@
 """
 The node's precision plan with real rclpy: statuses, progress, and the self-stop.
 
-Uses the rig of test_node.py (a node and a peer on SingleThreadedExecutors in threads).
+Uses the rig of test_node.py (a node and a peer on SingleThreadedExecutors in threads);
+the records reach the node's subscription callback as the serialized messages DDS would
+deliver (``Rig.deliver``: hours of messages in seconds; test_node.py tests the transport).
 """
 
 import math
@@ -37,7 +39,7 @@ def test_statuses_and_progress_carry_the_plan(rig):  # noqa: F811
     r = rig(plan_period_s=0.001, progress_period_s=3600.0)
     diag = []
     r.peer.create_subscription(DiagnosticArray, '/diagnostics', diag.append, 10)
-    r.feed(*_record(200.0))
+    r.deliver(*_record(200.0))
     result = r.publish()
     assert result.plans and set(result.plans) == {a for a, f in result.fits.items() if f}
     st = statuses(r.last('noise_parameters'))
@@ -86,7 +88,7 @@ def test_stop_when_met_stops_collecting_after_the_floor(rig):  # noqa: F811
     r = rig(plan_period_s=0.001, stop_when_met=True, plan_profile='vio',
             plan_targets='K=none', min_duration_s=1000.0)
     t, y = _record(300.0)
-    r.feed(t[:40000], y[:40000])
+    r.deliver(t[:40000], y[:40000])
     result = r.publish()
     # min_duration_s is a floor: 200 s of data, targets met or not, collection goes on.
     assert not r.node.collection_stopped
@@ -96,7 +98,7 @@ def test_stop_when_met_stops_collecting_after_the_floor(rig):  # noqa: F811
         {a: p.progress_line() for a, p in result.plans.items()}
     assert r.node.collection_stopped
     n_used = r.node.session.stats.n_used
-    r.feed(t[40000:], y[40000:])                  # received, but no longer collected
+    r.deliver(t[40000:], y[40000:])               # received, but no longer collected
     r.node.live.process()
     assert r.node.session.stats.n_used == n_used
     level, message, kv = statuses(r.last('noise_parameters'))['imu_allan: gyro_x']
@@ -119,13 +121,13 @@ def test_the_vio_profile_stops_by_itself_once_n_and_k_of_an_mti7_are_met(rig):  
     t_s, y = simulate_imu(MTI7, 2.0, 20 * 3600.0, seed=4)
     t_ns = T0_NS + np.round(t_s * 1e9).astype(np.int64)
     half = t_s.size // 2
-    r.feed(t_ns[:half], y[:half])
+    r.deliver(t_ns[:half], y[:half])
     result = r.publish()
     # 10 h: N is met on every axis, K not yet on some: collection goes on.
     assert all(p.param('N').kind == 'met' for p in result.plans.values())
     assert not all(p.all_met() for p in result.plans.values())
     assert not r.node.collection_stopped
-    r.feed(t_ns[half:], y[half:])
+    r.deliver(t_ns[half:], y[half:])
     result = r.publish()
     # 20 h: K meets +-50 % too; the node stops collecting and says so.
     assert all(p.all_met() for p in result.plans.values()), \
@@ -135,7 +137,7 @@ def test_the_vio_profile_stops_by_itself_once_n_and_k_of_an_mti7_are_met(rig):  
     assert ('stopped collecting: vio targets (N, K) met'
             in r.node.reports.progress_status().message)
     n_used = r.node.session.stats.n_used
-    r.feed(t_ns[-10:] + 10 ** 10, y[-10:])        # received, no longer collected
+    r.deliver(t_ns[-10:] + 10 ** 10, y[-10:])     # received, no longer collected
     r.node.live.process()
     assert r.node.session.stats.n_used == n_used
 
@@ -155,7 +157,7 @@ def test_the_first_plan_comes_before_min_duration_and_counts_toward_the_profile(
     r = rig(plan_profile='vio', plan_period_s=300.0, publish_period_s=0.5,
             min_duration_s=1.0e5)
     started = time.monotonic()
-    r.feed(*_record(120.0))
+    r.deliver(*_record(120.0))
     wait(lambda: bool(r.node.reports.plans), 120, 'the first plan')
     assert time.monotonic() - started < 300.0
     assert r.node.n_fits == 0 and r.last('noise_parameters') is None
