@@ -350,6 +350,26 @@ def test_alpha_from_slope_power_laws():
     assert np.all(rising == -2)
 
 
+def test_phase_noise_only_in_the_leading_descent():
+    # Quantization (phase noise, ADEV tau^-1) carries the short end, then white noise:
+    # kept.  A steep fall after white noise (a sinusoid's turn, held values, a filter's
+    # knee) is not phase noise: read as one, its points' EDF ran 3-140 times their
+    # neighbours' (ADIS16405 accelerometers at 1-1.3 s, a held record at 1.26 s).
+    tau = np.logspace(-2, 2, 17)
+    quantized = 1e-6 / tau ** 2 + 1e-6 / tau            # equal at 1 s
+    got = allan.alpha_from_slope(tau, quantized)
+    assert got[0] == 2 and got[-1] == 0
+    assert np.all(np.diff(got) <= 0)             # phase noise first, then white FM
+    bump = 1e-6 / tau * (1.0 + 30.0 * np.exp(-((np.log10(tau) - 0.0) / 0.2) ** 2))
+    slope_only = np.where(np.gradient(np.log(bump), np.log(tau)) < -1.35)[0]
+    assert slope_only.size and slope_only[0] > 0     # steep only past a white start
+    got = allan.alpha_from_slope(tau, bump)
+    assert np.all(got <= 0), got
+    m = np.round(tau * 100.0).astype(np.int64)
+    edf = allan.edf_overlapping(got, m, 360_000)
+    assert np.all(np.diff(edf) <= 0), edf        # no point looks more exact than the last
+
+
 def test_no_phase_noise_edf_at_the_long_taus_of_a_streamed_curve():
     # A random walk: its last points scatter with an EDF of 1-3, and a low-lying one
     # made the local slope steep enough to read as phase noise, whose EDF (tens to

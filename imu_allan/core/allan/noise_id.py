@@ -53,7 +53,8 @@ def alpha_from_slope(tau_s, avar, method: str = 'overlapping',
     to read as phase noise, whose EDF is tens to thousands of times that of the
     frequency noises (Greenhall), and the point then looks exact.  For rate data phase
     noise means quantization, at the shortest taus; there the exponent is held at most
-    0 (white FM).
+    0 (white FM).  For the same reason phase noise is read only in the curve's leading
+    descent: past its first point of frequency noise the exponent is at most 0.
 
     Parameters
     ----------
@@ -84,6 +85,12 @@ def alpha_from_slope(tau_s, avar, method: str = 'overlapping',
         idx = np.searchsorted(_SLOPE_EDGES, np.nan_to_num(mu, nan=-1.0))
         alpha = np.where(np.isfinite(mu), labels[idx], 0)
     alpha = np.clip(alpha, _ALPHA_MIN[_check_method(method)], 2)
+    # Phase noise in rate data is quantization, which carries the short end of the
+    # curve: past its first point of frequency noise, a steep fall is a deterministic
+    # feature (a sinusoid's turn, held values, a filter) whose points would look exact
+    # (their EDF as phase noise ran 3-140 times their neighbours').
+    past = np.logical_or.accumulate(alpha <= 0, axis=0)
+    alpha = np.where(past, np.minimum(alpha, 0), alpha)
     if n_clusters is not None:
         few = np.asarray(n_clusters, dtype=np.float64).reshape(-1, 1) < MIN_ACF_POINTS
         alpha = np.where(few, np.minimum(alpha, 0), alpha)
