@@ -92,7 +92,7 @@ class ClipWatch:
         for end, vals in ((0, y), (1, -y)):
             keep = vals >= self.value[end, :, 1]
             for j in np.flatnonzero(keep.any(axis=0)):
-                self._merge(end, j, vals[keep[:, j], j])
+                self._merge(end, int(j), vals[keep[:, j], j])
         self._judge()
 
     def _merge(self, end: int, j: int, values: np.ndarray) -> None:
