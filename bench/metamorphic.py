@@ -163,8 +163,13 @@ def summarise(result) -> dict:
             'axes': axes}
 
 
-def analyse(rec: Record, declared: bool = False) -> dict:
-    """Analyse a record as ``imu-allan analyze --no-plan`` does; return its summary."""
+def analyse(rec: Record, declared: bool = False, workers: int = 1) -> dict:
+    """
+    Analyse a record as ``imu-allan analyze --no-plan`` does; return its summary.
+
+    ``workers``: processes for the axes' searches (the sweep runs cases in parallel
+    instead, ``--jobs``).
+    """
     from imu_allan.core.noise.unit_check import parse_units
     from imu_allan.errors import InputError
     from imu_allan.io.inputs import analyze_input
@@ -177,7 +182,7 @@ def analyse(rec: Record, declared: bool = False) -> dict:
         write(rec, path)
         try:
             result, _ = analyze_input(path, None, config, quiet=True, progress=False,
-                                      workers=1, prefetch=False,
+                                      workers=workers, prefetch=False,
                                       units=None if units.is_si and not units.declared
                                       else units)
         except InputError as exc:

@@ -34,10 +34,10 @@ DATA = Path(__file__).resolve().parents[2] / 'shared' / 'realdata' / 'adis16405'
 PARAMS = ('N', 'B', 'T_B')
 
 
-def analysis_of(stamps: np.ndarray, samples: np.ndarray):
+def analysis_of(stamps: np.ndarray, samples: np.ndarray, workers: int = 1):
     """Stream samples through a Session as the CLI does; return the AnalysisResult."""
     session, keeper = stream(stamps, samples)
-    return analyze(session, raw=keeper)
+    return analyze(session, raw=keeper, workers=workers)
 
 
 def predicted_lengths(fit, rate_hz: float, duration_s: float, widths: dict,
@@ -63,19 +63,20 @@ def predicted_lengths(fit, rate_hz: float, duration_s: float, widths: dict,
     return out, plan.caveat
 
 
-def compare_run(path: Path, minutes: float) -> list:
+def compare_run(path: Path, minutes: float, workers: int = 1) -> list:
     """
     Compare the plan of a run's first minutes with the whole run, per axis and parameter.
 
     Rows (run, axis, param, w_short, w_full, predicted, run length, kind, w_pred, caveat,
     grew): ``grew`` names the terms the whole run's model has that the short one lacks.
+    ``workers``: processes for the axes' searches.
     """
     rec = read_csv(path)
     stamps = np.round(np.asarray(rec.t_s) * 1e9).astype(np.int64)
     samples = np.asarray(rec.samples, dtype=np.float64)
     cut = int(np.searchsorted(rec.t_s, rec.t_s[0] + 60.0 * minutes))
-    short = analysis_of(stamps[:cut], samples[:cut])
-    full = analysis_of(stamps, samples)
+    short = analysis_of(stamps[:cut], samples[:cut], workers)
+    full = analysis_of(stamps, samples, workers)
     rows = []
     for axis in AXES:
         fs, ff = short.fits.get(axis), full.fits.get(axis)

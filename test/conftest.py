@@ -62,7 +62,10 @@ def adis_run1():
     from imu_allan.io.inputs import analyze_input
     from imu_allan.pipeline.hygiene import SessionConfig
 
-    return analyze_input(path, None, SessionConfig(), quiet=True, progress=False)[0]
+    # Two worker processes for the axes' searches, as the CLI runs on two cores (the same
+    # numbers: test_pipeline.py::test_axes_searched_in_worker_processes_give_the_same_result).
+    return analyze_input(path, None, SessionConfig(), quiet=True, progress=False,
+                         workers=2)[0]
 
 
 def still_imu(n: int, seed: int = 0, rate_hz: float = 100.0) -> tuple:

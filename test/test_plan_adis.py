@@ -16,7 +16,8 @@ from plan_adis import compare_run  # noqa: E402, I100
 
 
 def test_twenty_minutes_predict_the_full_run(shared_dir):
-    rows = compare_run(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run2.csv.gz', 20.0)
+    rows = compare_run(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run2.csv.gz', 20.0,
+                       workers=2)
     checked = 0
     for run, axis, p, w_short, w_full, t_pred, t_full, kind, w_pred, caveat, grew in rows:
         if axis not in ('gyro_x', 'gyro_y') or p != 'N':

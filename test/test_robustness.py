@@ -131,9 +131,9 @@ def test_adis_slice_with_dropped_messages(shared_dir):
     data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run6.csv.gz',
                     columns=list(AXES))
     rec = Record(data.t_s[:60_000], data.samples[:60_000])
-    clean = meta.analyse(rec)
-    verdict = meta.compare(clean, meta.analyse(degrade(rec, 'drop_random', 2.0, seed=1)),
-                           'drop_random')
+    clean = meta.analyse(rec, workers=2)
+    verdict = meta.compare(clean, meta.analyse(degrade(rec, 'drop_random', 2.0, seed=1),
+                                               workers=2), 'drop_random')
     assert not _broken(verdict, clean)
 
 
@@ -147,7 +147,7 @@ def test_a_search_that_drops_a_step_at_the_end_keeps_its_solution(shared_dir):
     data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run6.csv.gz',
                     columns=list(AXES))
     summary = meta.analyse(degrade(Record(data.t_s, data.samples), 'thermal_no_temp', 5.0,
-                                   seed=0))
+                                   seed=0), workers=2)
     assert summary['ok'], summary.get('message')
     assert all('params' in summary['axes'][a] for a in AXES)
     # No bound of B or K above the curve's joint band.  (accel_z, not trusted, bounds N
@@ -166,7 +166,7 @@ def test_bounds_made_after_the_fit_stay_under_the_curve(shared_dir):
     from imu_allan.io.csv_io import read_csv
     data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run6.csv.gz',
                     columns=list(AXES))
-    summary = meta.analyse(Record(data.t_s, data.samples))
+    summary = meta.analyse(Record(data.t_s, data.samples), workers=2)
     k = summary['axes']['accel_y']['params']['K']
     assert k['kind'] == 'upper_bound'
     assert not [(a, o) for a in AXES for o in meta.over_curve(summary['axes'][a])]
