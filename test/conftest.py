@@ -7,6 +7,9 @@ Test files import the plain ones (``from conftest import REPO, still_imu, T0_NS`
 import importlib.util
 import os
 from pathlib import Path
+import subprocess
+import sys
+import tempfile
 
 # As the CLI and the node do before numpy loads (imu_allan.pipeline.workers.one_blas_thread):
 # the tests that compare an in-process analysis with a CLI run compare the same sums.
@@ -38,6 +41,54 @@ def pytest_report_header(config):
     """Name the test files left out for missing pip extras."""
     return [f'imu_allan: skipped {f} (pip extras missing: {", ".join(MISSING[f])})'
             for f in collect_ignore]
+
+
+#: The linters' commands (``python -m ...`` from the repository), by the test file that
+#: reads each.  Each starts in the background once its test is collected: the suite runs
+#: in one process on a two-core machine, and their minute of one core overlaps the tests.
+def _existing(*names: str) -> list:
+    return [n for n in names if (REPO / n).exists()]
+
+
+_CHECKED = ('imu_allan', 'test', 'bench', 'launch', 'examples')
+LINTERS = {
+    'test_mypy.py': ['mypy', '--config-file', 'setup.cfg', '--no-incremental',
+                     '--cache-dir', os.devnull, 'imu_allan'],
+    'test_flake8.py': ['ament_flake8.main', '--config', 'test/ament_flake8.ini',
+                       *_existing(*_CHECKED, 'setup.py')],
+    'test_pep257.py': ['ament_pep257.main', *_existing(*_CHECKED)],
+}
+_LINTING: dict = {}
+
+
+def _start_linter(name: str) -> None:
+    out = tempfile.TemporaryFile()
+    proc = subprocess.Popen([sys.executable, '-m', *LINTERS[name]], cwd=REPO, stdout=out,
+                            stderr=subprocess.STDOUT)
+    _LINTING[name] = (proc, out)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """Start the linters whose tests were collected (see :data:`LINTERS`)."""
+    for name in sorted({Path(str(item.path)).name for item in items} & set(LINTERS)):
+        if name not in _LINTING:
+            _start_linter(name)
+
+
+def pytest_unconfigure(config):
+    """Stop a linter whose test did not read it (an interrupted run)."""
+    for proc, _ in _LINTING.values():
+        proc.kill()
+
+
+def lint(name: str) -> tuple[int, str]:
+    """Return the exit code and output of a linter of :data:`LINTERS` (waits for it)."""
+    if name not in _LINTING:
+        _start_linter(name)
+    proc, out = _LINTING.pop(name)
+    rc = proc.wait()
+    out.seek(0)
+    return rc, out.read().decode(errors='replace')
 
 
 @pytest.fixture

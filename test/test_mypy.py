@@ -1,13 +1,11 @@
-"""mypy over the package (settings in setup.cfg [mypy])."""
+"""mypy over the package (settings in setup.cfg [mypy]; the command: conftest.LINTERS)."""
 
-from mypy import api
 import pytest
 
-from conftest import REPO
+from conftest import lint
 
 
 @pytest.mark.linter
 def test_mypy():
-    out, err, rc = api.run(['--config-file', str(REPO / 'setup.cfg'), '--no-incremental',
-                            '--cache-dir', '/dev/null', str(REPO / 'imu_allan')])
-    assert rc == 0, out + err
+    rc, out = lint('test_mypy.py')
+    assert rc == 0, out
