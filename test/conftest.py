@@ -43,14 +43,14 @@ def pytest_report_header(config):
             for f in collect_ignore]
 
 
-#: The linters' commands (``python -m ...`` from the repository), by the test file that
-#: reads each.  Each starts in the background once its test is collected: the suite runs
-#: in one process on a two-core machine, and their minute of one core overlaps the tests.
 def _existing(*names: str) -> list:
     return [n for n in names if (REPO / n).exists()]
 
 
 _CHECKED = ('imu_allan', 'test', 'bench', 'launch', 'examples')
+#: The linters' commands (``python -m ...`` from the repository), by the test file that
+#: reads each.  Each starts in the background once its test is collected: the suite runs
+#: in one process on a two-core machine, and their minute of one core overlaps the tests.
 LINTERS = {
     'test_mypy.py': ['mypy', '--config-file', 'setup.cfg', '--no-incremental',
                      '--cache-dir', os.devnull, 'imu_allan'],
