@@ -1010,6 +1010,25 @@ def test_the_curve_is_drawn_on_adev_image_while_someone_subscribes(rig):
          60, 'a picture with the models drawn over the curve')
 
 
+def test_a_node_destroyed_while_it_draws_publishes_nothing_after(context, tmp_path,
+                                                                 monkeypatch):
+    # The picture thread published through a destroyed node: a traceback in the thread
+    # (InvalidHandle) at every shutdown that came while it drew.
+    from sensor_msgs.msg import Image
+
+    errors = []
+    monkeypatch.setattr(threading, 'excepthook', errors.append)
+    r = Rig(context, tmp_path / 'out', adev_image_period_s=0.2, warmup_window_s=0.0)
+    r.feed(*_record(200.0, 20.0))
+    r.subscribe(f'{NODE}/adev_image', Image)
+    drawing = r.node.pictures
+    wait(lambda: drawing._thread is not None and drawing._thread.is_alive(), 60,
+         'a picture being drawn')
+    r.close()
+    drawing._thread.join()
+    assert not errors, [str(e.exc_value) for e in errors]
+
+
 # ------------------------------------------------------ the executable itself
 def _start(out: Path, *params: str, env: dict | None = None) -> subprocess.Popen:
     exe = Path(sys.executable).parent / 'imu_allan_node'

@@ -278,12 +278,16 @@ class ImuAllanNode(Node):
             self.get_logger().info(statuses[0].message)
             self.pub_params.publish(self._stamped(statuses))
 
+    def destroy_node(self) -> None:
+        """Destroy the node once no picture is being drawn (it would publish after)."""
+        self.pictures.close()
+        super().destroy_node()
+
     def _on_image_timer(self) -> None:
         if self.pictures.wanted():
             self.pictures.draw(self.live.view(), self._last_result,
                                self.subscription.topic_name, self.get_clock().now().to_msg())
 
-    # ----------------------------------------------------------- callbacks
     def _on_imu(self, raw: bytes) -> None:
         # The only per-message Python work: count, append and (if asked) relay the
         # message at once with the current covariances (a byte patch).

@@ -60,6 +60,12 @@ class CurvePictures:
                                         name='imu_allan_picture', daemon=True)
         self._thread.start()
 
+    def close(self) -> None:
+        """Stop drawing; wait for a picture being drawn (none is published after this)."""
+        self._off = True
+        if self._thread is not None:
+            self._thread.join()
+
     def _draw(self, view, result, topic: str, stamp) -> None:
         curve = view.curve()
         if curve is None:
@@ -79,4 +85,5 @@ class CurvePictures:
         msg = Image(height=pixels.shape[0], width=pixels.shape[1], encoding='rgb8',
                     is_bigendian=0, step=pixels.shape[1] * 3, data=pixels.tobytes())
         msg.header.stamp = stamp
-        self.publisher.publish(msg)
+        if not self._off:       # closed while drawing: the node is going
+            self.publisher.publish(msg)
