@@ -190,7 +190,6 @@ class ImuAllanNode(Node):
             f'results after {self.values["min_duration_s"]:.0f} s of stationary data; '
             f'files in {self.output_dir}')
 
-    # ------------------------------------------------------------- set-up
     def _make_timers(self) -> None:
         self._period_timers = {
             key: self.create_timer(max(self.values[f'{key}_period_s'], 1.0), callback,
@@ -280,7 +279,8 @@ class ImuAllanNode(Node):
 
     def destroy_node(self) -> None:
         """Destroy the node once no picture is being drawn (it would publish after)."""
-        self.pictures.close()
+        if hasattr(self, 'pictures'):       # none when a parameter was refused at start
+            self.pictures.close()
         super().destroy_node()
 
     def _on_image_timer(self) -> None:
