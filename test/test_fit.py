@@ -331,7 +331,8 @@ def test_bounds_made_after_the_fit_are_capped_at_its_curve():
     avar = 1e-6 / tau + 1e-9 * tau
     edf = np.geomspace(5e4, 3.0, 30)
     fit = fit_axis(tau, avar, edf, 100.0, 200_000)
-    assert fit.caps == curve_caps(tau, avar, edf)
+    assert fit.filter_end_s == tau[0]             # white from the first tau: no filter
+    assert fit.caps == curve_caps(tau, avar, edf, tau[0])
     assert cap_fit(fit) is fit
     k = fit.optimised['K']
     late = replace(fit, optimised={**fit.optimised, 'K': Param(
@@ -345,11 +346,37 @@ def test_bounds_made_after_the_fit_are_capped_at_its_curve():
                                rtol=1e-12)
 
 
+def test_n_bound_is_capped_only_where_the_filter_is_seen_to_end():
+    # White noise lies under the curve past the sensor's filter: an N bound above that
+    # line (a held record's profile widened by its misfit ran 1.3x over its curve) is
+    # capped there; a filter whose bend is not seen to end may lower the curve below
+    # N's line, so then there is no cap.
+    from imu_allan.core.allan.edf import avar_upper
+    from imu_allan.core.fit.caps import cap_bounds, curve_caps
+    from imu_allan.core.fit.result import Param
+    tau = np.geomspace(0.01, 30.0, 12)
+    avar = 1e-6 / tau
+    avar[:2] *= 0.3                            # the filter lowers the first two points
+    edf = np.geomspace(5e3, 3.0, 12)
+    caps = curve_caps(tau, avar, edf, tau[2])
+    assert_allclose(caps.N, np.sqrt(np.min(avar_upper(avar[2:], edf[2:]) * tau[2:])),
+                    rtol=1e-12)
+    assert 1e-3 < caps.N < 1.1e-3              # over the true N, under the filtered points
+    assert curve_caps(tau, avar, edf).N == math.inf
+    notes: list = []
+    bound = {'N': Param(5e-3, (0.0, 5e-3), 'upper_bound', 'u')}
+    out = cap_bounds(bound, caps, notes)
+    assert out['N'][:3] == (caps.N, (0.0, caps.N), 'upper_bound')
+    assert out['N'].source == 'curve' and notes[0].startswith('N: the bound 0.005')
+    estimate = {'N': Param(5e-3, (4e-3, 6e-3), 'estimate', 'u')}
+    assert cap_bounds(estimate, caps, [])['N'] is estimate['N']
+
+
 def test_a_3_min_real_record_reports_no_bound_above_its_own_curve(shared_dir):
     # Issue 35: on 2-3 min of the ADIS16405 the profile bounds of B and K ran up to
     # hundreds of times the curve's own bounds (accel_z K 6.8 m/s^2.5 beside a curve
     # bound of 2e-3), and estimates of K had intervals starting at 0.
-    from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
+    from imu_allan.core.allan.edf import curve_k_bound, curve_n_bound, floor_b_bound
     data = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run1.csv.gz',
                     columns=['gyro_x', 'gyro_y', 'gyro_z', 'accel_x', 'accel_y', 'accel_z'])
     curve = allan_curve(data.samples[1000:19000], 100.0, confidence=0.95)  # past 7 s
@@ -357,6 +384,10 @@ def test_a_3_min_real_record_reports_no_bound_above_its_own_curve(shared_dir):
         fit = fit_curve(curve, j)
         caps = {'K': curve_k_bound(fit.tau_s, fit.avar_meas, fit.edf),
                 'B': floor_b_bound(fit.avar_meas, fit.edf)}
+        white = fit.tau_s >= fit.filter_end_s * (1 - 1e-9)    # NaN: no N cap
+        if white.any():
+            caps['N'] = curve_n_bound(fit.tau_s[white], fit.avar_meas[white],
+                                      fit.edf[white])
         for sym in ('N', 'B', 'K'):
             p = fit.optimised[sym]
             assert p.kind != 'estimate' or p.ci95[0] > 0, (j, sym, p)

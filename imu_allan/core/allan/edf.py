@@ -355,6 +355,32 @@ def curve_k_bound(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> float:
     return float(np.sqrt(np.min(3.0 * avar_upper(avar, edf) / tau)))
 
 
+def curve_n_bound(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> float:
+    """
+    95 % upper bound of N from the curve alone: min over tau of sqrt(AVAR_hi tau).
+
+    White noise alone gives AVAR = N^2 / tau (IEEE Std 952 C.1 slope -1/2) and every
+    other term but a sensor's filter only adds to it, so N^2 <= AVAR(tau) tau at every
+    tau past the filter; AVAR_hi is each point's joint upper limit (:func:`avar_upper`).
+
+    Parameters
+    ----------
+    tau : np.ndarray
+        Shape (k,), averaging times past the sensor's filter [s].
+    avar : np.ndarray
+        Shape (k,), measured AVAR [unit^2].
+    edf : np.ndarray
+        Shape (k,), equivalent degrees of freedom of each point.
+
+    Returns
+    -------
+    float
+        The bound [unit*s^0.5].
+
+    """
+    return float(np.sqrt(np.min(avar_upper(avar, edf) * tau)))
+
+
 def floor_b_bound(avar: np.ndarray, edf: np.ndarray) -> float:
     """
     95 % upper bound of B from a curve's floor: min sqrt(AVAR_hi) / 0.664.

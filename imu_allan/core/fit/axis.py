@@ -7,7 +7,7 @@ Part of :mod:`imu_allan.core.fit` (see its docstring for the method).
 from dataclasses import replace
 from itertools import combinations
 import math
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -123,9 +123,27 @@ def thin(tau: np.ndarray, per_octave: float = 2.0) -> np.ndarray:
     return np.array(keep, dtype=np.int64)
 
 
-def filtered_start(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> int:
+class FilterCut(NamedTuple):
     """
-    Return the index of the first tau to fit: leading taus bent by the sensor's filter.
+    Where a sensor's filter stops bending a curve (:func:`filter_cut`).
+
+    Attributes
+    ----------
+    first : int
+        Index of the first tau past the bend [taus].
+    ended : bool
+        Whether the curve falls as steeply as white noise there (the bend seen to end),
+        not only at the cut's limit.
+
+    """
+
+    first: int
+    ended: bool
+
+
+def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> FilterCut:
+    """
+    Return where to start fitting: past the leading taus bent by the sensor's filter.
 
     Real IMUs low-pass filter (anti-aliasing, decimation) before they output samples, so
     at the first few cluster sizes neighbouring samples are correlated and the curve is
@@ -134,14 +152,29 @@ def filtered_start(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> int:
     would pull N below the density that matters at longer tau and recruit a fast
     Gauss-Markov term to bridge the bend.  Leading points whose ADEV slope to the next
     point is above -0.48 are dropped, at most those below 64 sample periods; a white
-    record keeps them all (its slope noise there is ~0.003).
+    record keeps them all (its slope noise there is ~0.003).  A term rising within the
+    bend does not end it (a filter may act past the taus it visibly flattens).
+
+    Parameters
+    ----------
+    tau : np.ndarray
+        Shape (k,), averaging times [s], shortest first.
+    avar : np.ndarray
+        Shape (k,), Allan variance [unit^2].
+    rate_hz : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    FilterCut
+
     """
     first = 0
     slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
     while (first < slope.size and tau[first] * rate_hz < 64.0 and slope[first] > -0.48
            and tau.size - first > 3):
         first += 1
-    return first
+    return FilterCut(first, bool(first < slope.size and slope[first] <= -0.48))
 
 
 def filter_identified(t_f_s: float, tau0_s: float, bounds: tuple) -> bool:
@@ -244,7 +277,9 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     tau, avar, edf = tau[keep], avar[keep], edf[keep]
     notes: list[str] = []
     # With the filtered_white term the filter is part of the model, not cut away.
-    first = 0 if 'filtered_white' in candidates else filtered_start(tau, avar, rate_hz)
+    cut = filter_cut(tau, avar, rate_hz)
+    cut_tau = tau[min(cut.first, tau.size - 1)]
+    first = 0 if 'filtered_white' in candidates else cut.first
     if first:
         notes.append(f'tau < {tau[first]:.3g} s left out: flatter than white noise there '
                      "(the sensor's low-pass filter)")
@@ -298,7 +333,9 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
     past = whole[0] >= tau[0]
-    caps = curve_caps(whole[0][past], whole[1][past], whole[2][past])
+    filter_end_s = float(cut_tau) if cut.ended else math.nan
+    caps = curve_caps(whole[0][past], whole[1][past], whole[2][past],
+                      filter_end_s if cut.ended else math.inf)
     optimised = bound_by_curve(optimised, caps, notes)
     if dof > 0 and chi2_sf(chi2_value, dof) < P_CONSISTENT:
         notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '
@@ -319,7 +356,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
                    notes=tuple(notes), chi2=chi2_value, dof=dof, tau_s=tau,
                    avar_fit=avar_fit, avar_sd=np.sqrt(np.diag(sigma)) * fitter.data.scale,
                    avar_meas=avar, edf=edf, components=components, pinned=tuple(pinned),
-                   caps=caps)
+                   caps=caps, filter_end_s=filter_end_s)
 
 
 def _select_terms(fitter, slots_all: list, start, sigma0, select: bool) -> tuple:

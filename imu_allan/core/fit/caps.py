@@ -1,8 +1,9 @@
 """
-What the measured curve allows: no bound of B or K lies above the record's own curve.
+What the measured curve allows: no bound of N, B or K lies above the record's own curve.
 
 Every noise term but a sensor's filter only adds to the Allan variance, so B and K are
-bounded by the whole curve (:class:`imu_allan.core.fit.result.CurveCaps`).
+bounded by the whole curve, and N by the curve past the filter
+(:class:`imu_allan.core.fit.result.CurveCaps`).
 :func:`curve_caps` reads the bounds off every point past the sensor's filter once, where
 the fit is made; :func:`cap_fit` caps the upper bounds each later step makes (a rival
 model, the trust fallback, a drift test) at them.  numpy only: the pipeline imports it
@@ -14,13 +15,14 @@ import math
 
 import numpy as np
 
-from imu_allan.core.allan.edf import curve_k_bound, floor_b_bound
+from imu_allan.core.allan.edf import curve_k_bound, curve_n_bound, floor_b_bound
 from imu_allan.core.fit.result import AxisFit, CurveCaps, Param
 
 
-def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> CurveCaps:
+def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray,
+               white_from_s: float = math.inf) -> CurveCaps:
     """
-    Return what the measured curve allows of B and K (:class:`CurveCaps`).
+    Return what the measured curve allows of N, B and K (:class:`CurveCaps`).
 
     Parameters
     ----------
@@ -30,6 +32,9 @@ def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> CurveCaps:
         (k,) measured AVAR at them [unit^2].
     edf : numpy.ndarray
         (k,) their equivalent degrees of freedom.
+    white_from_s : float
+        The first tau where the curve showed the filter's bend end [s]: N is capped by
+        the points from there (inf: no N cap).
 
     Returns
     -------
@@ -39,18 +44,23 @@ def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray) -> CurveCaps:
     """
     if not np.size(tau):
         return CurveCaps()
-    return CurveCaps(floor_b_bound(avar, edf), curve_k_bound(tau, avar, edf))
+    white = tau >= white_from_s * (1.0 - 1e-9)
+    return CurveCaps(floor_b_bound(avar, edf), curve_k_bound(tau, avar, edf),
+                     curve_n_bound(tau[white], avar[white], edf[white]) if white.any()
+                     else math.inf)
 
 
 #: What each cap of :class:`CurveCaps` is, for the note of a capped bound.
-_CAP_WHAT = {'K': 'what the curve itself allows (a random walk under its 95 % upper band '
+_CAP_WHAT = {'N': 'what the curve itself allows past the filter (white noise under its 95 % '
+                  'upper band at every tau)',
+             'K': 'what the curve itself allows (a random walk under its 95 % upper band '
                   'at every tau)',
              'B': "what the curve's floor allows (its 95 % upper band / 0.664)"}
 
 
 def cap_bounds(optimised: dict, caps: CurveCaps, notes: list) -> dict:
     """
-    Cap every upper bound of B and K at what the measured curve allows.
+    Cap every upper bound of N, B and K at what the measured curve allows.
 
     A bound from a profile, from a rival model or from a drift test is an interval's
     upper end; on a short record it can lie far above the curve (the profile of a term
@@ -73,7 +83,7 @@ def cap_bounds(optimised: dict, caps: CurveCaps, notes: list) -> dict:
 
     """
     out = dict(optimised)
-    for sym in ('B', 'K'):
+    for sym in ('N', 'B', 'K'):
         p, cap = out.get(sym), getattr(caps, sym)
         if (p is None or p.kind != 'upper_bound' or not (math.isfinite(cap) and cap > 0)
                 or p.value <= cap):

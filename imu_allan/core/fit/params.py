@@ -6,7 +6,7 @@ do not support get a one-sided 95 % upper bound from the chi-square profile of t
 level (or "not identified" where the record cannot constrain them).  Then
 :func:`bound_by_curve` makes the bounds honest on a short record: an estimate of N, B or
 K whose interval reaches 0 is only an upper bound (its interval's upper end), and no
-bound of B or K lies above the bound the measured curve itself sets
+bound of N, B or K lies above the bound the measured curve itself sets
 (:mod:`imu_allan.core.fit.caps`, which keeps it so for the bounds later steps make).
 """
 

@@ -68,15 +68,16 @@ def json_floats(a) -> list:
 
 class CurveCaps(NamedTuple):
     """
-    The largest B and K a measured curve allows, jointly at 95 % over its points.
+    The largest N, B and K a measured curve allows, jointly at 95 % over its points.
 
     Every term of the model but a sensor's filter only adds to the Allan variance, so a
-    random walk's line K^2 tau / 3 (IEEE Std 952 C.1 slope +1/2) and a bias
-    instability's peak 0.664^2 B^2 (annex C) each lie under the true AVAR at every tau;
-    each point is taken at its joint upper limit
-    (:func:`imu_allan.core.allan.edf.avar_upper`).  (N has no such cap: a filter, which
-    may act far past the taus it visibly flattens, lowers the curve below N's line.)
-    Made by :func:`imu_allan.core.fit.caps.curve_caps` from the points past the filter.
+    random walk's line K^2 tau / 3 (IEEE Std 952 C.1 slope +1/2), a bias
+    instability's peak 0.664^2 B^2 (annex C) and, past the filter, white noise's line
+    N^2 / tau each lie under the true AVAR at every tau; each point is taken at its joint
+    upper limit (:func:`imu_allan.core.allan.edf.avar_upper`).  N is capped only where
+    the curve showed the filter's bend end (:class:`imu_allan.core.fit.axis.FilterCut`):
+    a filter whose bend runs past its cut lowers the curve below N's line.  Made by
+    :func:`imu_allan.core.fit.caps.curve_caps` from the points past the filter.
 
     Attributes
     ----------
@@ -84,11 +85,14 @@ class CurveCaps(NamedTuple):
         min sqrt(AVAR_hi) / 0.664 [unit]; inf without a curve (no cap).
     K : float
         min sqrt(3 AVAR_hi / tau) [unit / s^0.5].
+    N : float
+        min sqrt(AVAR_hi tau) [unit * s^0.5]; inf where the filter's end is not seen.
 
     """
 
     B: float = math.inf
     K: float = math.inf
+    N: float = math.inf
 
 
 def _no_curve() -> np.ndarray:
@@ -164,6 +168,9 @@ class AxisFit:
     caps : CurveCaps
         What the measured curve allows of B and K: no upper bound in ``optimised``
         lies above them (:func:`imu_allan.core.fit.params.cap_fit`).
+    filter_end_s : float
+        The first tau past the sensor's filter [s], where the curve showed its bend end
+        (:func:`imu_allan.core.fit.axis.filter_cut`); NaN where it did not.
     p_value : float or None
         Chi-square p-value of ``chi2`` on ``dof`` (None without degrees of freedom);
         computed where the fit is made, so a process that only reports it needs no scipy.
@@ -191,6 +198,7 @@ class AxisFit:
     b_floor: Param | None = None
     rivals: tuple = ()
     caps: CurveCaps = CurveCaps()
+    filter_end_s: float = math.nan
     p_value: float | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:

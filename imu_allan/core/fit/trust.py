@@ -25,9 +25,9 @@ import math
 
 import numpy as np
 
-from imu_allan.core.allan.edf import avar_upper, curve_k_bound, floor_b_bound
+from imu_allan.core.allan.edf import curve_k_bound, curve_n_bound, floor_b_bound
 from imu_allan.core.allan.quantiles import chi2_ppf
-from imu_allan.core.fit.axis import filtered_start
+from imu_allan.core.fit.axis import filter_cut
 from imu_allan.core.fit.judge import follows_curve, white_region, white_share
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.noise.values import AxisNoise
@@ -67,10 +67,17 @@ def trust_problems(fit: AxisFit, consistent: bool) -> list:
 
 
 def _unfiltered(fit: AxisFit) -> int:
-    """Index of the first fitted tau past the sensor's filter (the one rule of fit_axis)."""
+    """
+    Index of the first fitted tau past the sensor's filter (the one rule of fit_axis).
+
+    Where the fit saw the filter's bend end, there; else the rule runs again on the
+    fitted taus (a bend that may reach past them: filter and floor not told apart).
+    """
+    if math.isfinite(fit.filter_end_s):
+        return int(np.searchsorted(fit.tau_s, fit.filter_end_s * (1.0 - 1e-9)))
     if fit.tau_s.size < 4:
         return 0
-    return filtered_start(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0])
+    return filter_cut(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0]).first
 
 
 def _white(fit: AxisFit, trusted_model: bool = True):
@@ -176,8 +183,7 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
         # No tighter than white noise alone allows at each tau past the filter, each
         # point at its joint upper limit: the largest of the descent alone ran up to 8x
         # above the curve where a bias instability lifts its end (AVAR tau grows).
-        upper = avar_upper(avar[i:], fit.edf[i:]) * tau[i:]
-        bound = min(bound, float(np.sqrt(np.min(upper))))
+        bound = min(bound, curve_n_bound(tau[i:], avar[i:], fit.edf[i:]))
         n_new = Param(bound, (0.0, bound), 'upper_bound', unit_n, 'curve',
                       f"{why}: the curve's own bound")
     # Within what the whole curve allows (AxisFit.caps), so the model file agrees.

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from imu_allan.core.allan.quantiles import chi2_sf
-from imu_allan.core.fit.axis import (check_curve, filter_identified, filtered_start, fit_axis,
+from imu_allan.core.fit.axis import (check_curve, filter_cut, filter_identified, fit_axis,
                                      n_params, term_slot, thin)
 from imu_allan.core.fit.caps import cap_fit
 from imu_allan.core.fit.criterion import claim_penalty
@@ -74,7 +74,7 @@ class _Run:
         # The one rule for the sensor's filter on every axis: the leading taus it bends
         # are left out (as fit_axis does for plain white noise) unless the filter is
         # modelled with an identifiable time constant (see :meth:`base`).
-        self.first = filtered_start(self.tau, self.y, rate_hz)
+        self.cut = filter_cut(self.tau, self.y, rate_hz)
         self.use_taus(0)
         self.raw = None if raw is None else np.asarray(raw, dtype=np.float64)
         self.raw_rate = float(raw_rate_hz or rate_hz)
@@ -140,7 +140,7 @@ class _Run:
         it buys its margin on the whole curve, its time constant is identifiable
         (:func:`filter_identified`) and no other time of the model is pinned at an end
         of its range by it; otherwise the leading taus it bends are left out
-        (:func:`imu_allan.core.fit.axis.filtered_start`) and white noise is fitted to
+        (:func:`imu_allan.core.fit.axis.filter_cut`) and white noise is fitted to
         the rest, as :func:`fit_axis` does.
         """
         self.irls(list(base_labels))
@@ -164,12 +164,10 @@ class _Run:
                     self.notes.append(
                         f'filtered_white: T_f {self.sol.phi[i_f][0]:.3g} s is not '
                         f'identified by taus from {self.tau[0]:.3g} s (left out)')
-        if not modelled and (self.first or 'filtered_white' in self.labels):
-            if self.first:
-                self.use_taus(self.first)
-                slope = 0.5 * math.log(self.y[1] / self.y[0]) / math.log(self.tau[1] /
-                                                                         self.tau[0])
-                if slope > -0.48:
+        if not modelled and (self.cut.first or 'filtered_white' in self.labels):
+            if self.cut.first:
+                self.use_taus(self.cut.first)
+                if not self.cut.ended:
                     # The cut stopped at its limit with the curve still flatter than
                     # white noise: filter and floor cannot be told apart.
                     self.problems.append(f"the sensor's filter bends the curve beyond "
