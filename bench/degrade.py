@@ -157,6 +157,30 @@ def hold(rec: Record, k: float, rng: np.random.Generator) -> Record:
     return out._replace(samples=means[j[ok]])
 
 
+def interpolate(rec: Record, k: float, rng: np.random.Generator) -> Record:
+    """
+    Interpolate the accelerometer linearly onto the gyro's stamps (united IMU streams).
+
+    realsense-ros' ``unite_imu_method: linear_interpolation`` publishes one message per
+    gyro sample, the accelerometer (updating k times slower: 400 Hz gyro and 250 Hz
+    accel is k = 1.6, 200 and 63 Hz about 3.2) interpolated between its two updates
+    around it.  Each update is the mean of the record over its k sample periods (the
+    sensor's own decimation; a fractional k weighs the samples at a window's ends by
+    their share, so every update weighs the same time and the density is unchanged),
+    stamped at its window's middle; the gyro is kept.
+    """
+    y = rec.samples.copy()
+    n = y.shape[0]
+    edges = np.arange(0.0, n + 1e-9, k)
+    sums = np.concatenate((np.zeros((1, 3)), np.cumsum(y[:, 3:], axis=0)))
+    t_u = np.interp(0.5 * (edges[:-1] + edges[1:]) - 0.5, np.arange(n), rec.t_s)
+    inside = (rec.t_s >= t_u[0]) & (rec.t_s <= t_u[-1])
+    for j in range(3):
+        means = np.diff(np.interp(edges, np.arange(n + 1), sums[:, j])) / k
+        y[:, 3 + j] = np.interp(rec.t_s, t_u, means)
+    return _keep(rec._replace(samples=y), inside)
+
+
 def duplicate(rec: Record, pct: float, rng: np.random.Generator) -> Record:
     """Publish pct % of the messages twice, same stamp and values (a driver race)."""
     n = rec.t_s.size
@@ -435,6 +459,8 @@ DEGRADATIONS = {d.name: d for d in (
     _d('gaps', gaps, (2.0, 30.0, 300.0), 's', _GAP),
     _d('hold', hold, (2.0, 3.0, 5.0), 'x', ('held', 'repeat', 'hold', 'update rate')),
     _d('poll', hold, (1.5, 1.9, 3.6), 'x', ('held', 'repeat', 'hold', 'update rate')),
+    _d('interpolate', interpolate, (1.6, 2.0, 3.2), 'x',
+       ('interpolates', 'interpolated between', 'linear_interpolation')),
     _d('duplicate', duplicate, (0.5, 2.0, 10.0), '%', ('duplicate', 'repeat') + _STAMP),
     _d('reorder', reorder, (0.1, 1.0, 5.0), '%', ('order', 'backward') + _STAMP),
     _d('arrival_jitter', arrival_jitter, (0.2, 1.0, 5.0), 'periods', _STAMP),

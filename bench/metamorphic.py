@@ -65,6 +65,7 @@ from degrade import DEGRADATIONS, degrade, Record  # noqa: E402, I100
 
 from imu_allan import AXES  # noqa: E402, I100
 from imu_allan.core.allan.edf import avar_upper  # noqa: E402
+from imu_allan.core.allan.hold import hold_bias, MAX_BIAS  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 REALDATA = REPO.parent / 'shared' / 'realdata'
@@ -157,6 +158,10 @@ def summarise(result) -> dict:
             entry['random_walk'] = [_num(rep.random_walk.value), rep.random_walk.kind]
             entry['trusted'] = bool(fit.trusted)
             entry['fit_tau0_s'] = float(fit.tau_s[0]) if fit.tau_s.size else 0.0
+            # Where the fit saw the sensor's filter end (a modelled filter's fit starts
+            # at the bent taus, which lie below N's line).
+            entry['white_tau0_s'] = max(entry['fit_tau0_s'], np.nan_to_num(fit.filter_end_s))
+        entry['held'] = float(result.hygiene.get('held', {}).get(axis, 0.0))
         axes[axis] = entry
     return {'ok': True, 'warnings': list(result.warnings), 'n_samples': int(result.n_samples),
             'duration_s': float(result.duration_s), 'rate_hz': float(result.rate_hz),
@@ -266,15 +271,19 @@ def over_curve(entry: dict, kinds: tuple = ('upper_bound', 'curve_bound'),
     # The taus the fit reads: the shorter ones, flattened by the sensor's filter or by
     # held values, lie below the white line by construction.
     read = tau >= entry.get('fit_tau0_s', 0.0) * (1.0 - 1e-9)
+    # A held axis' curve is read corrected for the hold (core.allan.hold), as the fit does.
+    held = entry.get('held', 0.0)
+    bias = hold_bias(tau / tau[0], 1.0 / (1.0 - held)) if held else np.zeros(tau.size)
+    gain = 1.0 / np.sqrt(1.0 - np.minimum(bias, MAX_BIAS))
     if joint:
         adev = np.array([np.nan if v is None else v for v in entry['adev']])
         edf = np.array([np.nan if v is None else v for v in entry['edf']])
         ok = np.isfinite(adev) & np.isfinite(edf) & (edf > 0) & read
         tau = tau[ok]
-        hi = np.sqrt(avar_upper(adev[ok] ** 2, edf[ok]))
+        hi = np.sqrt(avar_upper(adev[ok] ** 2, edf[ok])) * gain[ok]
     else:
         hi = np.array([np.nan if v is None else v for v in entry['adev_hi']])
-        hi = np.where(read, hi, np.nan)
+        hi = np.where(read, hi * gain, np.nan)
     ok = np.isfinite(hi) & (hi > 0)
     if not ok.any():
         return []
@@ -287,9 +296,12 @@ def over_curve(entry: dict, kinds: tuple = ('upper_bound', 'curve_bound'),
                for s, key in (('N', 'white'), ('K', 'random_walk'))
                if entry[key][0] and entry[key][1] in kinds]
     out = []
+    white = tau >= entry.get('white_tau0_s', 0.0) * (1.0 - 1e-9)
     for what, value, kind in values:
         sym = what.split()[-1]
         ratio = _term_adev(sym, value, tau, t_b) / hi
+        if sym == 'N':
+            ratio = np.where(white, ratio, 0.0)
         k = int(np.argmax(ratio))
         if ratio[k] > (JOINT_TOL if joint else OVER_TOL):
             out.append((what, kind, float(ratio[k]), float(tau[k])))
