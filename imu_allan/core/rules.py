@@ -161,6 +161,18 @@ LOST_MIN_WINDOWS = 20
 #: p (10 %: 0.142), in runs many times p (2 % in runs of 20: 0.79).
 LOST_FANO = 0.06
 
+# ------------------------------------------------- values interpolated between updates
+
+#: Triples judged on a straight line where twice their area over (t, y) is at most this
+#: share of their values' sum times their span: float32 interpolation keeps 1e-7, a
+#: sensor's noise puts 0-0.05 of its triples there (pipeline.interpolated).
+INTERP_REL_TOL = 1e-6
+#: Moving triples counted before an axis is judged.
+INTERP_MIN_TRIPLES = 2000
+#: The share of moving triples on a line that makes an axis interpolated: 0.2 at 2.5
+#: messages per update, 0-0.05 on the bench's own records (docs/input_gate.md).
+INTERP_MIN = 0.1
+
 # ------------------------------------------------- values on a coarse grid
 
 #: A grid (the least step between distinct values: an LSB, the digits of a CSV) is named

@@ -17,6 +17,7 @@ from imu_allan import AXES
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clipping import ClipWatch
 from imu_allan.pipeline.hygiene import HygieneStats, N_AXES, SessionConfig, WarningLog
+from imu_allan.pipeline.interpolated import InterpWatch
 from imu_allan.pipeline.lost import LostWatch
 from imu_allan.pipeline.motion import MotionGate
 from imu_allan.pipeline.spikes import HOLD_MIN, SpikeFilter
@@ -61,6 +62,7 @@ class SampleGate:
         self.clips = ClipWatch(stats, warn, ('rad/s',) * 3 + ('m/s^2',) * 3)
         self.zeros = ZeroWatch(stats, warn, config.max_fill_samples)
         self.lost = LostWatch(stats, warn)
+        self.interp = InterpWatch(stats, warn)
         self._limits = np.array([config.gyro_range_rad_s] * 3 + [config.accel_range_m_s2] * 3)
         self._last_value = np.full(N_AXES, np.nan)
         self._repeat = np.zeros(N_AXES, dtype=np.int64)
@@ -70,6 +72,7 @@ class SampleGate:
         """Check a gap-free run; pass the rows kept on towards the accumulator."""
         self._rate_hz = rate_hz
         self.lost.take(stamp_ns)
+        self.interp.take(stamp_ns, samples)
         self.clips.take(samples)
         rows = None
         if (self._limits > 0).any():      # no range given (the default): nothing saturates
@@ -87,6 +90,7 @@ class SampleGate:
                 judged = self.spikes.take(t_run, y_run)
                 self._note_held(rate_hz)
                 self.motion.take(*judged, rate_hz)
+        self.interp.judge(rate_hz)
 
     def release(self) -> None:
         """Pass the rows the spike filter holds on now (live: no wait for a chunk)."""
@@ -97,6 +101,7 @@ class SampleGate:
         """End the segment here (a gap, NaN, saturation, a restart): no term spans it."""
         self.zeros.end_segment()
         self.lost.end_segment()
+        self.interp.end_segment()
         self._cut()
 
     def _cut(self) -> None:
@@ -163,7 +168,7 @@ class SampleGate:
                 'spikes': spike_meta, 'motion': motion_meta, 'clips': clip_meta}
         return meta, {'last_value': self._last_value, **spike_arrays, **motion_arrays,
                       **clip_arrays, **self.zeros.state(),
-                      **self.lost.state()}
+                      **self.lost.state(), **self.interp.state()}
 
     def restore(self, meta, arrays: dict) -> None:
         """Take the state of :meth:`state`; InputError when it is invalid."""
@@ -183,6 +188,7 @@ class SampleGate:
         self.clips.restore(meta.get('clips'), arrays)
         self.zeros.restore(arrays)
         self.lost.restore(arrays)
+        self.interp.restore(arrays)
         self._repeat = np.array(repeat, dtype=np.int64)
         self._last_value = last.astype(np.float64)
         self._rate_hz = float(rate)

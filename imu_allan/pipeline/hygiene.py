@@ -181,6 +181,10 @@ class HygieneStats:
         Per axis with held values (a sensor slower than its stream), the share of the
         steps that repeat the value before (0-1), beyond quantization's repeats; the
         spike filter measures it (nothing with ``spike_sigma`` 0).
+    interpolated : dict
+        Per axis whose values a driver interpolated between its sensor's updates, the
+        share of the moving triples on a straight line (0-1;
+        :mod:`imu_allan.pipeline.interpolated`).
     jitter_rel : float
         Standard deviation of the stamp steps (gaps left out) over the period,
         pooled over the windows judged so far.
@@ -235,6 +239,7 @@ class HygieneStats:
     frozen_axes: list = field(default_factory=list)
     saturated_axes: list = field(default_factory=list)
     held: dict = field(default_factory=dict)
+    interpolated: dict = field(default_factory=dict)
     jitter_rel: float = 0.0
     irregular_stamps: bool = False
     coarse_tick_s: float = 0.0
@@ -250,11 +255,11 @@ class HygieneStats:
         if isinstance(state, dict):
             # Counters written before short gaps were filled: none were.
             # ... and before a settling transient was left out, coarse stamps,
-            # clipping and zero-filled fields were recognised: none were.
+            # clipping, zero-filled fields and interpolated values were recognised.
             state = {'n_short_gaps': 0, 'n_filled': 0, 'n_warmup': 0, 'warmup_s': 0.0,
                      'warmup_axes': [], 'coarse_tick_s': 0.0, 'n_lost_in_ticks': 0,
                      'clipped': {}, 'n_zero_rows': 0, 'zero_filled': {}, 'value_grid': {},
-                     **state}
+                     'interpolated': {}, **state}
         if not isinstance(state, dict) or set(state) != {f.name for f in fields(cls)}:
             raise InputError('the counters are incomplete or unknown')
         stats = cls(**state)
@@ -265,7 +270,7 @@ class HygieneStats:
             elif f.name in ('spikes', 'zero_filled'):
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, int) and v >= 0 for v in value.values()))
-            elif f.name in ('held', 'clipped'):
+            elif f.name in ('held', 'clipped', 'interpolated'):
                 ok = (isinstance(value, dict) and set(value) <= set(AXES)
                       and all(isinstance(v, (int, float)) and 0 <= v <= 1
                               for v in value.values()))
