@@ -72,7 +72,6 @@ class SampleGate:
         """Check a gap-free run; pass the rows kept on towards the accumulator."""
         self._rate_hz = rate_hz
         self.lost.take(stamp_ns)
-        self.interp.take(stamp_ns, samples)
         self.clips.take(samples)
         rows = None
         if (self._limits > 0).any():      # no range given (the default): nothing saturates
@@ -83,6 +82,7 @@ class SampleGate:
         for t_part, y_part, broken in split_runs(stamp_ns, samples, rows):
             if broken:
                 self.end_segment()
+            self.interp.take(t_part, y_part)
             self._check_frozen(y_part)
             for t_run, y_run, cut in self.zeros.take(t_part, y_part):
                 if cut:

@@ -278,7 +278,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     notes: list[str] = []
     # With the filtered_white term the filter is part of the model, not cut away.
     cut = filter_cut(tau, avar, rate_hz)
-    cut_tau = tau[min(cut.first, tau.size - 1)]
+    filter_end_s = float(tau[cut.first]) if cut.ended else math.nan
     first = 0 if 'filtered_white' in candidates else cut.first
     if first:
         notes.append(f'tau < {tau[first]:.3g} s left out: flatter than white noise there '
@@ -333,7 +333,6 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
     past = whole[0] >= tau[0]
-    filter_end_s = float(cut_tau) if cut.ended else math.nan
     caps = curve_caps(whole[0][past], whole[1][past], whole[2][past],
                       filter_end_s if cut.ended else math.inf)
     optimised = bound_by_curve(optimised, caps, notes)

@@ -166,7 +166,7 @@ class AxisFit:
         'model' (what differs), 'criterion_rise' (chi-square or -2 ln L + BIC above
         the chosen model) and their N, B, T_B, K [SI].
     caps : CurveCaps
-        What the measured curve allows of B and K: no upper bound in ``optimised``
+        What the measured curve allows of N, B and K: no upper bound in ``optimised``
         lies above them (:func:`imu_allan.core.fit.params.cap_fit`).
     filter_end_s : float
         The first tau past the sensor's filter [s], where the curve showed its bend end
