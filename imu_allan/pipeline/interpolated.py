@@ -74,14 +74,16 @@ class InterpWatch:
         if t.size < 3:
             return
         dt = np.diff(t).astype(np.float64)[:, None]
-        step = np.diff(y, axis=0)
-        # Twice the signed area of each triple over (t, y): 0 on a straight line.
-        cross = step[1:] * dt[:-1] - step[:-1] * dt[1:]
-        span = dt[1:] + dt[:-1]
-        tol = INTERP_REL_TOL * (np.abs(y[:-2]) + 2 * np.abs(y[1:-1]) + np.abs(y[2:])) * span
-        moving = (np.abs(step[1:]) * span > tol) & (np.abs(step[:-1]) * span > tol)
-        self.counts[0] += moving.sum(axis=0)
-        self.counts[1] += (moving & (np.abs(cross) <= tol)).sum(axis=0)
+        # Huge finite values (spikes near the float range) overflow to inf: not on a line.
+        with np.errstate(over='ignore', invalid='ignore'):
+            step = np.diff(y, axis=0)
+            # Twice the signed area of each triple over (t, y): 0 on a straight line.
+            cross = step[1:] * dt[:-1] - step[:-1] * dt[1:]
+            span = dt[1:] + dt[:-1]
+            tol = INTERP_REL_TOL * (np.abs(y[:-2]) + 2 * np.abs(y[1:-1]) + np.abs(y[2:])) * span
+            moving = (np.abs(step[1:]) * span > tol) & (np.abs(step[:-1]) * span > tol)
+            self.counts[0] += moving.sum(axis=0)
+            self.counts[1] += (moving & (np.abs(cross) <= tol)).sum(axis=0)
 
     def end_segment(self) -> None:
         """Forget the last rows: no triple spans a break."""
