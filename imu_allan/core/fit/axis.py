@@ -333,8 +333,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     _unsupported(fitter, slots_all, slots, sol, supported, candidates, terms is not None,
                  symbols, unit, optimised, notes)
     past = whole[0] >= tau[0]
-    caps = curve_caps(whole[0][past], whole[1][past], whole[2][past],
-                      filter_end_s if cut.ended else math.inf)
+    caps = curve_caps(whole[0][past], whole[1][past], whole[2][past], filter_end_s)
     optimised = bound_by_curve(optimised, caps, notes)
     if dof > 0 and chi2_sf(chi2_value, dof) < P_CONSISTENT:
         notes.append(f'the model does not explain the curve (chi2 {chi2_value:.1f} for '

@@ -20,7 +20,7 @@ from imu_allan.core.fit.result import AxisFit, CurveCaps, Param
 
 
 def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray,
-               white_from_s: float = math.inf) -> CurveCaps:
+               white_from_s: float = math.nan) -> CurveCaps:
     """
     Return what the measured curve allows of N, B and K (:class:`CurveCaps`).
 
@@ -34,7 +34,8 @@ def curve_caps(tau: np.ndarray, avar: np.ndarray, edf: np.ndarray,
         (k,) their equivalent degrees of freedom.
     white_from_s : float
         The first tau where the curve showed the filter's bend end [s]: N is capped by
-        the points from there (inf: no N cap).
+        the points from there (NaN, ``AxisFit.filter_end_s`` where the end was not seen:
+        no N cap).
 
     Returns
     -------
