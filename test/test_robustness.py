@@ -84,6 +84,15 @@ def test_the_oracle_can_fail(clean):
     wrong['warnings'].append('gap of 30.000 s (~3000 samples) ...')
     assert meta.compare(summary, wrong, 'drop_random')['cells']['gyro_x N'] == 'warned'
     assert meta.compare(summary, wrong, 'hold')['cells']['gyro_x N'] == 'flagged'
+    # The clean record's own warning at other figures names the effect of its cause.
+    line = 'coarse resolution on gyro_x: the values lie on a grid: rounding raises N by {}'
+    summary_grid = {**summary, 'warnings': [*summary['warnings'], line.format('1 %')]}
+    restated = {**wrong, 'warnings': [*summary['warnings'], line.format('6 %')]}
+    assert meta.compare(summary_grid, restated, 'coarse_grid')['cells']['gyro_x N'] == 'warned'
+    assert meta.compare(summary_grid, restated,
+                        'drop_random')['cells']['gyro_x N'] == 'CONFIDENT'
+    same = {**restated, 'warnings': summary_grid['warnings']}
+    assert meta.compare(summary_grid, same, 'coarse_grid')['cells']['gyro_x N'] == 'CONFIDENT'
     refused = {'ok': False, 'error': 'InputError', 'message': 'x'}
     assert meta.compare(summary, refused, 'drop_random')['outcome'] == 'REFUSED'
     unit = {'ok': False, 'error': 'UnitMistake', 'message': 'x'}

@@ -206,3 +206,28 @@ def test_the_conservative_b_bound_is_not_one_low_lying_point():
         held_new += b.value >= true_floor
         held_old += b_floor(fit).value >= true_floor
     assert held_new == 6 and held_old < 6, (held_new, held_old)
+
+
+def test_the_conservative_n_range_takes_in_the_fit_it_replaces():
+    # The white region's N is the value; where the distrusted fit's N lies outside its
+    # range (ADIS16405 accelerometers: the region read on a plateau of sinusoids) the
+    # range reaches to the fit's, so a record the fit read right is not contradicted.
+    from dataclasses import replace
+    from imu_allan.core.fit.result import Param
+    from imu_allan.core.fit.trust import conservative
+    y = simulate_axis(AxisNoise(N=1e-3, K=1e-6), 10.0, 36_000, np.random.default_rng(4))
+    c = allan_curve(y, 10.0, 'octave', confidence=0.95)
+    found = search_axis(c.tau_s, c.avar[:, 0], c.edf[:, 0], 10.0, y.size, unit='rad/s').fit
+    ranges = {}
+    for kind, n_fit in (('upper_bound', 0.5e-3), ('estimate', 0.5e-3), ('estimate', 1e-3)):
+        n_given = Param(n_fit, (0.98 * n_fit, 1.02 * n_fit), kind, 'rad/s')
+        fit = replace(found, optimised={**found.optimised, 'N': n_given})
+        n = conservative(fit, ['a test']).optimised['N']
+        assert n.kind == 'estimate' and n.source == 'curve'
+        np.testing.assert_allclose(n.value, 1e-3, rtol=0.02)
+        ranges[kind, n_fit] = n.ci95
+    # A bound of the fit leaves the white region's own range, an estimate joins it.
+    white = ranges['upper_bound', 0.5e-3]
+    assert white[0] < 1e-3 < white[1] and white[0] > 0.98 * 0.5e-3
+    assert ranges['estimate', 0.5e-3] == (0.98 * 0.5e-3, white[1])
+    assert ranges['estimate', 1e-3] == white

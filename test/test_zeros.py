@@ -160,3 +160,30 @@ def test_fills_and_block_means_of_a_quantised_axis_are_not_zero_fills():
     tm, ym = t[::10], np.repeat(means[:, None], 6, axis=1) + BIAS * [1, 1, 1, 0, 1, 1]
     list(watch.take(tm, ym))
     assert not watch.filled_axes().any()
+
+
+def test_zeros_of_a_grid_that_a_drift_left_for_a_while_are_a_level():
+    # An ADIS16405-like accel_x (0 a level of a grid of 1.6 sd) whose bias a warm-up
+    # moved off the grid for its first 20,000 rows: the values nearest to 0 are then
+    # single readings of the drift, 0 of the settled part no rarer than its neighbours.
+    t, y = _still(60_000, seed=14)
+    lsb = 1.6 * SD[3]
+    y[:, 3] = np.round((y[:, 3] - BIAS[3] - 0.3 * lsb) / lsb) * lsb
+    y[:20_000, 3] += 2e-2 * np.linspace(1.0, 0.0, 20_000) ** 2
+    assert (y[20_000:, 3] == 0).mean() > 0.2
+    s = _run(t, y, block=97)
+    assert s.stats.n_zero_rows == 0 and not any(ZERO_FILLED in w for w in s.warnings)
+    # Fills on a grid whose levels lie 3 sds off 0 remain fills: no level explains them.
+    y[:, 0] = np.round(y[:, 0] / (0.4 * SD[0])) * 0.4 * SD[0]
+    rows = np.flatnonzero(np.random.default_rng(15).random(t.size) < 0.05)
+    y[rows, 0] = 0.0
+    s = _run(t, y, block=97)
+    assert s.gate.zeros.filled_axes().tolist() == [True] + [False] * 5
+    # (with the grid's own zeros, 0.2 % of the rows: 3 sds off the mean, one LSB wide)
+    zeros = int((y[:, 0] == 0).sum())
+    assert zeros - 40 <= s.stats.zero_filled['gyro_x'] <= zeros
+    # Cut into other blocks, the summary of frequent values is the same.
+    other = _run(t, y, block=1000)
+    for a, b in zip(s.gate.zeros.heavy, other.gate.zeros.heavy):
+        np.testing.assert_array_equal(a.keys, b.keys)
+        np.testing.assert_array_equal(a.counts, b.counts)

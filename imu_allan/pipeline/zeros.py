@@ -19,7 +19,12 @@ either a value next to 0 (within :data:`~imu_allan.core.rules.ZERO_STEP_MAX` sds
 the distribution: a quantised axis reads 0 about as often as the levels next to it),
 or no value is near 0 and 0 lies :data:`~imu_allan.core.rules.ZERO_FAR` sds from the
 mean.  An axis quantised coarser than its noise, which may read 0 most of the time,
-is left alone.  Rows whose three gyro (or accel) values are all 0 are fills when they
+is left alone.  Zeros are no pile either where a level of the axis' values anywhere is
+seen as often as 0 would be by the normal of its values (a summary of the most frequent
+values, Misra and Gries 1982, :data:`HEAVY_LEVELS` counters): the nearest value to 0 may
+be a single value of a stretch off the grid (a quantised axis whose bias a driver or a
+warm-up shifted for a while), while 0 is a level of the grid the rest of the record
+takes.  Rows whose three gyro (or accel) values are all 0 are fills when they
 are :data:`~imu_allan.core.rules.ZERO_RATIO` times as many as the three axes' shares
 of zeros make by chance: a packet's vector zeroed on axes that each read 0 now and
 then (the ADIS16405's gyros read 0 on 3-4 % of their samples).
@@ -62,6 +67,13 @@ LEVEL_ROWS = 1 << 17
 GRID_LEVELS = 1024
 #: The axes of each sensor, whose fields an incomplete packet zeroes together.
 SENSORS = (slice(0, 3), slice(3, 6))
+#: Counters of the most frequent non-zero values per axis: every value seen on more than
+#: 1 / (HEAVY_LEVELS + 1) of an axis' rows keeps one (a grid's levels near its mean).
+HEAVY_LEVELS = 32
+#: Rows gathered before they are added to the summary of frequent values (a summary per
+#: block would cost a node's one-row blocks a sort each).  The batches start at fixed
+#: row counts, so the summary does not depend on how the rows were cut into blocks.
+HEAVY_BATCH = 256
 
 
 # Long because its counters survive a checkpoint, validated one by one, and the rows
@@ -105,6 +117,11 @@ class ZeroWatch:
         self.last_row = np.empty((0, N_AXES))
         # Rows were dropped at the end of the last block: the next run is cut from it.
         self.cut = False
+        # Per axis, the most frequent non-zero values (float32: one level computed in
+        # another order is one key) and their counts; the rows not yet added.
+        self.heavy = [HeavyLevels() for _ in range(N_AXES)]
+        self.pending = np.empty((HEAVY_BATCH, N_AXES))
+        self.n_pending = 0
 
     def take(self, stamp_ns: np.ndarray, samples: np.ndarray):
         """
@@ -182,7 +199,34 @@ class ZeroWatch:
             expected = np.where(close, self.near_count * np.maximum(odds, 1.0), 0.0)
             pile = close.any(axis=1) & (self.n_zero >= ZERO_RATIO * expected.max(axis=1))
             far = ~close.any(axis=1) & (np.abs(centre) > ZERO_FAR * sd)
-        return counted & (pile | far)
+            found = counted & (pile | far)
+            for j in np.flatnonzero(found):
+                found[j] = self.n_zero[j] >= ZERO_RATIO * self._level_expected(
+                    j, float(mu[j, 0]), float(sd_all[j]))
+        return found
+
+    def _level_expected(self, j: int, mu: float, sd: float) -> float:
+        """Return the zeros axis j would read by its most frequent levels' normal odds."""
+        # The rows not yet in a batch count too (the pile is judged on them as well).
+        levels = HeavyLevels(self.heavy[j].keys, self.heavy[j].counts)
+        levels.add(_keys(self.pending[:self.n_pending, j]))
+        keys, counts = levels.keys.astype(np.float64), levels.counts
+        if not keys.size or not sd > 0:
+            return 0.0
+        odds = np.exp(np.minimum(((keys - mu) ** 2 - mu * mu) / (2.0 * sd * sd), 700.0))
+        return float(np.max(counts * odds))
+
+    def _gather(self, samples: np.ndarray) -> None:
+        """Add the rows (n, 6) to the summary of frequent values in whole batches."""
+        k = 0
+        while k < samples.shape[0]:
+            m = min(HEAVY_BATCH - self.n_pending, samples.shape[0] - k)
+            self.pending[self.n_pending:self.n_pending + m] = samples[k:k + m]
+            self.n_pending, k = self.n_pending + m, k + m
+            if self.n_pending == HEAVY_BATCH:
+                for j in range(N_AXES):
+                    self.heavy[j].add(_keys(self.pending[:, j]))
+                self.n_pending = 0
 
     def filled_sensors(self) -> np.ndarray:
         """
@@ -211,6 +255,7 @@ class ZeroWatch:
         # per block all along would double this count's time.
         if self.n_rows - samples.shape[0] < LEVEL_ROWS:
             self._note_levels(samples)
+        self._gather(samples)
         # Sums of the non-zero values, over all axes at once (a loop over the axes
         # costs more than the sums on the blocks of a few rows a node passes on).
         nonzero = ~zero
@@ -290,7 +335,13 @@ class ZeroWatch:
     # ------------------------------------------------------------- checkpoint
     def state(self) -> dict:
         """Return the arrays of the counters and the left neighbour."""
-        return {'zero_n_zero': self.n_zero.copy(), 'zero_near': self.near.copy(),
+        return {'zero_pending': self.pending[:self.n_pending].copy(),
+                'zero_heavy': np.array([np.pad(h.keys.astype(np.float64),
+                                               (0, HEAVY_LEVELS - h.keys.size),
+                                               constant_values=np.nan) for h in self.heavy]),
+                'zero_heavy_counts': np.array([np.pad(h.counts, (0, HEAVY_LEVELS - h.counts.size))
+                                               for h in self.heavy]),
+                'zero_n_zero': self.n_zero.copy(), 'zero_near': self.near.copy(),
                 'zero_near_count': self.near_count.copy(), 'zero_n': self.n.copy(),
                 'zero_sums': self.sums.copy(), 'zero_quantum': self.quantum.copy(),
                 'zero_last_row': self.last_row.copy(),
@@ -325,6 +376,25 @@ class ZeroWatch:
         self.sums, self.last_row = got['zero_sums'].astype(np.float64), last.astype(np.float64)
         self.cut, self.quantum = bool(got['zero_cut'][0]), got['zero_quantum'].astype(np.float64)
         self.n_rows, self.n_all_zero = int(got['zero_rows'][0]), got['zero_rows'][1:].copy()
+        self._restore_heavy(arrays.get('zero_heavy'), arrays.get('zero_heavy_counts'),
+                            arrays.get('zero_pending'))
+
+    def _restore_heavy(self, keys, counts, pending) -> None:
+        """Take the frequent values of :meth:`state` (none saved: counted from here)."""
+        if keys is None and counts is None and pending is None:
+            return
+        shape = (N_AXES, HEAVY_LEVELS)
+        if (keys is None or counts is None or pending is None or keys.shape != shape
+                or counts.shape != shape or (counts < 0).any()
+                or (np.isfinite(keys) != (counts > 0)).any() or pending.ndim != 2
+                or pending.shape[0] >= HEAVY_BATCH or pending.shape[1] != N_AXES):
+            raise InputError('the frequent values of the zero-field counters are invalid')
+        self.n_pending = pending.shape[0]
+        self.pending[:self.n_pending] = pending
+        for j in range(N_AXES):
+            kept = np.isfinite(keys[j])
+            self.heavy[j] = HeavyLevels(keys[j][kept].astype(np.float32),
+                                        counts[j][kept].astype(np.int64))
 
     def _restore_levels(self, levels, many) -> None:
         """Take the distinct values of :meth:`state` (none saved: counted again)."""
@@ -337,6 +407,41 @@ class ZeroWatch:
         if any(np.any(np.diff(v) <= 0) for v in kept):
             raise InputError('the value levels of the zero-field counters are not sorted')
         self.levels, self.many_levels = kept, many.astype(bool)
+
+
+class HeavyLevels:
+    """
+    The most frequent values of a stream, with their counts (Misra and Gries 1982).
+
+    A mergeable summary (Agarwal et al. 2012): a batch's distinct values and counts are
+    added to the counters, and where more than :data:`HEAVY_LEVELS` remain each count is
+    lowered by the next one's and the values left at 0 dropped.  A count is then low by
+    at most the values seen over ``HEAVY_LEVELS + 1``; a value on no grid keeps none.
+    """
+
+    def __init__(self, keys: np.ndarray | None = None, counts: np.ndarray | None = None):
+        self.keys = np.empty(0, np.float32) if keys is None else keys
+        self.counts = np.empty(0, np.int64) if counts is None else counts
+
+    def add(self, values: np.ndarray) -> None:
+        """Count the values (n,) float32."""
+        if not values.size:
+            return
+        keys, where = np.unique(np.concatenate((self.keys, values)), return_inverse=True)
+        counts = np.bincount(where, np.concatenate(
+            (self.counts, np.ones(values.size, np.int64)))).astype(np.int64)
+        if keys.size > HEAVY_LEVELS:
+            cut = np.partition(counts, -(HEAVY_LEVELS + 1))[-(HEAVY_LEVELS + 1)]
+            counts = counts - cut
+            keys, counts = keys[counts > 0], counts[counts > 0]
+        self.keys, self.counts = keys, counts
+
+
+def _keys(values: np.ndarray) -> np.ndarray:
+    """Return the non-zero values (n,) as float32 keys, those beyond its range left out."""
+    with np.errstate(over='ignore'):
+        keys = values[values != 0].astype(np.float32)
+    return keys[np.isfinite(keys)]
 
 
 def _filled(samples: np.ndarray, lost: np.ndarray) -> np.ndarray:

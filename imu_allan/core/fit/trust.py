@@ -8,7 +8,8 @@ white region (:func:`imu_allan.core.fit.judge.white_region`) beyond both interva
 Then every output uses conservative values read off the measured curve instead of the
 distorted fit's:
 
-- N: the white region's level and its 95 % range (an estimate); without a white
+- N: the white region's level, its 95 % range widened to take in the fit's (an
+  estimate: the record cannot tell which is right where they disagree); without a white
   region, the curve's own bound min sqrt(AVAR tau) as an upper bound;
 - B: the ADEV floor's 95 % upper limit over 0.664 (IEEE Std 952-1997 annex C) as an
   upper bound (the floor holds every term's share), each AVAR at its joint upper
@@ -171,8 +172,14 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
     tau, avar = fit.tau_s, fit.avar_meas
     got = _white(fit, trusted_model=False)
     why = 'fit not trusted: ' + '; '.join(problems)
+    n_fit = opt['N']
     if got is not None:
-        n_new = Param(got[0], got[1], 'estimate', unit_n, 'curve',
+        # The value is the white region's; its range reaches to the fit's as well: where
+        # the two disagree (a plateau of sinusoids read as the region, a fit distorted by
+        # the record's end) which is right the record cannot tell.
+        lo = min(got[1][0], n_fit.ci95[0]) if n_fit.kind == 'estimate' else got[1][0]
+        hi = max(got[1][1], n_fit.ci95[1]) if n_fit.kind == 'estimate' else got[1][1]
+        n_new = Param(got[0], (lo, hi), 'estimate', unit_n, 'curve',
                       f'{why}: the white region of the curve')
     else:
         # No white region: the descending part of the curve past the filter bounds N
