@@ -202,7 +202,7 @@ class ZeroWatch:
             found = counted & (pile | far)
             for j in np.flatnonzero(found):
                 found[j] = self.n_zero[j] >= ZERO_RATIO * self._level_expected(
-                    j, float(mu[j, 0]), float(sd_all[j]))
+                    int(j), float(mu[j, 0]), float(sd_all[j]))
         return found
 
     def _level_expected(self, j: int, mu: float, sd: float) -> float:
