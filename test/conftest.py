@@ -49,8 +49,8 @@ def _existing(*names: str) -> list:
 
 _CHECKED = ('imu_allan', 'test', 'bench', 'launch', 'examples')
 #: The linters' commands (``python -m ...`` from the repository), by the test file that
-#: reads each.  Each starts in the background once its test is collected: the suite runs
-#: in one process on a two-core machine, and their minute of one core overlaps the tests.
+#: reads each.  In one pytest process each starts in the background once its test is
+#: selected, and their minute of one core overlaps the tests.
 LINTERS = {
     'test_mypy.py': ['mypy', '--config-file', 'setup.cfg', '--no-incremental',
                      '--cache-dir', os.devnull, 'imu_allan'],
@@ -68,9 +68,25 @@ def _start_linter(name: str) -> None:
     _LINTING[name] = (proc, out)
 
 
+#: Test files whose nodes talk over DDS with timers and discovery that a loaded core
+#: slows past their waits: marked ``ros_graph``, and `make test` runs them alone after
+#: the others ran on two xdist workers.
+ROS_GRAPH = ('test_node.py', 'test_node_plan.py', 'test_node_install.py')
+
+
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(session, config, items):
-    """Start the linters whose tests were collected (see :data:`LINTERS`)."""
-    for name in sorted({Path(str(item.path)).name for item in items} & set(LINTERS)):
+    """Mark the tests of :data:`ROS_GRAPH` (before ``-m`` selects)."""
+    for item in items:
+        if Path(str(item.path)).name in ROS_GRAPH:
+            item.add_marker(pytest.mark.ros_graph)
+
+
+def pytest_collection_finish(session):
+    """Start the linters whose tests were selected (see :data:`LINTERS`)."""
+    if os.environ.get('PYTEST_XDIST_WORKER'):
+        return      # each worker collects every test: a linter starts when its test runs
+    for name in sorted({Path(str(item.path)).name for item in session.items} & set(LINTERS)):
         if name not in _LINTING:
             _start_linter(name)
 
