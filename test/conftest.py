@@ -69,17 +69,29 @@ def _start_linter(name: str) -> None:
 
 
 #: Test files whose nodes talk over DDS with timers and discovery that a loaded core
-#: slows past their waits: marked ``ros_graph``, and `make test` runs them alone after
-#: the others ran on two xdist workers.
+#: slows past their waits: marked ``ros_graph``, and `make test` runs them (and the
+#: linters, in the background) after the others ran on two xdist workers.
 ROS_GRAPH = ('test_node.py', 'test_node_plan.py', 'test_node_install.py')
+#: Test files with module-scoped fixtures (fleet runs, analysed records, a colcon
+#: build): one xdist group each, so a worker builds each once; the tests of the
+#: session's ADIS16405 run 1 are one group too.  The rest go to either worker.
+SHARED_FIXTURES = ('test_accumulator.py', 'test_cli_analyze.py', 'test_cli_errors.py',
+                   'test_colcon.py', 'test_diagnose.py', 'test_fills.py', 'test_fleet.py',
+                   'test_plot.py', 'test_reported.py', 'test_robustness.py',
+                   'test_units.py', 'test_warmup.py')
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(session, config, items):
-    """Mark the tests of :data:`ROS_GRAPH` (before ``-m`` selects)."""
+    """Mark :data:`ROS_GRAPH` and the xdist groups (before ``-m`` selects)."""
     for item in items:
-        if Path(str(item.path)).name in ROS_GRAPH:
+        name = Path(str(item.path)).name
+        if name in ROS_GRAPH:
             item.add_marker(pytest.mark.ros_graph)
+        group = ('adis_run1' if 'adis_run1' in getattr(item, 'fixturenames', ())
+                 else name if name in SHARED_FIXTURES else None)
+        if group:
+            item.add_marker(pytest.mark.xdist_group(group))
 
 
 def pytest_collection_finish(session):

@@ -6,6 +6,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
+from imu_allan import AXES
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.noise.rounding import rounding_effect
 from imu_allan.core.noise.values import AxisNoise
@@ -53,3 +54,23 @@ def test_a_grid_is_named_per_sensor_from_a_one_percent_raise_on():
     # Nothing is said of an axis whose N is not an estimate, or without a rate.
     assert resolution_warnings(coarse, {'gyro_x': None}, RATE_HZ) == ()
     assert resolution_warnings(coarse, _fits(n), 0.0) == ()
+
+
+def test_the_gate_measures_the_grid_of_an_axis_with_two_levels():
+    # A gyro rounded to 8 sds reads two levels only (ADIS16405 run 3's gyros so rounded:
+    # N 0.43x its clean value, and no word of the grid when two levels were too few).
+    from conftest import still_imu
+    from imu_allan.pipeline.session import Session
+    t, y = still_imu(30_000, seed=6, rate_hz=RATE_HZ)
+    sd = np.std(np.diff(y, axis=0), axis=0) / math.sqrt(2.0)
+    steps = np.array([8.0, 8.0, 2.0, 1.6, 1.6, 1.6]) * sd
+    y = np.round((y - y.mean(axis=0) + 0.3 * steps) / steps) * steps
+    assert np.unique(y[:, 0]).size == 2
+    s = Session()
+    s.add(t, y)
+    s.flush()
+    got = np.array([s.stats.value_grid[a] for a in AXES])
+    assert_allclose(got, steps, rtol=1e-9)
+    n = float(sd[0]) / math.sqrt(RATE_HZ)
+    line = resolution_warnings(s.stats.value_grid, _fits(n), RATE_HZ)[0]
+    assert line.startswith(f'{COARSE_GRID} on gyro_x, gyro_y') and 'not resolved' in line

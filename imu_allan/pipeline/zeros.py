@@ -312,7 +312,7 @@ class ZeroWatch:
             levels = self.levels[j]
             steps = np.diff(levels)
             steps = steps[steps > LEVEL_TOL * float(np.abs(levels).max(initial=0.0))]
-            if self.many_levels[j] or steps.size < 2:
+            if self.many_levels[j] or not steps.size:
                 self.stats.value_grid.pop(axis, None)
             else:
                 self.stats.value_grid[axis] = float(np.median(steps))
