@@ -69,8 +69,8 @@ def _start_linter(name: str) -> None:
 
 
 #: Test files whose nodes talk over DDS with timers and discovery that a loaded core
-#: slows past their waits: marked ``ros_graph``, and `make test` runs them (and the
-#: linters, in the background) after the others ran on two xdist workers.
+#: slows past their waits: marked ``ros_graph``, and `make test` runs them alone after
+#: the others ran on two xdist workers.
 ROS_GRAPH = ('test_node.py', 'test_node_plan.py', 'test_node_install.py')
 #: Test files with module-scoped fixtures (fleet runs, analysed records, a colcon
 #: build): one xdist group each, so a worker builds each once; the tests of the

@@ -97,6 +97,7 @@ def test_untrusted_axis_warns_and_comments_every_consumer_file():
     (warning,) = result.trust_warnings()
     assert warning.startswith('gyro_x: the fitted model is not trusted')
     assert f'{fit.optimised["N"].value:.3g}' in warning
+    assert 'imu-allan diagnose names an effect' in warning      # what to do
     for text in (result.kalibr_yaml(), result.vins_yaml(), result.driver_yaml(),
                  result.robot_localization_yaml()):
         assert '# WARNING gyro_x: fit not trusted' in text

@@ -257,10 +257,8 @@ class AnalysisResult:
     def trust_warnings(self) -> list:
         """One top-level warning per axis whose fit is not trusted (conservative values)."""
         out = []
-        for axis in AXES:
-            fit = self.fits.get(axis)
-            if fit is None or not fit.trust:
-                continue
+        for axis in [a for a in AXES if self.fits.get(a) is not None and self.fits[a].trust]:
+            fit = self.fits[axis]
             used = ', '.join(f'{s} {"<= " if p.kind == "upper_bound" else ""}{p.value:.3g}'
                              + (f' [{p.ci95[0]:.3g}, {p.ci95[1]:.3g}]'
                                 if p.kind == 'estimate' else '')
@@ -269,9 +267,10 @@ class AnalysisResult:
             fitted = ', '.join(f'{s} {p.value:.3g} ({p.kind})'
                                for s, p in fit.fit_values.items() if s in ('N', 'B'))
             out.append(f'{axis}: the fitted model is not trusted ({"; ".join(fit.trust)}); '
-                       f'every output uses conservative values from the curve: {used} '
-                       f'[SI] (N from the white region, B from the ADEV floor); the fit '
-                       f'gave {fitted}')
+                       f'every output uses conservative values from the curve: {used} [SI] '
+                       f'(N from the white region, B from the ADEV floor); the fit gave '
+                       f'{fitted}; imu-allan diagnose names an effect the model lacks, a '
+                       'longer record settles a time at the end of its range')
         return out
 
     def with_trust_comments(self, text: str) -> str:
