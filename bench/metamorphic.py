@@ -20,9 +20,10 @@ section of result.json) the degraded analysis is one of:
 - ``agree``: the reported intervals overlap (an upper bound is [0, bound], a lower bound
   [bound, inf], a parameter not identified makes no claim);
 - ``warned``: they do not, but a top-level warning the clean record lacks names the axis
-  (or its sensor, or no axis: the whole record) and the cause (a word of the class'
-  ``cause``), or a warning of the clean record that does so states other figures (the
-  coarse-resolution warning's raise of N on a record rounded coarser);
+  (or its sensor, or no axis: the whole record; a short record's warning the parameter
+  too) and the cause (a word of the class' ``cause``), or a warning of the clean record
+  that does so states other figures (the coarse-resolution warning's raise of N on a
+  record rounded coarser);
 - ``flagged``: they do not, and a warning the clean record lacks is about the axis but
   names another cause (the "fit not trusted" warning, motion ...): the rule is not met;
 - ``CONFIDENT``: they do not and no new warning is about the axis: a confident
@@ -67,6 +68,7 @@ from degrade import DEGRADATIONS, degrade, Record  # noqa: E402, I100
 from imu_allan import AXES  # noqa: E402, I100
 from imu_allan.core.allan.edf import avar_upper  # noqa: E402
 from imu_allan.core.allan.hold import hold_bias, MAX_BIAS  # noqa: E402
+from imu_allan.core.outputs.short_record import CONSUMER_NAMES, SHORT_RECORD  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 REALDATA = REPO.parent / 'shared' / 'realdata'
@@ -232,6 +234,14 @@ def names_axis(warning: str, axis: str) -> bool:
     return False
 
 
+def names_param(warning: str, axis: str, sym: str) -> bool:
+    """Tell whether a warning can be about a parameter: one of a short record names it."""
+    if not warning.startswith(SHORT_RECORD):
+        return True
+    name = CONSUMER_NAMES.get((axis.split('_')[0], sym))
+    return name is not None and name in warning
+
+
 def _shape(warning: str) -> str:
     """Return a warning with its numbers blanked (the same warning at other figures)."""
     return re.sub(r'[-+]?\d[\d.,]*(e[-+]?\d+)?', '#', warning)
@@ -337,8 +347,9 @@ def compare(clean: dict, degraded: dict, deg_name: str) -> dict:
             if ci is None or di is None or (ci[0] <= di[1] and di[0] <= ci[1]):
                 cells[f'{axis} {sym}'] = 'agree'
                 continue
-            about = [w for w in new if names_axis(w, axis)]
-            if any(has_cause(w, cause) for w in about + restated if names_axis(w, axis)):
+            about = [w for w in new if names_axis(w, axis) and names_param(w, axis, sym)]
+            if any(has_cause(w, cause) for w in about + restated
+                   if names_axis(w, axis) and names_param(w, axis, sym)):
                 cells[f'{axis} {sym}'] = 'warned'
             else:
                 cells[f'{axis} {sym}'] = 'flagged' if about else 'CONFIDENT'

@@ -75,10 +75,8 @@ ROS_GRAPH = ('test_node.py', 'test_node_plan.py', 'test_node_install.py')
 #: Test files with module-scoped fixtures (fleet runs, analysed records, a colcon
 #: build): one xdist group each, so a worker builds each once; the tests of the
 #: session's ADIS16405 run 1 are one group too.  The rest go to either worker.
-SHARED_FIXTURES = ('test_accumulator.py', 'test_cli_analyze.py', 'test_cli_errors.py',
-                   'test_colcon.py', 'test_diagnose.py', 'test_fills.py', 'test_fleet.py',
-                   'test_plot.py', 'test_reported.py', 'test_robustness.py',
-                   'test_units.py', 'test_warmup.py')
+SHARED_FIXTURES = frozenset(p.name for p in Path(__file__).parent.glob('test_*.py')
+                            if "scope='module'" in p.read_text())
 
 
 @pytest.hookimpl(tryfirst=True)

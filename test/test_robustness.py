@@ -84,6 +84,12 @@ def test_the_oracle_can_fail(clean):
     wrong['warnings'].append('gap of 30.000 s (~3000 samples) ...')
     assert meta.compare(summary, wrong, 'drop_random')['cells']['gyro_x N'] == 'warned'
     assert meta.compare(summary, wrong, 'hold')['cells']['gyro_x N'] == 'flagged'
+    # A short record's warning is about the parameters it names (K here), not N.
+    short = {**wrong, 'warnings': [*summary['warnings'], 'record too short (9 min) to '
+                                   'determine gyroscope_random_walk (K): only a bound']}
+    assert meta.compare(summary, short, 'first_minutes')['cells']['gyro_x N'] == 'CONFIDENT'
+    short['warnings'][-1] = short['warnings'][-1].replace('random_walk (K)', 'noise_density (N)')
+    assert meta.compare(summary, short, 'first_minutes')['cells']['gyro_x N'] == 'warned'
     # The clean record's own warning at other figures names the effect of its cause.
     line = 'coarse resolution on gyro_x: the values lie on a grid: rounding raises N by {}'
     summary_grid = {**summary, 'warnings': [*summary['warnings'], line.format('1 %')]}
