@@ -187,3 +187,18 @@ def test_zeros_of_a_grid_that_a_drift_left_for_a_while_are_a_level():
     for a, b in zip(s.gate.zeros.heavy, other.gate.zeros.heavy):
         np.testing.assert_array_equal(a.keys, b.keys)
         np.testing.assert_array_equal(a.counts, b.counts)
+
+
+def test_a_frozen_read_of_zeros_is_one_reading_not_a_pile():
+    # 300 s of one row repeated whose gyro_z and accel_x read 0 (ADIS16405 run 5 so
+    # degraded: 30,000 zeros made a pile, and the axes' own zeros were then taken for
+    # zero-filled fields); held values likewise count once per update.
+    t, y = _still(60_000, seed=16)
+    y[:, 2] = np.round((y[:, 2] - BIAS[2]) / (0.4 * SD[2])) * 0.4 * SD[2]    # reads 0 too
+    y[20_000:50_000] = y[19_999]
+    y[20_000:50_000, [2, 3]] = 0.0
+    s = _run(t, y, block=333)
+    assert s.stats.n_zero_rows == 0 and not any(ZERO_FILLED in w for w in s.warnings)
+    # The same zeros in 3,000 separate messages are fills (10 % of rows as before).
+    bad = _zero_rows(_still(60_000, seed=16)[1], 0.1, seed=17)
+    assert _run(t, bad, block=333).stats.n_zero_rows > 5_000

@@ -193,6 +193,14 @@ class MotionGate:
 
     def _judge_window(self, t: np.ndarray, y: np.ndarray, mean: np.ndarray,
                       std: np.ndarray) -> None:
+        if not std.any():
+            # Six values repeated for a whole window: a frozen read (the sample checks
+            # name it), no still data, and no quieter stretch to take as the reference
+            # (a 300 s freeze of ADIS16405 run 5 became it, and the hour was refused as
+            # motion). Left out as a gap.
+            self.feed.break_segment()
+            self.stats.n_motion_dropped += t.size
+            return
         std = np.maximum(std, _FLOOR * self._caps)
         if self.ref_mean is None or self.ref_std is None:
             # The first window: a provisional reference, replaced when it was motion.
@@ -457,7 +465,8 @@ def _still_run(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
     """
     means, stds = _window_stats(y.reshape(-1, win, y.shape[1]))
     for w in range(means.shape[0]):
-        if _moved_axes(means[w], stds[w], thr, ratio_limit, ref_mean, ref_std)[0].any():
+        if (_moved_axes(means[w], stds[w], thr, ratio_limit, ref_mean, ref_std)[0].any()
+                or not stds[w].any()):     # a frozen window is judged alone
             return w, means[w], stds[w]
         _follow_drift(ref_mean, means[w])
     return means.shape[0], None, None

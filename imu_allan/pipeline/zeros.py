@@ -117,6 +117,8 @@ class ZeroWatch:
         self.last_row = np.empty((0, N_AXES))
         # Rows were dropped at the end of the last block: the next run is cut from it.
         self.cut = False
+        # The last row seen (a repeat of it is not counted again).
+        self.prev_row = np.empty((0, N_AXES))
         # Per axis, the most frequent non-zero values (float32: one level computed in
         # another order is one key) and their counts; the rows not yet added.
         self.heavy = [HeavyLevels() for _ in range(N_AXES)]
@@ -139,9 +141,16 @@ class ZeroWatch:
             zero-filled rows was dropped just before (the segment ends there).
 
         """
-        # Rows that fill a gap of the stamps are no readings: neither counted nor judged.
+        # Rows that fill a gap of the stamps are no readings: neither counted nor judged;
+        # a row that repeats the one before is counted once (a held or frozen read of
+        # zeros is one reading, not a pile: a 300 s freeze made 30,000).
         fill = filled(samples)
-        self._count(samples if fill is None else samples[~fill])
+        again = np.empty(samples.shape[0], dtype=bool)
+        again[0] = bool(self.prev_row.shape[0]) and bool((samples[0] == self.prev_row[0]).all())
+        again[1:] = (samples[1:] == samples[:-1]).all(axis=1)
+        self.prev_row = samples[-1:].copy()
+        counted = ~again if fill is None else ~again & ~fill
+        self._count(samples if counted.all() else samples[counted])
         axes, sensors = self.filled_axes(), self.filled_sensors()
         zero = (samples[:, axes] == 0).any(axis=1) if axes.any() else None
         for k in np.flatnonzero(sensors):
@@ -336,6 +345,7 @@ class ZeroWatch:
     def state(self) -> dict:
         """Return the arrays of the counters and the left neighbour."""
         return {'zero_pending': self.pending[:self.n_pending].copy(),
+                'zero_prev_row': self.prev_row.copy(),
                 'zero_heavy': np.array([np.pad(h.keys.astype(np.float64),
                                                (0, HEAVY_LEVELS - h.keys.size),
                                                constant_values=np.nan) for h in self.heavy]),
@@ -378,6 +388,11 @@ class ZeroWatch:
         self.n_rows, self.n_all_zero = int(got['zero_rows'][0]), got['zero_rows'][1:].copy()
         self._restore_heavy(arrays.get('zero_heavy'), arrays.get('zero_heavy_counts'),
                             arrays.get('zero_pending'))
+        prev = arrays.get('zero_prev_row')
+        if prev is not None:
+            if prev.ndim != 2 or prev.shape[0] > 1 or prev.shape[1] != N_AXES:
+                raise InputError('the last row of the zero-field counters is invalid')
+            self.prev_row = prev.astype(np.float64)
 
     def _restore_heavy(self, keys, counts, pending) -> None:
         """Take the frequent values of :meth:`state` (none saved: counted from here)."""
