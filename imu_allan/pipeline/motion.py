@@ -177,9 +177,9 @@ class MotionGate:
                     self._note_still(tail.reshape(k, win, -1).mean(axis=1), k == still)
                     self._ref_windows += still
                     i += still
-                    last = y[(i - 1) * win:i * win][None]
-                    if self._quieter(_window_stats(last)[1][0], self.ref_std):
-                        self._close()
+                    last_std = _window_stats(y[(i - 1) * win:i * win][None])[1][0]
+                    if last_std.any() and self._quieter(last_std, self.ref_std):
+                        self._close()       # (a frozen window is no quieter stillness)
                 if i == n_windows:
                     return
                 if mean is None or self.moving:
@@ -193,13 +193,14 @@ class MotionGate:
 
     def _judge_window(self, t: np.ndarray, y: np.ndarray, mean: np.ndarray,
                       std: np.ndarray) -> None:
-        if not std.any():
+        if not std.any() and self.ref_mean is not None:
             # Six values repeated for a whole window: a frozen read (the sample checks
-            # name it), no still data, and no quieter stretch to take as the reference
-            # (a 300 s freeze of ADIS16405 run 5 became it, and the hour was refused as
-            # motion). Left out as a gap.
-            self.feed.break_segment()
-            self.stats.n_motion_dropped += t.size
+            # name it), never a quieter stretch to take as the reference (a 300 s freeze
+            # of ADIS16405 run 5 became it, and the hour was refused as motion).
+            if self.moving:
+                self.stats.n_motion_dropped += t.size
+            else:
+                self.feed.queue(y, t)
             return
         std = np.maximum(std, _FLOOR * self._caps)
         if self.ref_mean is None or self.ref_std is None:
@@ -465,8 +466,7 @@ def _still_run(y: np.ndarray, win: int, thr: np.ndarray, ratio_limit: float,
     """
     means, stds = _window_stats(y.reshape(-1, win, y.shape[1]))
     for w in range(means.shape[0]):
-        if (_moved_axes(means[w], stds[w], thr, ratio_limit, ref_mean, ref_std)[0].any()
-                or not stds[w].any()):     # a frozen window is judged alone
+        if _moved_axes(means[w], stds[w], thr, ratio_limit, ref_mean, ref_std)[0].any():
             return w, means[w], stds[w]
         _follow_drift(ref_mean, means[w])
     return means.shape[0], None, None
