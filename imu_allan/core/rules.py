@@ -184,3 +184,10 @@ ROUNDING_N_RAISE = 0.01
 #: rounding is no additive noise once the sd is below half a step (Widrow and Kollar,
 #: Quantization Noise, 2008), and a simulated axis rounded to 8 sds read N at 0.49x.
 ROUNDING_RATIO_MAX = 2.0
+
+# ---------------------------------------------------------- a noise level that changed
+
+#: The AVAR at a white-noise tau differs between the record's stretches when Cochran's
+#: Q test gives a p-value below this (core/allan/stretches.py): one false widening in a
+#: thousand axes of a steady sensor; the ADIS16405 accelerometers' hours give p < 1e-7.
+LEVEL_P = 1e-3

@@ -27,12 +27,13 @@ from imu_allan.core.outputs.covering import cover_axes, default_horizon, DEFAULT
 from imu_allan.core.outputs.exports import driver_yaml, kalibr_yaml, robot_localization_yaml
 from imu_allan.core.outputs.kalman import imu_covariance, kalman_model, KalmanModel
 from imu_allan.core.outputs.lines import axis_line
-from imu_allan.core.outputs.reported import report_axes
+from imu_allan.core.outputs.reported import report_axes, unsettled
 from imu_allan.core.outputs.short_record import SHORT_RECORD, short_record_warnings
 from imu_allan.core.outputs.vio import openvins_yaml, vins_yaml
 from imu_allan.errors import InputError
 from imu_allan.pipeline.clipping import CLIPPED, KEEP_SHARE, left_out
 from imu_allan.pipeline.drift_report import drift_axes, SLOW_DRIFT
+from imu_allan.pipeline.level_report import level_axes, NOISE_CHANGED
 from imu_allan.pipeline.resolution import COARSE_GRID, resolution_warnings
 from imu_allan.pipeline.session import Session
 from imu_allan.pipeline.thermal_report import thermal_axes, THERMAL_DRIFT
@@ -228,7 +229,7 @@ class AnalysisResult:
             values += [(sym, _g(p.value)), (f'{sym}_ci95_lo', _g(p.ci95[0])),
                        (f'{sym}_ci95_hi', _g(p.ci95[1])), (f'{sym}_unit', p.unit),
                        (f'{sym}_kind', p.kind)]
-        problems = _trust_problems(fit)
+        problems = unsettled(fit)
         if fit.trust:
             problems.append('fit not trusted, conservative values used: ' + '; '.join(fit.trust))
         elif fit.model_consistent is False:
@@ -278,7 +279,8 @@ class AnalysisResult:
         lines = [f'# WARNING {c}' for a in AXES
                  for c in [self.fits[a].trust_comment(a) if self.fits.get(a) else ''] if c]
         lines += [f'# WARNING {w}' for w in self.warnings if CLIPPED in w
-                  or w.startswith((SHORT_RECORD, THERMAL_DRIFT, SLOW_DRIFT, COARSE_GRID))]
+                  or w.startswith((SHORT_RECORD, THERMAL_DRIFT, SLOW_DRIFT, COARSE_GRID,
+                                   NOISE_CHANGED))]
         if not lines:
             return text
         head, sep, rest = text.partition('\n')
@@ -429,6 +431,7 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
     fits.update(zip(jobs, found))
     thermal, hot = thermal_axes(session, curve, fits, (samples, raw_rate), _map_axes, workers)
     fits, drifts = drift_axes(fits, samples, raw_rate, thermal)     # K that is a slow drift
+    fits, changed = level_axes(fits, session.stretches())
     curve = curve._replace(adev_lo=lo, adev_hi=hi)
     plans = _plans(fits, float(session.rate_hz), float(session.duration_s), plan_targets,
                    workers) if plan else {}
@@ -446,8 +449,8 @@ def analyze(session, source: str = '', raw=None, topic: str = '', workers: int =
     # and so is a consumer value the record cannot determine.
     return replace(result, warnings=result.warnings + tuple(result.trust_warnings())
                    + tuple(short_record_warnings(fits, plans, float(session.duration_s)))
-                   + hot + drifts + resolution_warnings(session.stats.value_grid, fits,
-                                                        session.rate_hz))
+                   + hot + drifts + changed
+                   + resolution_warnings(session.stats.value_grid, fits, session.rate_hz))
 
 
 def _gyro_white(curve: AllanCurve, fits: dict) -> np.ndarray:
@@ -482,17 +485,6 @@ def _plans(fits: dict, rate_hz: float, duration_s: float, targets, workers: int)
         for part in pool.map(_plan_job, [j for j in jobs if j[0]]):
             done.update(part)
     return {a: done[a] for a in fitted if a in done}
-
-
-def _trust_problems(fit: AxisFit) -> list:
-    problems = []
-    for sym, max_ratio in (('N', 1.5), ('B', 4.0)):
-        p = fit.optimised.get(sym)
-        if p is None or p.kind != 'estimate':
-            problems.append(f'{sym} not identified yet')
-        elif not (p.ci95[0] > 0 and p.ci95[1] / p.ci95[0] <= max_ratio):
-            problems.append(f'{sym} interval still wide')
-    return problems
 
 
 def _g(x: float) -> str:

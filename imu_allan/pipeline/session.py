@@ -28,6 +28,7 @@ from typing import Callable, Self
 import numpy as np
 
 from imu_allan.core.allan.curve import AllanCurve
+from imu_allan.core.allan.stretches import Stretches
 from imu_allan.core.noise.unit_check import (first_look, FIRST_LOOK_ROWS, unit_error,
                                              unit_warnings)
 from imu_allan.errors import InputError, NotEnoughStillData, UnitMistake
@@ -253,6 +254,11 @@ class Session:
         if acc is None or acc.n_samples < 4:
             return None
         return acc.curve(confidence=confidence, bounds=bounds)
+
+    def stretches(self) -> Stretches | None:
+        """Return the AVAR of each stretch of the record (core/allan/stretches.py), or None."""
+        self.feed.pass_on()
+        return None if self.feed.acc is None else self.feed.acc.stretches()
 
     @property
     def warnings(self) -> list[str]:

@@ -56,6 +56,7 @@ class SessionView:
 
     def __init__(self, session: Session):
         self._curve = session.curve(confidence=CONFIDENCE, bounds=False)
+        self._stretches = session.stretches()
         self.stats = copy.deepcopy(session.stats)
         # Rows held for the warm-up judgement after a restart are not in the curve yet.
         self.stats.n_used -= session.warmup.held_used
@@ -71,6 +72,10 @@ class SessionView:
         self.feed = SimpleNamespace(
             thermal=copy.deepcopy(thermal),
             acc=None if thermal is None else copy.deepcopy(session.feed.acc))
+
+    def stretches(self):
+        """Return the stretches taken with the snapshot (core/allan/stretches.py)."""
+        return self._stretches
 
     def curve(self, confidence: float = CONFIDENCE, bounds: bool = True):
         """Return the Allan curve taken with the snapshot (bounds computed on request)."""

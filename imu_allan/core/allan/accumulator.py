@@ -62,6 +62,7 @@ from imu_allan.core.allan.curve import AllanCurve
 from imu_allan.core.allan.edf import confidence_bounds, edf_overlapping
 from imu_allan.core.allan.fill_terms import gap_excess, used_terms
 from imu_allan.core.allan.noise_id import alpha_from_slope
+from imu_allan.core.allan.stretches import stretch_view, Stretches, StretchSums
 from imu_allan.core.allan.taus import dense_m_grid
 from imu_allan.core.allan.window_sums import accumulate, dirty_terms, phase, TILE_COLS
 from imu_allan.errors import InputError
@@ -170,6 +171,8 @@ class AllanAccumulator(_Persistence):
         self._dirty_sums = np.zeros((self._m0.size, n_axes))
         self._dirty_counts = np.zeros(self._m0.size, dtype=np.int64)
         self._work: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: The exact taus' sums per stretch of the record (noise level changes).
+        self.stretch_sums = StretchSums(self._m0.size, n_axes)
 
     # ------------------------------------------------------------------ grid
     def _build_grid(self) -> None:
@@ -327,16 +330,19 @@ class AllanAccumulator(_Persistence):
         x_all, x2_all, tile = self._work_arrays()
         x = x_all[:, :w + 1]
         r = phase(buf[:, :w], x)
+        k0 = self._m0.size
+        sums = np.zeros((k0, self.n_axes))
+        counts = np.zeros(k0, dtype=np.int64)
+        accumulate(x, h + 1, w, self._m0, sums, counts, 0, x2_all, tile)
+        self._sums[:k0] += sums
+        self._counts[:k0] += counts
         if self._miss[h:w].any():
-            sums = np.zeros((self._m0.size, self.n_axes))
-            counts = np.zeros(self._m0.size, dtype=np.int64)
-            accumulate(x, h + 1, w, self._m0, sums, counts, 0, x2_all, tile)
-            self._sums[:self._m0.size] += sums
-            self._counts[:self._m0.size] += counts
-            dirty_terms(x, self._miss[:w], h + 1, self._m0, sums, self._dirty_sums,
-                        self._dirty_counts)
-        else:
-            accumulate(x, h + 1, w, self._m0, self._sums, self._counts, 0, x2_all, tile)
+            dirty = np.zeros((k0, self.n_axes)), np.zeros(k0, dtype=np.int64)
+            dirty_terms(x, self._miss[:w], h + 1, self._m0, sums, *dirty)
+            self._dirty_sums += dirty[0]
+            self._dirty_counts += dirty[1]
+            sums, counts = np.maximum(sums - dirty[0], 0.0), counts - dirty[1]
+        self.stretch_sums.add(sums, counts, p)
         # Cluster sums for level 1 end at segment indices that are multiples of D_1.
         base = self._seg_n - h
         if self._levels:
@@ -375,13 +381,31 @@ class AllanAccumulator(_Persistence):
             values = x[:, ends] - x[:, ends - 2] + 2.0 * r[:, None]
 
     # ----------------------------------------------------------------- curve
-    def _sums_now(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Pooled sums and counts, then the exact taus' terms over missing samples."""
+    def _flushed(self) -> 'AllanAccumulator':
+        """Return self, or a copy with the pending samples processed."""
         if not self._pending:
-            return self._sums, self._counts, self._dirty_sums, self._dirty_counts
+            return self
         clone = self._copy()
         clone._flush()
-        return clone._sums, clone._counts, clone._dirty_sums, clone._dirty_counts
+        return clone
+
+    def _sums_now(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Pooled sums and counts, then the exact taus' terms over missing samples."""
+        done = self._flushed()
+        return done._sums, done._counts, done._dirty_sums, done._dirty_counts
+
+    def stretches(self) -> Stretches:
+        """
+        Return the AVAR of each stretch of the record at the exact taus.
+
+        Returns
+        -------
+        Stretches
+            Per stretch of :mod:`imu_allan.core.allan.stretches` (the samples not yet
+            processed in the last), terms over filled samples left out.
+
+        """
+        return stretch_view(self._flushed().stretch_sums, self._m0, self.rate_hz)
 
     def curve(self, confidence: float = 0.683, alpha=None, min_terms: int = 1,
               bounds: bool = True) -> AllanCurve:

@@ -15,12 +15,15 @@ from typing import Self, TYPE_CHECKING
 import numpy as np
 
 from imu_allan.atomic import write_atomic
+from imu_allan.core.allan.stretches import StretchSums
 from imu_allan.errors import InputError
 
 STATE_FORMAT = 'imu_allan.core.accumulator'
 STATE_VERSION = 1
 #: Arrays of the missing samples (absent from states written before they were known).
 _MISSING_KEYS = ('miss', 'dirty_sums', 'dirty_counts')
+#: Arrays of the stretches (absent from states written before they were kept).
+_STRETCH_KEYS = ('stretch_sums', 'stretch_counts', 'stretch_rows')
 
 
 # Long because from_state checks every field of a state it did not write: a corrupt
@@ -33,6 +36,8 @@ class _Persistence:
                      per_decade: int = 10) -> None: ...
 
         def _flush(self) -> None: ...
+
+        stretch_sums: StretchSums
 
     def _copy(self) -> Self:
         new = type(self)(self.n_axes, self.rate_hz, self.exact_max_m, self.per_decade)
@@ -62,6 +67,8 @@ class _Persistence:
             'n_missing': self._n_missing, 'fill_excess': self._fill_excess,
             'miss_run': self._miss_run,
         }
+        stretch_meta, stretch_arrays = self.stretch_sums.state()
+        meta.update(stretch_meta)
         arrays = {
             'buf': self._buf[:, :self._h0 + self._pending].copy(),
             'ref': self._ref.copy(),
@@ -69,6 +76,7 @@ class _Persistence:
             'sums': self._sums.copy(), 'counts': self._counts.copy(), 'm': self._m.copy(),
             'miss': self._miss[:self._h0 + self._pending].copy(),
             'dirty_sums': self._dirty_sums.copy(), 'dirty_counts': self._dirty_counts.copy(),
+            **stretch_arrays,
         }
         return meta, arrays
 
@@ -93,6 +101,7 @@ class _Persistence:
         self._n_samples, self._n_segments = int(meta['n_samples']), int(meta['n_segments'])
         self._seg_n, self._h0 = int(meta['seg_n']), int(meta['h0'])
         self._pending, self._ref_set = int(meta['pending']), bool(meta['ref_set'])
+        self.stretch_sums.restore(meta, arrays)
 
     def save(self, path) -> None:
         """
@@ -134,7 +143,7 @@ class _Persistence:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z['meta']))
                 arrays = {k: z[k] for k in ('buf', 'ref', 'level_hist', 'sums', 'counts',
-                                            'm', *_MISSING_KEYS) if k in z}
+                                            'm', *_MISSING_KEYS, *_STRETCH_KEYS) if k in z}
         except FileNotFoundError:
             raise InputError(f'accumulator state {path} does not exist') from None
         except Exception as exc:  # zip, JSON, missing keys: all mean a bad file

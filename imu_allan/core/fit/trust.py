@@ -177,8 +177,9 @@ def conservative(fit: AxisFit, problems: list) -> AxisFit:
         # The value is the white region's; its range reaches to the fit's as well: where
         # the two disagree (a plateau of sinusoids read as the region, a fit distorted by
         # the record's end) which is right the record cannot tell.
-        lo = min(got[1][0], n_fit.ci95[0]) if n_fit.kind == 'estimate' else got[1][0]
-        hi = max(got[1][1], n_fit.ci95[1]) if n_fit.kind == 'estimate' else got[1][1]
+        lo, hi = got[1]
+        if n_fit.kind == 'estimate':
+            lo, hi = min(lo, n_fit.ci95[0]), max(hi, n_fit.ci95[1])
         n_new = Param(got[0], (lo, hi), 'estimate', unit_n, 'curve',
                       f'{why}: the white region of the curve')
     else:

@@ -412,3 +412,19 @@ def report_axes(sources) -> dict:
 
     """
     return {a: report_axis(AxisNoise() if s is None else s, a) for a, s in sources.items()}
+
+
+def unsettled(fit) -> list:
+    """
+    Return what keeps an axis' status from 'ok' ([] when N and B are settled).
+
+    N and B must be estimates whose 95 % intervals span at most 1.5x and 4x.
+    """
+    problems = []
+    for sym, max_ratio in (('N', 1.5), ('B', 4.0)):
+        p = fit.optimised.get(sym)
+        if p is None or p.kind != 'estimate':
+            problems.append(f'{sym} not identified yet')
+        elif not (p.ci95[0] > 0 and p.ci95[1] / p.ci95[0] <= max_ratio):
+            problems.append(f'{sym} interval still wide')
+    return problems
