@@ -91,6 +91,26 @@ def test_bursty_arrival_stamps_are_irregular_not_gaps():
     assert_allclose(s.rate_hz, RATE_HZ, rtol=0.02)
 
 
+def test_a_starved_subscriber_losing_most_messages_keeps_the_clocks_period():
+    # A node starved of CPU lost bursts of a 200 Hz stream's messages (sensor stamps):
+    # the waits took more time than the received steps, and the window was taken for
+    # bursty arrival (irregular, rate 198.09 Hz), so a resume at 200 Hz was refused.
+    rng = np.random.default_rng(21)
+    t, y = still_imu(60_000, rate_hz=200.0)
+    keep = np.ones(t.size, dtype=bool)
+    at = 0
+    while at < t.size:
+        at += int(rng.integers(5, 40))                  # received
+        lost = int(rng.integers(20, 80))
+        keep[at:at + lost] = False
+        at += lost
+    assert keep.mean() < 0.4
+    s = _feed(Session(), t[keep], y[keep])
+    assert not s.stats.irregular_stamps, s.warnings
+    assert_allclose(s.rate_hz, 200.0, rtol=1e-9)
+    assert_allclose(s.stamp_rate_hz(t[keep][:500]), 200.0, rtol=1e-9)
+
+
 def test_a_warning_quotes_no_rate_but_the_one_the_analysis_uses():
     # The irregular-stamp warning used to quote the first window's rate (110.457 Hz
     # for the MPU-6050), while the analysis used the whole record's mean (99.317 Hz).

@@ -13,6 +13,13 @@ from imu_allan.pipeline.hygiene import NS
 
 #: Relative jitter of the stamp steps above which the stamps are irregular.
 MAX_JITTER = 0.25
+#: Gaps that lie within this share of a period of whole periods (90 % of them) are a
+#: regular clock's lost messages (a window of 100 steps of a link that lost 60 % holds
+#: 3-5): 3 waits that fall anywhere do so by chance 0.8 % of the time, and one window
+#: judged irregular flags the whole record so.
+_WHOLE_TOL = 0.1
+#: ... and none longer than this many periods (beyond, a tenth of a period is no test).
+_WHOLE_MAX = 1000.0
 
 
 def is_int(value) -> bool:
@@ -90,7 +97,13 @@ def judge_steps(steps_ns: np.ndarray, gap_factor: float, max_step_ns: float):
         # or (a lossy link) leave most of the time to the regular steps.
         isolated = n_long <= max(2, 0.02 * s.size)
         covered = float(s[clock].sum() / s.sum())
-        if jitter <= MAX_JITTER and (isolated or covered >= 0.5):
+        # A subscriber starved of CPU loses bursts of messages of a regular clock: its
+        # gaps are whole periods however much time they take; waits between bursts of
+        # arrival stamps fall anywhere between multiples.
+        gaps = s[~clock] / period
+        whole = (n_long > 0 and float(gaps.max()) <= _WHOLE_MAX
+                 and float(np.mean(np.abs(gaps - np.round(gaps)) <= _WHOLE_TOL)) >= 0.9)
+        if jitter <= MAX_JITTER and (isolated or covered >= 0.5 or whole):
             # A clock's gap loses whole periods: count them, so gaps do not bias the rate.
             return True, float(s.sum() / np.maximum(np.round(s / period), 1).sum()), jitter
     mean = float(s.mean())
