@@ -171,6 +171,8 @@ class AllanAccumulator(_Persistence):
         self._dirty_sums = np.zeros((self._m0.size, n_axes))
         self._dirty_counts = np.zeros(self._m0.size, dtype=np.int64)
         self._work: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        # The curve's and the stretches' copy with the pending samples processed (not state).
+        self._flushed_copy: tuple[tuple[int, int], 'AllanAccumulator'] | None = None
         #: The exact taus' sums per stretch of the record (noise level changes).
         self.stretch_sums = StretchSums(self._m0.size, n_axes)
 
@@ -382,12 +384,15 @@ class AllanAccumulator(_Persistence):
 
     # ----------------------------------------------------------------- curve
     def _flushed(self) -> 'AllanAccumulator':
-        """Return self, or a copy with the pending samples processed."""
+        """Return self, or a copy with the pending samples processed (kept till the next add)."""
         if not self._pending:
             return self
-        clone = self._copy()
-        clone._flush()
-        return clone
+        key = (self._n_samples, self._n_segments)
+        if self._flushed_copy is None or self._flushed_copy[0] != key:
+            clone = self._copy()
+            clone._flush()
+            self._flushed_copy = (key, clone)
+        return self._flushed_copy[1]
 
     def _sums_now(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Pooled sums and counts, then the exact taus' terms over missing samples."""
