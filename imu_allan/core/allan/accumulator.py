@@ -72,7 +72,7 @@ _M_LO = 64
 #: Levels are pre-allocated up to this cluster size [samples] (35 years at 1 kHz), so
 #: the state never grows while data flow.
 _MAX_M = 2 ** 40
-#: Largest exact_max_m: keeps the state under 1 MB per axis (0.58 MB at this value).
+#: Largest exact_max_m: keeps the state under 1 MB per axis (0.62 MB at this value).
 _MAX_EXACT_M = 2 ** 14
 
 
@@ -241,8 +241,10 @@ class AllanAccumulator(_Persistence):
 
     def state_nbytes(self) -> int:
         """Return the bytes of persistent state (independent of the record length)."""
+        st = self.stretch_sums
         return int(self._buf.nbytes + self._ref.nbytes + self._sums.nbytes
-                   + self._counts.nbytes + sum(lv.hist.nbytes for lv in self._levels))
+                   + self._counts.nbytes + sum(lv.hist.nbytes for lv in self._levels)
+                   + st.sums.nbytes + st.counts.nbytes + st.rows.nbytes)
 
     # ------------------------------------------------------------- streaming
     def add(self, samples: np.ndarray, missing: np.ndarray | None = None) -> None:
