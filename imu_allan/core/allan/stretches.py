@@ -3,8 +3,8 @@ Did the noise level change during the record?  The Allan sums of its stretches.
 
 The intervals of a fit are statistical: they say how well the record's *average* noise
 is known, assuming the noise was the same all along.  Real sensors break that (the
-ADIS16405 accelerometers' AVAR at 0.01-0.1 s wanders by 3-5 % sd between 5-minute
-stretches of a still hour, far beyond chance; a fan or a pump nearby does the same),
+ADIS16405 accelerometers' N, read at 0.08 s, wanders by 1.6-4.6 % sd between the
+5.5-minute stretches of still runs, far beyond chance; a fan or a pump nearby does too),
 and a first ten minutes then disagree with the hour by more than both intervals.
 
 :class:`StretchSums` keeps the exact taus' sums of squared second differences
