@@ -77,7 +77,7 @@ def test_the_consumer_files_carry_the_change(stepped):
 @pytest.mark.parametrize('filter_s', [0.02, 0.05])
 def test_a_steady_filtered_sensor_is_not_called_a_change(filter_s):
     # A low-pass filter correlates neighbouring samples: the chance spread of the
-    # stretches is larger than white noise's at a few filter times (1.7x at 10 T_f),
+    # stretches is larger than white noise's at a few filter times (1.4x at 3 T_f),
     # so the tested tau spans 20 T_f and more.
     rng = np.random.default_rng(12)
     y = _still(seed=13)

@@ -88,8 +88,8 @@ def tested_tau(fit: AxisFit, stretches: Stretches, n_value: float) -> int | None
     ``_SHARE_SLACK`` of the axis' best; None where no tau is at least half white.  The
     tau spans at least ``_MIN_M`` samples and ``_FILTER_SPAN`` times a fitted filter's
     time constant: the chance spread of the stretches assumes independent samples, and
-    a low-pass filter's correlation made it 1.7x larger at 10 filter times
-    (test/test_level_report.py).
+    a filter of 2.8 samples made its variance 1.4x white noise's at m = 8, 1.1x at 64
+    (docs/robustness.md).
     """
     rate_hz = float(stretches.m[0] / stretches.tau_s[0])
     t_f = fit.optimised.get('T_f')
