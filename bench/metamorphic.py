@@ -501,6 +501,21 @@ def _g(x) -> str:
     return 'inf' if x is None else f'{x:.3g}'
 
 
+def _z(a: dict | None, b: dict | None) -> float:
+    """
+    Return how far apart two estimates are in their combined sd (log scale), or NaN.
+
+    Each 95 % interval gives sd ln(hi / lo) / 3.92 (a log-normal reading); with the two
+    taken independent, |z| > 1.96 for ~5 % of pairs of the same truth, 3.9 for 1e-4.
+    """
+    vals = [(x['value'], x['lo'], x['hi']) for x in (a, b) if x and x.get('kind') == 'estimate'
+            and x['lo'] and x['hi'] and x['value']]
+    if len(vals) < 2 or min(v for t in vals for v in t) <= 0:
+        return math.nan
+    sd = [math.log(hi / lo) / 3.92 for _, lo, hi in vals]
+    return abs(math.log(vals[0][0] / vals[1][0])) / math.hypot(*sd)
+
+
 def findings(rows: list, clean: dict) -> str:
     """Return every confident disagreement, refusal and value over its curve."""
     out = []
@@ -517,7 +532,7 @@ def findings(rows: list, clean: dict) -> str:
             ratio = (d['value'] / c['value'] if c and d and c['value'] and d['value']
                      else math.nan)
             out.append(f'- CONFIDENT {tag}: {axis} {sym} clean {_fmt(c)}, degraded {_fmt(d)} '
-                       f'(x{ratio:.3g})')
+                       f'(x{ratio:.3g}, z {_z(c, d):.2g})')
         for axis, what, kind, ratio, tau in r['over']:
             out.append(f'- OVER {tag}: {axis} {what} ({kind}) {ratio:.3g}x the upper ADEV band '
                        f'at tau {tau:.3g} s')

@@ -258,6 +258,30 @@ def test_sensor_filter_bend_at_short_tau_is_left_out():
     assert white.tau_s[0] == 1.0 / rate       # plain white noise keeps every tau
 
 
+def test_a_gentle_rise_at_a_slow_rate_is_no_filter():
+    # White noise plus a slower process, an hour at 1 Hz: the first step falls at
+    # -0.465, within twice its noise (0.024) of white noise, and the curve flattens
+    # further out.  Read as a filter the bend never ended: every tau below 64 s was left
+    # out and the fit turned untrusted (on the ADIS16405 as 1 Hz block means N's bound
+    # then lay 1.4x over the curve).  A filter flattens the first step far beyond its
+    # noise.
+    rate, n = 1.0, 3600
+    y = simulate_axis(AxisNoise(N=7e-4, B=5e-4, T_B=20.0), rate, n,
+                      np.random.default_rng(1))
+    c = allan_curve(y, rate, 'octave')
+    slope = 0.5 * math.log(c.avar[1, 0] / c.avar[0, 0]) / math.log(2.0)
+    assert -0.49 < slope < -0.43
+    fit = fit_curve(c, 0, n)
+    assert fit.tau_s[0] == 1.0 and fit.filter_end_s == 1.0
+    assert fit.optimised['N'].kind == 'estimate'
+    assert fit.optimised['N'].ci95[0] <= 7e-4 <= fit.optimised['N'].ci95[1]
+    # A 4-tap moving average at the same length is still left out (first step -0.3).
+    w = np.random.default_rng(6).standard_normal(n + 3) * 7e-4 * math.sqrt(rate)
+    y4 = np.convolve(w, np.full(4, 0.25), mode='valid')
+    c4 = allan_curve(y4, rate, 'octave')
+    assert fit_curve(c4, 0, n).tau_s[0] >= 4.0
+
+
 def test_adis16405_gyro_against_the_datasheet(shared_dir):
     # A real record: run 2 of the six static ADIS16405 runs (100 Hz, 2.78 h, no
     # outliers; ../shared/realdata/README.md).  Datasheet: rate noise density

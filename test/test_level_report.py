@@ -86,3 +86,14 @@ def test_a_steady_filtered_sensor_is_not_called_a_change(filter_s):
                                        N_ROWS, rng) + (9.80665 if j == 5 else 0.0)
     result = _analysed(y)
     assert not [w for w in result.warnings if w.startswith(NOISE_CHANGED)], result.warnings
+
+
+def test_a_record_too_short_for_the_test_says_so(stepped):
+    short = _analysed(_still(seed=5)[:int(600 * RATE_HZ)])      # 10 min: 1.8 stretches
+    for axis in AXES:
+        notes = [n for n in short.fits[axis].notes if n.startswith('noise level over')]
+        assert len(notes) == 1 and 'not tested' in notes[0], short.fits[axis].notes
+        assert '21.8 min' in notes[0]
+    whole = stepped[0]
+    assert not any(n.startswith('noise level over') for axis in AXES
+                   for n in whole.fits[axis].notes)

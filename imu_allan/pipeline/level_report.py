@@ -18,7 +18,7 @@ import numpy as np
 
 from imu_allan import AXES
 from imu_allan.core.allan.stretches import (FIRST_STRETCH_ROWS, level_change, LevelChange,
-                                            Stretches)
+                                            MIN_STRETCHES, Stretches)
 from imu_allan.core.fit.result import AxisFit, Param
 from imu_allan.core.noise.units import format_quoted, sensor_of
 from imu_allan.core.rules import LEVEL_P
@@ -50,12 +50,16 @@ def level_axes(fits: dict, stretches: Stretches | None) -> tuple[dict, tuple]:
     Returns
     -------
     tuple of (dict, tuple of str)
-        The fits (a new dict) and one warning per axis whose interval was widened.
+        The fits (a new dict) and one warning per axis whose interval was widened.  A
+        record of fewer stretches than the test needs gets a note on each fitted axis
+        instead (not tested, and the length that would be).
 
     """
     out: dict = dict(fits)
     if stretches is None or not stretches.rows.size:
         return out, ()
+    if stretches.rows.size < MIN_STRETCHES:
+        return _untested(out, stretches), ()
     warnings = []
     for j, axis in enumerate(AXES):
         fit: AxisFit | None = fits.get(axis)
@@ -78,6 +82,18 @@ def level_axes(fits: dict, stretches: Stretches | None) -> tuple[dict, tuple]:
         out[axis] = replace(fit, optimised={**fit.optimised, 'N': widened})
         warnings.append(_warning(axis, n, widened, change, stretches))
     return out, tuple(warnings)
+
+
+def _untested(fits: dict, stretches: Stretches) -> dict:
+    """Return the fits with a note that the record is too short for the level test."""
+    rate_hz = float(stretches.m[0] / stretches.tau_s[0])
+    minutes = MIN_STRETCHES * FIRST_STRETCH_ROWS / rate_hz / 60.0
+    length = f'{minutes:.3g} min' if minutes < 120 else f'{minutes / 60:.3g} h'
+    note = (f'noise level over the record: not tested (it holds {stretches.rows.size} of '
+            f'the {MIN_STRETCHES} stretches of {FIRST_STRETCH_ROWS} samples the test '
+            f'needs; a record of {length} at this rate would be)')
+    return {axis: None if fit is None else replace(fit, notes=fit.notes + (note,))
+            for axis, fit in fits.items()}
 
 
 def tested_tau(fit: AxisFit, stretches: Stretches, n_value: float) -> int | None:

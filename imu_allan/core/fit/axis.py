@@ -141,7 +141,8 @@ class FilterCut(NamedTuple):
     ended: bool
 
 
-def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> FilterCut:
+def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float,
+               edf: np.ndarray | None = None) -> FilterCut:
     """
     Return where to start fitting: past the leading taus bent by the sensor's filter.
 
@@ -153,7 +154,11 @@ def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> FilterCut:
     Gauss-Markov term to bridge the bend.  Leading points whose ADEV slope to the next
     point is above -0.48 are dropped, at most those below 64 sample periods; a white
     record keeps them all (its slope noise there is ~0.003).  A term rising within the
-    bend does not end it (a filter may act past the taus it visibly flattens).
+    bend does not end it (a filter may act past the taus it visibly flattens).  A
+    filter flattens the first step most; where that step is not flatter than white
+    noise by twice its own noise (a short or slow record whose curve rises gently
+    past the filter: the ADIS16405 as 1 Hz block means, slope -0.47 +- 0.024) nothing
+    is left out.
 
     Parameters
     ----------
@@ -163,6 +168,9 @@ def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> FilterCut:
         Shape (k,), Allan variance [unit^2].
     rate_hz : float
         Sample rate [Hz].
+    edf : np.ndarray, optional
+        Shape (k,), equivalent degrees of freedom of each point [-]: the first step's
+        noise (without, the step is taken as exact).
 
     Returns
     -------
@@ -171,6 +179,12 @@ def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float) -> FilterCut:
     """
     first = 0
     slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
+    if edf is not None and slope.size:
+        # Var ln AVAR = 2 / EDF per point (NIST SP 1065 sec. 5.3), their covariance
+        # left out: an upper bound of the step's noise, so a doubt keeps the taus.
+        noise = 0.5 * math.sqrt(2.0 / edf[0] + 2.0 / edf[1]) / math.log(tau[1] / tau[0])
+        if slope[0] <= -0.5 + 2.0 * noise:
+            return FilterCut(0, True)
     while (first < slope.size and tau[first] * rate_hz < 64.0 and slope[first] > -0.48
            and tau.size - first > 3):
         first += 1
@@ -277,7 +291,7 @@ def _fit_axis(curve_tau_s, avar, edf, rate_hz, n_samples, terms, unit, method,
     tau, avar, edf = tau[keep], avar[keep], edf[keep]
     notes: list[str] = []
     # With the filtered_white term the filter is part of the model, not cut away.
-    cut = filter_cut(tau, avar, rate_hz)
+    cut = filter_cut(tau, avar, rate_hz, edf)
     filter_end_s = float(tau[cut.first]) if cut.ended else math.nan
     first = 0 if 'filtered_white' in candidates else cut.first
     if first:

@@ -78,7 +78,7 @@ def _unfiltered(fit: AxisFit) -> int:
         return int(np.searchsorted(fit.tau_s, fit.filter_end_s * (1.0 - 1e-9)))
     if fit.tau_s.size < 4:
         return 0
-    return filter_cut(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0]).first
+    return filter_cut(fit.tau_s, fit.avar_meas, 1.0 / fit.tau_s[0], fit.edf).first
 
 
 def _white(fit: AxisFit, trusted_model: bool = True):

@@ -74,7 +74,7 @@ class _Run:
         # The one rule for the sensor's filter on every axis: the leading taus it bends
         # are left out (as fit_axis does for plain white noise) unless the filter is
         # modelled with an identifiable time constant (see :meth:`base`).
-        self.cut = filter_cut(self.tau, self.y, rate_hz)
+        self.cut = filter_cut(self.tau, self.y, rate_hz, e)
         self.use_taus(0)
         self.raw = None if raw is None else np.asarray(raw, dtype=np.float64)
         self.raw_rate = float(raw_rate_hz or rate_hz)
