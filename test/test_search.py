@@ -229,6 +229,18 @@ def test_adis16405_first_minutes_read_n_past_the_filter_tail(shared_dir):
     assert n.ci95[0] <= 0.6996e-3 <= n.ci95[1]
 
 
+def test_adis16405_a_time_whose_interval_reaches_its_shortest_is_not_identified(shared_dir):
+    """Run 1's first 10 minutes: gyro_x T_B was 0.064 s [0.02, 86.7] (the hour: > 254 s)."""
+    from imu_allan.io.csv_io import read_csv
+    rec = read_csv(shared_dir / 'realdata' / 'adis16405' / 'adis16405_run1.csv.gz')
+    y = np.asarray(rec.samples, dtype=np.float64)[:60_000, 0]
+    curve = allan_curve(y, 100.0, 'dense', confidence=0.95)
+    s = search_axis(curve.tau_s, curve.avar[:, 0], curve.edf[:, 0], 100.0, y.size, raw=y,
+                    unit='rad/s')
+    assert s.fit.optimised['T_B'].kind == 'not_identified'
+    assert any(n.startswith('T_B: its 95 % interval reaches the shortest') for n in s.fit.notes)
+
+
 def test_adis16405_gyros_give_the_white_level_of_the_curve(shared_dir):
     """Run 6 of the real ADIS16405: N within 5 % of the curve's white level."""
     from imu_allan.core.allan.raw import RawKeeper

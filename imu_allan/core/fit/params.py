@@ -43,7 +43,8 @@ def _estimates(fitter, slots: list, sol: Solution, supported: set, threshold: fl
     2 %) is not identified by the taus: a correlation or filter time pinned there is
     the fit reshaping the curve, not a measurement.  It is reported as not identified
     (at the upper end: as a lower bound, the record being too short) and its name is
-    appended to ``pinned``.
+    appended to ``pinned``.  A time whose interval reaches the lower end is not
+    identified either (not pinned: the model stands, the time is unknown).
     """
     optimised: dict[str, Param] = {}
     values: dict[str, dict] = {}
@@ -73,14 +74,22 @@ def _estimates(fitter, slots: list, sol: Solution, supported: set, threshold: fl
                             _unit(template, unit), 'fitted',
                             'at the shortest value of its range: not identified')
                         continue
+                if ci[0] <= lo_b * 1.001 and sym.startswith('T_'):
+                    # An interval from the shortest time the taus resolve up: any faster
+                    # process would do (ADIS16405, first 10 minutes: T_B 0.064 s
+                    # [0.02, 86.7] where the hour's slow process lies beyond 254 s).
+                    notes.append(f'{symbols[(s.label, sym)]}: its 95 % interval reaches '
+                                 'the shortest value of its range; not identified')
+                    optimised[symbols[(s.label, sym)]] = Param(
+                        math.nan, (math.nan, math.nan), 'not_identified',
+                        _unit(template, unit), 'fitted',
+                        'its interval reaches the shortest value of its range')
+                    continue
                 if ci[1] >= hi_b * 0.999:
                     kind, ci = 'lower_bound', (ci[0], math.inf)
                     reason = 'may exceed the longest tau of the record: lower bound'
                     notes.append(f'{symbols[(s.label, sym)]}: may exceed the longest tau '
                                  'of the record; only a lower bound')
-                elif ci[0] <= lo_b * 1.001:
-                    notes.append(f'{symbols[(s.label, sym)]}: may lie below the shortest '
-                                 'tau; poorly identified')
             optimised[symbols[(s.label, sym)]] = Param(
                 float(v), (float(ci[0]), float(ci[1])), kind, _unit(template, unit), 'fitted',
                 reason)
