@@ -155,10 +155,10 @@ def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float,
     point is above -0.48 are dropped, at most those below 64 sample periods; a white
     record keeps them all (its slope noise there is ~0.003).  A term rising within the
     bend does not end it (a filter may act past the taus it visibly flattens).  A
-    filter flattens the first step most; where that step is not flatter than white
-    noise by twice its own noise (a short or slow record whose curve rises gently
-    past the filter: the ADIS16405 as 1 Hz block means, slope -0.47 +- 0.024) nothing
-    is left out.
+    filter flattens the first step most: where the bend is not seen to end and that
+    step is not flatter than white noise by twice its own noise (a short or slow
+    record whose curve rises gently: the ADIS16405 as 1 Hz block means, slope
+    -0.47 +- 0.024, flatter further out) nothing is left out.
 
     Parameters
     ----------
@@ -179,16 +179,17 @@ def filter_cut(tau: np.ndarray, avar: np.ndarray, rate_hz: float,
     """
     first = 0
     slope = 0.5 * np.diff(np.log(avar)) / np.diff(np.log(tau))
-    if edf is not None and slope.size:
+    while (first < slope.size and tau[first] * rate_hz < 64.0 and slope[first] > -0.48
+           and tau.size - first > 3):
+        first += 1
+    ended = bool(first < slope.size and slope[first] <= -0.48)
+    if first and not ended and edf is not None:
         # Var ln AVAR = 2 / EDF per point (NIST SP 1065 sec. 5.3), their covariance
         # left out: an upper bound of the step's noise, so a doubt keeps the taus.
         noise = 0.5 * math.sqrt(2.0 / edf[0] + 2.0 / edf[1]) / math.log(tau[1] / tau[0])
         if slope[0] <= -0.5 + 2.0 * noise:
             return FilterCut(0, True)
-    while (first < slope.size and tau[first] * rate_hz < 64.0 and slope[first] > -0.48
-           and tau.size - first > 3):
-        first += 1
-    return FilterCut(first, bool(first < slope.size and slope[first] <= -0.48))
+    return FilterCut(first, ended)
 
 
 def filter_identified(t_f_s: float, tau0_s: float, bounds: tuple) -> bool:
