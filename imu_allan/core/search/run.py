@@ -125,10 +125,15 @@ class _Run:
         return dof > 0 and chi2_sf(self.sol.j, dof) < P_CONSISTENT
 
     def pinned(self) -> set:
-        """Return the labels of the current model's terms with a time at an end of its range."""
-        return {slot.label for slot, phi in zip(self.slots_of(self.labels), self.sol.phi)
-                if any(v <= lo * PIN_MARGIN or v >= hi / PIN_MARGIN
-                       for (lo, hi), v in zip(slot.bounds, phi))}
+        """
+        Return the labels of the current model's terms with a time at an end of its range.
+
+        A term the model holds at zero has no time to pin.
+        """
+        slots = self.slots_of(self.labels)
+        return {slot.label for slot, c, phi in zip(slots, self.sol.coef, self.sol.phi)
+                if c > 0 and any(v <= lo * PIN_MARGIN or v >= hi / PIN_MARGIN
+                                 for (lo, hi), v in zip(slot.bounds, phi))}
 
     def base(self, base_labels) -> None:
         """
