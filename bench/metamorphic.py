@@ -217,8 +217,8 @@ def interval(p: dict | None) -> tuple | None:
         return lo, hi
     if p['kind'] == 'upper_bound':
         return 0.0, p['value']
-    if p['kind'] == 'lower_bound':
-        return p['value'], math.inf
+    if p['kind'] == 'lower_bound':    # the 95 % statement: its interval's lower end
+        return (p['lo'] if p['lo'] is not None else p['value']), math.inf
     return None
 
 
@@ -494,6 +494,8 @@ def _fmt(p: dict | None) -> str:
         return 'n/a'
     if p['kind'] == 'estimate':
         return f'{p["value"]:.3g} [{_g(p["lo"])}, {_g(p["hi"])}]'
+    if p['kind'] == 'lower_bound' and p['lo'] is not None:
+        return f'> {p["lo"]:.3g} (fit {p["value"]:.3g})'
     return {'upper_bound': '< ', 'lower_bound': '> '}.get(p['kind'], '? ') + f'{p["value"]:.3g}'
 
 

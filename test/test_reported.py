@@ -132,13 +132,16 @@ def test_a_bare_model_reports_its_values_and_what_the_filter_leaves_out():
 def test_the_summary_marks_bounds_both_ways(result):
     # An upper bound reads '<', a lower bound (a T_B beyond the record) '>'.
     fit = result.fits['gyro_x']
-    t_b = Param(300.0, (300.0, math.inf), 'lower_bound', 's', 'fitted',
+    t_b = Param(300.0, (40.0, math.inf), 'lower_bound', 's', 'fitted',
                 'may exceed the longest tau of the record: lower bound')
     k = Param(2e-5, (0.0, 2e-5), 'upper_bound', fit.optimised['K'].unit)
     changed = replace(result, fits=dict(result.fits, gyro_x=replace(
         fit, optimised=dict(fit.optimised, T_B=t_b, K=k))))
     line = changed.summary_line('gyro_x')
-    assert 'T_B > ' in line and 'K < ' in line
+    assert 'K < ' in line
+    # A lower bound states its interval's lower end (the fit's value said 'T_B > 300 s'
+    # where the record supports 40 s at 95 %).
+    assert 'T_B > 40 s (fit 300 s)' in line, line
 
 
 def test_the_summary_gives_each_estimate_its_interval_and_a_floor_only_where_measured(result):

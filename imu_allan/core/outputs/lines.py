@@ -18,9 +18,9 @@ def axis_line(axis: str, fit, report) -> str:
     One human line: N, B, K, T_B with their 95 % intervals in the units people quote.
 
     An estimate reads ``value unit [lo, hi]``, an upper bound ``< bound``, a lower
-    bound ``> bound``; gyro N also in a datasheet's deg/s/sqrt(Hz); the lowest ADEV
-    (a datasheet's in-run bias stability) only where the curve measures it
-    (:class:`imu_allan.core.outputs.reported.Floor`).
+    bound ``> bound (fit value)`` (the bound: its interval's lower end); gyro N also in
+    a datasheet's deg/s/sqrt(Hz); the lowest ADEV (a datasheet's in-run bias stability)
+    only where the curve measures it (:class:`imu_allan.core.outputs.reported.Floor`).
 
     Parameters
     ----------
@@ -47,6 +47,10 @@ def axis_line(axis: str, fit, report) -> str:
             parts.append(f'{sym} n/a')
             continue
         text = _quoted(sym, sensor, p.value)
+        if p.kind == 'lower_bound' and math.isfinite(p.ci95[0]):
+            # The 95 % statement is the interval's lower end (the fit's value is only
+            # the likeliest of the times beyond it).
+            text = f'{_quoted(sym, sensor, p.ci95[0])} (fit {text})'
         if p.kind == 'estimate':
             lo, hi = (quoted(sym, sensor, v)[0] for v in p.ci95)
             text += f' [{lo:.3g}, {hi:.3g}]'

@@ -19,8 +19,10 @@ read; none of them computes a value of its own.  The rules, each stated here onl
   C.1, :func:`imu_allan.core.allan.edf.curve_k_bound`); never 0 where a curve exists.
 * **Gauss-Markov state** (b_gm of the paper's model, Maia et al. eq. 8): B (value or
   bound) with T_B where T_B is identified (an estimate, or a lower bound used at the
-  bound).  A B without an identified T_B has no state: it is listed in ``left_out``,
-  never given an invented correlation time.
+  fit's value: B was fitted with it, and at the interval's lower end with that B the
+  state's ADEV peak would move to short taus and lie over the curve).  A B without an
+  identified T_B has no state: it is listed in ``left_out``, never given an invented
+  correlation time.
 * **Left out**: every term of the model without a slot in the white + Gauss-Markov +
   random-walk filter (flicker, further Gauss-Markov processes, sinusoids, quantization,
   ramp) is named, so a file that holds this model says what it leaves out.
