@@ -84,9 +84,14 @@ def level_axes(fits: dict, stretches: Stretches | None) -> tuple[dict, tuple]:
     return out, tuple(warnings)
 
 
+def _rate_hz(stretches: Stretches) -> float:
+    """Return the sample rate of the stretches' record [Hz]."""
+    return float(stretches.m[0] / stretches.tau_s[0])
+
+
 def _untested(fits: dict, stretches: Stretches) -> dict:
     """Return the fits with a note that the record is too short for the level test."""
-    rate_hz = float(stretches.m[0] / stretches.tau_s[0])
+    rate_hz = _rate_hz(stretches)
     minutes = MIN_STRETCHES * FIRST_STRETCH_ROWS / rate_hz / 60.0
     length = f'{minutes:.3g} min' if minutes < 120 else f'{minutes / 60:.3g} h'
     note = (f'noise level over the record: not tested (it holds {stretches.rows.size} of '
@@ -107,7 +112,7 @@ def tested_tau(fit: AxisFit, stretches: Stretches, n_value: float) -> int | None
     a filter of 2.8 samples made its variance 1.4x white noise's at m = 8, 1.1x at 64
     (docs/robustness.md).
     """
-    rate_hz = float(stretches.m[0] / stretches.tau_s[0])
+    rate_hz = _rate_hz(stretches)
     t_f = fit.optimised.get('T_f')
     m_min = max(_MIN_M, _FILTER_SPAN * t_f.value * rate_hz
                 if t_f is not None and math.isfinite(t_f.value) else 0.0)
@@ -132,7 +137,7 @@ def _range(change: LevelChange) -> str:
 def _warning(axis: str, n: Param, widened: Param, change: LevelChange,
              stretches: Stretches) -> str:
     sensor = sensor_of(axis)
-    minutes = float(np.median(stretches.rows)) / (stretches.m[0] / stretches.tau_s[0]) / 60
+    minutes = float(np.median(stretches.rows)) / _rate_hz(stretches) / 60
     q = [format_quoted('N', sensor, v, digits=3) for v in (n.value, *widened.ci95)]
     p = f'p = {change.p_value:.2g}' if change.p_value > 1e-12 else 'p < 1e-12'
     return (f'{NOISE_CHANGED} on {axis}: its Allan variance at {change.tau_s:.3g} s, where '

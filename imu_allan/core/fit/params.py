@@ -63,33 +63,26 @@ def _estimates(fitter, slots: list, sol: Solution, supported: set, threshold: fl
                 lo_b, hi_b = s.bounds[s.term.nonlinear.index(sym)]
                 ci = _profile_interval(fitter.data, slots, sol, i, sym, v, threshold,
                                        (lo_b, hi_b))
-                if v <= lo_b * PIN_MARGIN or v >= hi_b / PIN_MARGIN:
-                    if pinned is not None:
-                        pinned.append(symbols[(s.label, sym)])
-                    if v <= lo_b * PIN_MARGIN:
-                        notes.append(f'{symbols[(s.label, sym)]}: pinned at the shortest '
-                                     'value of its range; not identified by these taus')
-                        optimised[symbols[(s.label, sym)]] = Param(
-                            math.nan, (math.nan, math.nan), 'not_identified',
-                            _unit(template, unit), 'fitted',
-                            'at the shortest value of its range: not identified')
-                        continue
-                if ci[0] <= lo_b * 1.001 and sym.startswith('T_'):
-                    # An interval from the shortest time the taus resolve up: any faster
-                    # process would do (ADIS16405, first 10 minutes: T_B 0.064 s
-                    # [0.02, 86.7] where the hour's slow process lies beyond 254 s).
-                    notes.append(f'{symbols[(s.label, sym)]}: its 95 % interval reaches '
-                                 'the shortest value of its range; not identified')
-                    optimised[symbols[(s.label, sym)]] = Param(
-                        math.nan, (math.nan, math.nan), 'not_identified',
-                        _unit(template, unit), 'fitted',
-                        'its interval reaches the shortest value of its range')
+                name = symbols[(s.label, sym)]
+                if (v <= lo_b * PIN_MARGIN or v >= hi_b / PIN_MARGIN) and pinned is not None:
+                    pinned.append(name)
+                # At the shortest value of its range, or an interval from there up (any
+                # faster process would do: ADIS16405, first 10 minutes, T_B 0.064 s
+                # [0.02, 86.7] where the hour's slow process lies beyond 254 s).
+                why = ('pinned at the shortest value of its range' if v <= lo_b * PIN_MARGIN
+                       else 'its 95 % interval reaches the shortest value of its range'
+                       if ci[0] <= lo_b * 1.001 and sym.startswith('T_') else '')
+                if why:
+                    notes.append(f'{name}: {why}; not identified by these taus')
+                    optimised[name] = Param(math.nan, (math.nan, math.nan), 'not_identified',
+                                            _unit(template, unit), 'fitted',
+                                            f'{why}: not identified')
                     continue
                 if ci[1] >= hi_b * 0.999:
                     kind, ci = 'lower_bound', (ci[0], math.inf)
                     reason = 'may exceed the longest tau of the record: lower bound'
-                    notes.append(f'{symbols[(s.label, sym)]}: may exceed the longest tau '
-                                 'of the record; only a lower bound')
+                    notes.append(f'{name}: may exceed the longest tau of the record; only a '
+                                 'lower bound')
             optimised[symbols[(s.label, sym)]] = Param(
                 float(v), (float(ci[0]), float(ci[1])), kind, _unit(template, unit), 'fitted',
                 reason)
